@@ -1,0 +1,57 @@
+"""The ``fieldapp`` command. Each subcommand is a module of this package with a ``register``
+function; modules are found by name, so adding a subcommand touches no other file.
+
+Subcommand modules import their heavy dependencies inside their handlers, so ``--help`` stays
+fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import pkgutil
+import sys
+from collections.abc import Callable, Sequence
+
+from fieldapp import __version__
+from fieldapp.errors import FieldappError
+
+Handler = Callable[[argparse.Namespace], int]
+
+log = logging.getLogger("fieldapp")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fieldapp",
+        description="Maize seedling phenotyping with a Kinect v2 on a turntable on a mobile base.",
+    )
+    parser.add_argument("--version", action="version", version=f"fieldapp {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"{__name__}.{info.name}")
+        module.register(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the process exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    handler: Handler = args.handler
+    try:
+        return handler(args)
+    except FieldappError as error:
+        print(f"fieldapp {args.command}: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"fieldapp {args.command}: interrupted", file=sys.stderr)
+        return 130

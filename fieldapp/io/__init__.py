@@ -1,0 +1,1 @@
+"""Reading and writing what the spec (``shared/spec/session-format.md``) defines."""

@@ -1,0 +1,167 @@
+"""The rig calibration file (``fieldapp-calibration/1``): models, loading and durable writing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PlainSerializer,
+    PlainValidator,
+    StrictInt,
+    field_validator,
+    model_validator,
+)
+
+from devices.camera.frames import Intrinsics
+from fieldapp.io.durable import write_json_durably
+from fieldapp.io.jsonfile import load_model, to_rigid_matrix
+
+CALIBRATION_FORMAT = "fieldapp-calibration/1"
+
+RigidMatrix = Annotated[
+    NDArray[np.float64],
+    PlainValidator(to_rigid_matrix),
+    PlainSerializer(lambda m: np.asarray(m).tolist(), return_type=list),
+]
+"""A 4 x 4 rigid transform: nested lists in JSON, a float64 array in memory."""
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class SpecModel(BaseModel):
+    """Base of the spec's objects: unknown fields are kept (readers ignore, writers may add)."""
+
+    model_config = ConfigDict(extra="allow", arbitrary_types_allowed=True)
+
+
+class DepthCamera(SpecModel):
+    width: StrictInt = Field(gt=0)
+    height: StrictInt = Field(gt=0)
+    fx: FiniteFloat = Field(gt=0)
+    fy: FiniteFloat = Field(gt=0)
+    cx: FiniteFloat
+    cy: FiniteFloat
+    distortion: list[FiniteFloat] = Field(default_factory=lambda: [0.0] * 5)
+    depth_scale: FiniteFloat = Field(default=1000.0, gt=0)
+
+    @field_validator("distortion")
+    @classmethod
+    def _opencv_lengths(cls, value: list[float]) -> list[float]:
+        if len(value) not in (4, 5, 8, 12, 14):
+            raise ValueError("distortion must have 4, 5, 8, 12 or 14 entries (OpenCV order)")
+        return value
+
+    def intrinsics(self) -> Intrinsics:
+        return Intrinsics(
+            width=self.width,
+            height=self.height,
+            fx=self.fx,
+            fy=self.fy,
+            cx=self.cx,
+            cy=self.cy,
+            distortion=tuple(self.distortion),
+        )
+
+    @classmethod
+    def from_intrinsics(cls, intrinsics: Intrinsics, depth_scale: float = 1000.0) -> DepthCamera:
+        return cls(
+            width=intrinsics.width,
+            height=intrinsics.height,
+            fx=intrinsics.fx,
+            fy=intrinsics.fy,
+            cx=intrinsics.cx,
+            cy=intrinsics.cy,
+            distortion=list(intrinsics.distortion),
+            depth_scale=depth_scale,
+        )
+
+
+class ViewStep(SpecModel):
+    """``matrix`` maps view k+1 into view k at the same station (the table turned by angle)."""
+
+    angle_deg: FiniteFloat
+    matrix: RigidMatrix
+
+    @field_validator("angle_deg")
+    @classmethod
+    def _divides_circle(cls, value: float) -> float:
+        if not 0.0 < abs(value) <= 180.0:
+            raise ValueError("angle_deg must be non-zero and at most 180 degrees")
+        return value
+
+    @property
+    def views_per_turn(self) -> int:
+        """How many views make a full turn (8 for 45 degrees)."""
+        return max(1, round(360.0 / abs(self.angle_deg)))
+
+    def T_view0_view(self, view: int) -> NDArray[np.float64]:
+        """Maps view ``view`` into view 0 by applying ``matrix`` ``view`` times (paper, Eq. 9)."""
+        return np.linalg.matrix_power(self.matrix, view)
+
+
+class Stations(SpecModel):
+    reference: StrictInt
+    to_reference: dict[int, RigidMatrix]
+
+    @field_validator("to_reference", mode="before")
+    @classmethod
+    def _station_keys(cls, value: Any) -> Any:
+        if isinstance(value, dict):
+            for key in value:
+                if isinstance(key, str) and not key.strip().isdigit():
+                    raise ValueError(f"station key {key!r} is not a station number")
+        return value
+
+    @model_validator(mode="after")
+    def _reference_listed(self) -> Stations:
+        if self.reference not in self.to_reference:
+            raise ValueError(f"reference station {self.reference} has no to_reference entry")
+        return self
+
+
+class Ground(SpecModel):
+    """``matrix`` maps the reference frame into the field frame (z up, 0 on the ground)."""
+
+    matrix: RigidMatrix
+
+
+class Calibration(SpecModel):
+    """A ``fieldapp-calibration/1`` document. ``view_step`` and ``stations`` may be absent in a
+    calibration that is still being built (intrinsics only); a session needs them."""
+
+    format: Literal["fieldapp-calibration/1"]
+    depth_camera: DepthCamera
+    view_step: ViewStep | None = None
+    stations: Stations | None = None
+    ground: Ground | None = None
+
+    def to_document(self) -> dict[str, Any]:
+        document: dict[str, Any] = self.model_dump(mode="json", exclude_none=True)
+        if self.stations is not None:  # JSON object keys are strings
+            document["stations"]["to_reference"] = {
+                str(k): v for k, v in document["stations"]["to_reference"].items()
+            }
+        return document
+
+
+def load_calibration(path: Path) -> Calibration:
+    """Read and validate a calibration file; raises :class:`~fieldapp.errors.FormatError`."""
+    return load_model(path, Calibration)
+
+
+def save_calibration(path: Path, calibration: Calibration) -> None:
+    """Write a calibration file durably."""
+    write_json_durably(path, calibration.to_document())
+
+
+def nominal_views(calibration: Calibration) -> int:
+    """Views per station implied by the calibration (8 when it does not say)."""
+    if calibration.view_step is None:
+        return 8
+    return calibration.view_step.views_per_turn

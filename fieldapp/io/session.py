@@ -1,0 +1,241 @@
+"""Capture sessions (``fieldapp-session/1``): models, loading, reading captures, durable writing."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path, PurePosixPath
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import AfterValidator, Field, StrictInt
+
+from fieldapp.errors import FormatError, Problem
+from fieldapp.io.calibration import Calibration, FiniteFloat, SpecModel, load_calibration
+from fieldapp.io.images import ImageError, depth_units_to_m, read_color, read_depth_units, read_ir
+from fieldapp.io.jsonfile import load_model
+
+SESSION_FORMAT = "fieldapp-session/1"
+SESSION_FILE = "session.json"
+
+
+def _relative_path(value: str) -> str:
+    path = PurePosixPath(value.replace("\\", "/"))
+    if not value.strip():
+        raise ValueError("path is empty")
+    if path.is_absolute() or value.startswith(("/", "\\")) or ":" in path.parts[0]:
+        raise ValueError(f"path {value!r} must be relative to the session folder")
+    if ".." in path.parts:
+        raise ValueError(f"path {value!r} escapes the session folder")
+    return value
+
+
+RelativePath = Annotated[str, AfterValidator(_relative_path)]
+"""A path inside the session folder, forward slashes, never absolute or with ``..``."""
+
+
+class BasePose(SpecModel):
+    """The base's pose as it reported it (map frame, metres, degrees)."""
+
+    x: FiniteFloat
+    y: FiniteFloat
+    yaw_deg: FiniteFloat
+
+
+class Capture(SpecModel):
+    """One capture: a depth and a colour image of view ``view`` at station ``station``.
+
+    Extra fields are kept, e.g. ``target`` (the calibration board a capture sees).
+    """
+
+    station: StrictInt = Field(ge=0)
+    view: StrictInt = Field(ge=0)
+    depth: RelativePath
+    color: RelativePath
+    angle_deg: FiniteFloat | None = None
+    captured_at: datetime | None = None
+    base_pose: BasePose | None = None
+    ir: RelativePath | None = None
+
+    @property
+    def key(self) -> tuple[int, int, str | None]:
+        """(station, view, target): what must be unique in a session."""
+        target = getattr(self, "target", None)
+        return self.station, self.view, target if isinstance(target, str) else None
+
+
+class SessionDocument(SpecModel):
+    """The ``session.json`` document."""
+
+    format: Literal["fieldapp-session/1"]
+    id: str = Field(min_length=1)
+    created: datetime | None = None
+    calibration: RelativePath
+    captures: list[Capture]
+
+
+@dataclass
+class CaptureImages:
+    """A capture's images, decoded.
+
+    - ``depth_m``: (H, W) float32 metres along the optical axis, NaN where missing.
+    - ``color``: (H, W, 3) uint8 RGB, registered to depth.
+    - ``ir``: (H, W) uint16 or ``None``.
+    """
+
+    capture: Capture
+    depth_m: NDArray[np.float32]
+    color: NDArray[np.uint8]
+    ir: NDArray[np.uint16] | None = None
+
+
+@dataclass
+class Session:
+    """A loaded session folder: its document and the calibration it names."""
+
+    folder: Path
+    document: SessionDocument
+    calibration: Calibration
+
+    @property
+    def id(self) -> str:
+        return self.document.id
+
+    @property
+    def captures(self) -> list[Capture]:
+        return self.document.captures
+
+    def path_of(self, relative: str) -> Path:
+        return self.folder / relative
+
+    def read_capture(self, capture: Capture, with_ir: bool = False) -> CaptureImages:
+        """Decode one capture's images; raises :class:`FormatError` naming the bad file."""
+        camera = self.calibration.depth_camera
+        try:
+            units = read_depth_units(self.path_of(capture.depth))
+            color = read_color(self.path_of(capture.color))
+            ir = read_ir(self.path_of(capture.ir)) if (with_ir and capture.ir) else None
+        except ImageError as error:
+            raise FormatError([error.problem]) from None
+        problems = image_size_problems(self, capture, units.shape, color.shape[:2])
+        if problems:
+            raise FormatError(problems)
+        return CaptureImages(capture, depth_units_to_m(units, camera.depth_scale), color, ir)
+
+    def iter_captures(self, with_ir: bool = False) -> Iterator[CaptureImages]:
+        """Yield every capture's images in session order."""
+        for capture in self.captures:
+            yield self.read_capture(capture, with_ir=with_ir)
+
+    def stations(self) -> list[int]:
+        return sorted({c.station for c in self.captures})
+
+    def expected_keys(self) -> set[tuple[int, int]]:
+        """(station, view) pairs a complete session has: calibrated stations x views per turn."""
+        stations = set(self.stations())
+        if self.calibration.stations is not None:
+            stations |= set(self.calibration.stations.to_reference)
+        views = self.calibration.view_step.views_per_turn if self.calibration.view_step else 1
+        return {(s, v) for s in stations for v in range(views)}
+
+    def missing(self) -> list[tuple[int, int]]:
+        """(station, view) pairs with no capture, sorted."""
+        present = {(c.station, c.view) for c in self.captures}
+        return sorted(self.expected_keys() - present)
+
+
+def image_size_problems(
+    session: Session, capture: Capture, depth_hw: tuple[int, ...], color_hw: tuple[int, ...]
+) -> list[Problem]:
+    camera = session.calibration.depth_camera
+    expected = (camera.height, camera.width)
+    problems = []
+    if tuple(depth_hw) != expected:
+        problems.append(
+            Problem(
+                str(session.path_of(capture.depth)),
+                "depth",
+                f"size {depth_hw[1]} x {depth_hw[0]} differs from the calibration's "
+                f"{camera.width} x {camera.height}",
+            )
+        )
+    if tuple(color_hw) != tuple(depth_hw):
+        problems.append(
+            Problem(
+                str(session.path_of(capture.color)),
+                "color",
+                f"size {color_hw[1]} x {color_hw[0]} differs from the depth image's "
+                f"{depth_hw[1]} x {depth_hw[0]}",
+            )
+        )
+    return problems
+
+
+def structure_problems(folder: Path, document: SessionDocument) -> list[Problem]:
+    """What is wrong with a valid document as a whole: escaping paths, duplicates."""
+    session_file = str(folder / SESSION_FILE)
+    problems = []
+    root = folder.resolve()
+    seen: dict[tuple[int, int, str | None], int] = {}
+    for index, capture in enumerate(document.captures):
+        for name in ("depth", "color", "ir"):
+            relative = getattr(capture, name)
+            if relative and not (folder / relative).resolve().is_relative_to(root):
+                problems.append(
+                    Problem(session_file, f"captures[{index}].{name}", "path escapes the folder")
+                )
+        if capture.key in seen:
+            problems.append(
+                Problem(
+                    session_file,
+                    f"captures[{index}]",
+                    f"station {capture.station} view {capture.view} is already captured "
+                    f"by captures[{seen[capture.key]}]",
+                )
+            )
+        seen.setdefault(capture.key, index)
+    return problems
+
+
+def load_session(folder: Path, allow_empty: bool = False) -> Session:
+    """Load and check a session folder's documents (not its images: see :func:`verify`).
+
+    Raises :class:`FormatError` listing every problem found.
+    """
+    if not folder.is_dir():
+        raise FormatError([Problem(str(folder), "", "not a session folder (no such folder)")])
+    document = load_model(folder / SESSION_FILE, SessionDocument)
+    problems = structure_problems(folder, document)
+    if not document.captures and not allow_empty:
+        problems.append(Problem(str(folder / SESSION_FILE), "captures", "session has no captures"))
+    calibration: Calibration | None = None
+    try:
+        calibration = load_calibration(folder / document.calibration)
+        problems += session_calibration_problems(folder / document.calibration, calibration)
+    except FormatError as error:
+        problems += error.problems
+    if problems or calibration is None:
+        raise FormatError(problems)
+    return Session(folder, document, calibration)
+
+
+def session_calibration_problems(path: Path, calibration: Calibration) -> list[Problem]:
+    """A session's calibration must say how views and stations join."""
+    problems = []
+    if calibration.view_step is None:
+        problems.append(Problem(str(path), "view_step", "missing (needed to join the views)"))
+    if calibration.stations is None:
+        problems.append(Problem(str(path), "stations", "missing (needed to join the stations)"))
+    return problems
+
+
+def document_of(session: Session) -> dict[str, Any]:
+    """The session document as JSON-ready data."""
+    return session.document.model_dump(mode="json", exclude_none=True)
+
+
+def now_iso() -> str:
+    """The current local time with its UTC offset, ISO 8601, seconds."""
+    return datetime.now().astimezone().isoformat(timespec="seconds")

@@ -1,0 +1,158 @@
+"""Typed settings: a YAML file in the user's config folder, overridden by ``FIELDAPP_*`` variables.
+
+``FIELDAPP_DEVICES__TABLE_PORT=/dev/ttyUSB0`` sets ``devices.table_port`` (``__`` separates
+levels). A broken or partly invalid file never blocks start-up: each bad field is named in a
+warning and falls back to its default.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+import platformdirs
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from fieldapp.io.jsonfile import field_path
+
+log = logging.getLogger(__name__)
+
+ENV_PREFIX = "FIELDAPP_"
+SETTINGS_FILE_ENV = "FIELDAPP_SETTINGS"
+
+
+class Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class DeviceSettings(Section):
+    """Which devices to use. ``None`` for a port or endpoint means the simulated device."""
+
+    camera_backend: Literal["sim", "replay", "kinect2", "realsense"] = "sim"
+    replay_session: Path | None = None
+    table_port: str | None = None
+    base_endpoint: str | None = None
+    base_keys_dir: Path | None = None
+    realtime_simulation: bool = True
+
+
+class PathSettings(Section):
+    sessions_dir: Path = Field(
+        default_factory=lambda: Path(platformdirs.user_data_dir("fieldapp")) / "sessions"
+    )
+    results_db: Path = Field(
+        default_factory=lambda: Path(platformdirs.user_data_dir("fieldapp")) / "results.sqlite"
+    )
+
+
+class Settings(Section):
+    devices: DeviceSettings = Field(default_factory=DeviceSettings)
+    paths: PathSettings = Field(default_factory=PathSettings)
+
+
+def default_settings_path() -> Path:
+    """``$FIELDAPP_SETTINGS`` or ``settings.yaml`` in the user's config folder."""
+    override = os.environ.get(SETTINGS_FILE_ENV)
+    if override:
+        return Path(override)
+    return Path(platformdirs.user_config_dir("fieldapp")) / "settings.yaml"
+
+
+def environment_overrides(environ: Mapping[str, str]) -> dict[str, Any]:
+    """Nested values from ``FIELDAPP_SECTION__FIELD`` variables (names lower-cased)."""
+    values: dict[str, Any] = {}
+    for name, value in environ.items():
+        if not name.startswith(ENV_PREFIX) or name == SETTINGS_FILE_ENV:
+            continue
+        keys = name[len(ENV_PREFIX) :].lower().split("__")
+        node = values
+        for key in keys[:-1]:
+            node = node.setdefault(key, {})
+            if not isinstance(node, dict):
+                break
+        else:
+            node[keys[-1]] = yaml.safe_load(value) if value else value
+    return values
+
+
+def _merge(base: dict[str, Any], top: Mapping[str, Any]) -> dict[str, Any]:
+    merged = dict(base)
+    for key, value in top.items():
+        if isinstance(value, Mapping) and isinstance(merged.get(key), dict):
+            merged[key] = _merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+def _drop(values: dict[str, Any], loc: tuple[int | str, ...]) -> bool:
+    node: Any = values
+    for key in loc[:-1]:
+        if not isinstance(node, dict) or key not in node:
+            return False
+        node = node[key]
+    if isinstance(node, dict) and loc and loc[-1] in node:
+        del node[loc[-1]]
+        return True
+    return False
+
+
+def validate_leniently(values: dict[str, Any], source: str) -> Settings:
+    """Validate, dropping each bad field (with a warning naming it) until the rest is valid."""
+    for _ in range(100):
+        try:
+            return Settings.model_validate(values)
+        except ValidationError as error:
+            dropped = False
+            for problem in error.errors(include_url=False):
+                loc = problem["loc"]
+                while loc and not _drop(values, loc):
+                    loc = loc[:-1]
+                if loc:
+                    dropped = True
+                    log.warning(
+                        "%s: %s: %s; using the default", source, field_path(loc), problem["msg"]
+                    )
+            if not dropped:
+                break
+    log.warning("%s: unusable; using the default settings", source)
+    return Settings()
+
+
+def read_settings_file(path: Path) -> dict[str, Any]:
+    """The YAML mapping in ``path``, or ``{}`` (with a warning) when it is missing or broken."""
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return {}
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
+        log.warning("%s: cannot read settings (%s); using the defaults", path, error)
+        return {}
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        log.warning("%s: settings must be a mapping; using the defaults", path)
+        return {}
+    return data
+
+
+def load_settings(path: Path | None = None, environ: Mapping[str, str] | None = None) -> Settings:
+    """Settings from the file (default: :func:`default_settings_path`) and the environment."""
+    path = path or default_settings_path()
+    environ = os.environ if environ is None else environ
+    values = _merge(read_settings_file(path), environment_overrides(environ))
+    return validate_leniently(values, f"{path} (or {ENV_PREFIX}* variables)")
+
+
+def save_settings(settings: Settings, path: Path | None = None) -> Path:
+    """Write the settings as YAML (durably); returns the path written."""
+    from fieldapp.io.durable import write_bytes_durably
+
+    path = path or default_settings_path()
+    text = yaml.safe_dump(settings.model_dump(mode="json"), sort_keys=False)
+    write_bytes_durably(path, text.encode("utf-8"))
+    return path

@@ -1,0 +1,74 @@
+"""``fieldapp verify``: a complete check of a session folder against the spec."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fieldapp.errors import FormatError, Problem
+from fieldapp.io.images import ImageError, read_color, read_depth_units, read_ir
+from fieldapp.io.session import Capture, Session, image_size_problems, load_session
+
+
+@dataclass
+class VerifyReport:
+    """What ``verify`` found: the problems (none means usable) and a summary of the content."""
+
+    folder: Path
+    problems: list[Problem] = field(default_factory=list)
+    session: Session | None = None
+    views_by_station: dict[int, list[int]] = field(default_factory=dict)
+    missing: list[tuple[int, int]] = field(default_factory=list)
+
+    @property
+    def usable(self) -> bool:
+        return self.session is not None and not self.problems
+
+    def summary_lines(self) -> list[str]:
+        if self.session is None:
+            return []
+        lines = [
+            f"session {self.session.id}: {len(self.session.captures)} captures, "
+            f"{len(self.views_by_station)} stations"
+        ]
+        for station, views in sorted(self.views_by_station.items()):
+            lines.append(f"  station {station}: views {', '.join(map(str, views))}")
+        if self.missing:
+            listed = ", ".join(f"s{s} v{v}" for s, v in self.missing)
+            lines.append(f"missing captures ({len(self.missing)}): {listed}")
+        else:
+            lines.append("no missing captures")
+        return lines
+
+
+def capture_file_problems(session: Session, capture: Capture) -> list[Problem]:
+    """Decode a capture's files and check their kinds and sizes."""
+    try:
+        depth = read_depth_units(session.path_of(capture.depth))
+        color = read_color(session.path_of(capture.color))
+        if capture.ir:
+            ir = read_ir(session.path_of(capture.ir))
+            if ir.shape != depth.shape:
+                return [Problem(str(session.path_of(capture.ir)), "ir", "size differs from depth")]
+    except ImageError as error:
+        return [error.problem]
+    return image_size_problems(session, capture, depth.shape, color.shape[:2])
+
+
+def verify_session(folder: Path) -> VerifyReport:
+    """Check ``folder`` completely: documents, calibration, every referenced image."""
+    report = VerifyReport(folder)
+    try:
+        session = load_session(folder)
+    except FormatError as error:
+        report.problems = error.problems
+        return report
+    report.session = session
+    views: dict[int, list[int]] = defaultdict(list)
+    for capture in session.captures:
+        views[capture.station].append(capture.view)
+        report.problems += capture_file_problems(session, capture)
+    report.views_by_station = {s: sorted(v) for s, v in views.items()}
+    report.missing = session.missing()
+    return report
