@@ -25,6 +25,8 @@ def _relative_path(value: str) -> str:
     path = PurePosixPath(value.replace("\\", "/"))
     if not value.strip():
         raise ValueError("path is empty")
+    if any(ord(c) < 32 for c in value):
+        raise ValueError(f"path {value!r} has control characters")
     if path.is_absolute() or value.startswith(("/", "\\")) or ":" in path.parts[0]:
         raise ValueError(f"path {value!r} must be relative to the session folder")
     if ".." in path.parts:
