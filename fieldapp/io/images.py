@@ -32,7 +32,7 @@ def _decode(path: Path, field: str, flags: int) -> NDArray[Any]:
     image = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
     if image is None:
         raise ImageError(Problem(str(path), field, "not a decodable image (truncated or corrupt?)"))
-    return image
+    return np.asarray(image)
 
 
 def read_depth_units(path: Path, field: str = "depth") -> NDArray[np.uint16]:

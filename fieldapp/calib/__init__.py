@@ -1,0 +1,1 @@
+"""Calibration solvers (Qt-free): intrinsics, view-to-view, station-to-station, ground."""
