@@ -33,6 +33,39 @@ def register(subparsers: Any) -> None:
     intrinsics.add_argument("--out", type=Path, required=True, help="calibration file to write")
     intrinsics.set_defaults(handler=run_intrinsics)
 
+    views = kinds.add_parser(
+        "views",
+        help="the turntable's view-to-view transform from a board seen at views k and k+1",
+        description="Solve view_step (view k+1 into view k) by weighted SVD on the board's "
+        "corners, lifted to 3D with the registered depth, at consecutive views of a station.",
+    )
+    views.add_argument("session", type=Path, help="session whose views 0 and 1 see one board")
+    _board_arguments(views)
+    views.add_argument("--station", type=int, help="use this station only (default: all)")
+    views.add_argument("--out", type=Path, required=True, help="calibration file to write")
+    views.set_defaults(handler=run_views)
+
+    stations = kinds.add_parser(
+        "stations",
+        help="station-to-station transforms from boards seen by neighbouring stations",
+        description="Pairwise transforms through boards seen from two stations (captures "
+        'tagged "target" in session.json), composed into stations.to_reference.',
+    )
+    stations.add_argument("session", type=Path, help="session with board-tagged captures")
+    _board_arguments(stations)
+    stations.add_argument("--reference", type=int, default=5, help="reference station (5)")
+    stations.add_argument(
+        "--calibration", type=Path, required=True, help="calibration with the view_step to use"
+    )
+    stations.add_argument("--out", type=Path, required=True, help="calibration file to write")
+    stations.set_defaults(handler=run_stations)
+
+
+def _board_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--board", required=True, help="inner corners COLSxROWS, e.g. 9x6")
+    parser.add_argument("--square-mm", type=float, required=True, help="square size, mm")
+    parser.add_argument("--serial", help="the rig's serial number, recorded")
+
 
 def run_intrinsics(args: argparse.Namespace) -> int:
     from fieldapp.calib.board import Board
@@ -64,6 +97,90 @@ def run_intrinsics(args: argparse.Namespace) -> int:
         else:
             print(f"  {view.name}: REJECTED: {view.rejected}")
     print(f"corner coverage {100 * result.coverage:.0f} % of the image")
+    for warning in result.warnings:
+        print(f"warning: {warning}")
+    print(f"written to {args.out}" + (f" (previous kept as {previous})" if previous else ""))
+    return 0
+
+
+def _load(path: Path) -> Any:
+    from fieldapp.errors import FieldappError, FormatError
+    from fieldapp.io.session import load_session
+
+    try:
+        return load_session(path)
+    except FormatError as error:
+        raise FieldappError(f"{path} is not a usable session:\n{error}") from None
+
+
+def run_views(args: argparse.Namespace) -> int:
+    from fieldapp.calib.board import Board
+    from fieldapp.calib.store import provenance, save_keeping_previous, with_depth_camera
+    from fieldapp.calib.views import calibrate_view_step
+    from fieldapp.io.calibration import ViewStep
+
+    session = _load(args.session)
+    board = Board.parse(args.board, args.square_mm)
+    result = calibrate_view_step(session, board, args.station)
+    nominal = session.calibration.view_step
+    angle = nominal.angle_deg if nominal is not None else round(result.angle_deg, 1)
+    view_step = ViewStep(angle_deg=angle, matrix=result.T_view_k_view_k1)
+    view_step.calibrated = provenance(  # type: ignore[attr-defined]
+        args.serial,
+        method="weighted SVD of checkerboard corners",
+        rmse_mm=round(1000 * result.rmse_m, 3),
+        solved_angle_deg=round(result.angle_deg, 4),
+        points=result.points,
+        pairs=result.pairs,
+    )
+    calibration = with_depth_camera(args.out, session.calibration.depth_camera)
+    calibration = calibration.model_copy(update={"view_step": view_step})
+    previous = save_keeping_previous(args.out, calibration)
+    print(
+        f"view_step: turn {result.angle_deg:.4f} degrees, translation "
+        + " ".join(f"{x:+.4f}" for x in result.T_view_k_view_k1[:3, 3])
+        + " m"
+    )
+    print(f"feature point RMSE {1000 * result.rmse_m:.2f} mm over {result.points} corners")
+    for pair in result.pairs:
+        print(f"  {pair}")
+    for warning in result.warnings:
+        print(f"warning: {warning}")
+    print(f"written to {args.out}" + (f" (previous kept as {previous})" if previous else ""))
+    return 0
+
+
+def run_stations(args: argparse.Namespace) -> int:
+    from fieldapp.calib.board import Board
+    from fieldapp.calib.stations import calibrate_stations
+    from fieldapp.calib.store import provenance, save_keeping_previous
+    from fieldapp.errors import FieldappError
+    from fieldapp.io.calibration import Stations, load_calibration
+
+    session = _load(args.session)
+    calibration = load_calibration(args.calibration)
+    if calibration.view_step is None:
+        raise FieldappError(f"{args.calibration}: view_step is missing: calibrate views first")
+    board = Board.parse(args.board, args.square_mm)
+    result = calibrate_stations(session, board, calibration.view_step, args.reference)
+    stations = Stations(reference=args.reference, to_reference=result.T_reference_station)
+    stations.calibrated = provenance(  # type: ignore[attr-defined]
+        args.serial,
+        method="checkerboards between neighbouring stations, spanning tree",
+        pairs={f"{p.station_a}-{p.station_b}": round(1000 * p.fit.rmse_m, 3) for p in result.pairs},
+        tree={str(s): parent for s, parent in sorted(result.tree.items())},
+    )
+    previous = save_keeping_previous(
+        args.out, calibration.model_copy(update={"stations": stations})
+    )
+    for pair in result.pairs:
+        print(
+            f"stations {pair.station_a}-{pair.station_b} via {', '.join(pair.targets)}: "
+            f"RMSE {1000 * pair.fit.rmse_m:.2f} mm"
+        )
+    for station, parent in sorted(result.tree.items()):
+        t = result.T_reference_station[station][:3, 3]
+        print(f"station {station} (via {parent}): " + " ".join(f"{x:+.4f}" for x in t) + " m")
     for warning in result.warnings:
         print(f"warning: {warning}")
     print(f"written to {args.out}" + (f" (previous kept as {previous})" if previous else ""))
