@@ -1,0 +1,183 @@
+"""Scenes for the calibration workflows.
+
+- Intrinsics: a board held at varied poses close to the camera, covering the image, in front of
+  a dim wall (IR images, as the paper calibrates from).
+- View step: a board standing near the reference station, seen by both views 0 and 1.
+- Stations: a board lying on the soil midway between each pair of neighbouring stations, seen
+  from both.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.camera.frames import KINECT_V2_PAPER, Intrinsics
+from devices.geometry import (
+    Matrix4,
+    make_transform,
+    rotation_x,
+    rotation_y,
+    rotation_z,
+    transform_points,
+)
+from devices.sim.boards import Checkerboard, PlacedBoard, board_facing, board_lying
+from devices.sim.render import Renderer, SensorModel
+from devices.sim.rig import REFERENCE_STATION, RigGeometry
+from devices.sim.scene import Body, Scene, empty_scene
+from devices.sim.soil import Soil
+from devices.sim.visibility import project
+
+INTRINSICS_BOARD = Checkerboard("intrinsics", inner_cols=9, inner_rows=6, square_m=0.04)
+VIEW_STEP_BOARD = Checkerboard("view-step", inner_cols=9, inner_rows=6, square_m=0.05)
+WALL_DISTANCE_M = 3.0
+
+
+def neighbour_pairs() -> list[tuple[int, int]]:
+    """Neighbouring stations of the 3 x 3 grid (along rows, then along columns)."""
+    pairs = [(s, s + 1) for s in range(1, 10) if s % 3 != 0]
+    return pairs + [(s, s + 3) for s in range(1, 7)]
+
+
+def station_board(a: int, b: int) -> Checkerboard:
+    return Checkerboard(f"stations-{a}-{b}", inner_cols=9, inner_rows=6, square_m=0.04)
+
+
+def add_calibration_boards(scene: Scene, rig: RigGeometry, seed: int) -> None:
+    """The view-step board near the reference station and one board between each pair of
+    neighbouring stations (lying on the soil, short side towards the stations)."""
+    if scene.soil is None:
+        raise ValueError("the calibration boards stand on soil")
+    rng = np.random.default_rng([seed, 23])
+    reference = rig.station_pose(REFERENCE_STATION)
+    T_camera = rig.T_field_camera(reference, rig.view_step_deg / 2, scene.soil)
+    centre = transform_points(T_camera, np.array([[0.0, 0.0, 1.25]]))[0]
+    scene.add_board(
+        PlacedBoard(VIEW_STEP_BOARD, board_facing(VIEW_STEP_BOARD, centre, T_camera[:3, 3]))
+    )
+    for a, b in neighbour_pairs():
+        pa, pb = rig.station_pose(a), rig.station_pose(b)
+        mid_map = np.array([(pa.x_m + pb.x_m) / 2, (pa.y_m + pb.y_m) / 2, 0.0])
+        mid = transform_points(rig.T_field_map, mid_map[None, :])[0]
+        mid[2] = scene.soil.height_at(mid[0], mid[1]) + 0.004
+        heading = np.degrees(np.arctan2(pb.y_m - pa.y_m, pb.x_m - pa.x_m))
+        board = station_board(a, b)
+        yaw = heading + 90.0 + rng.uniform(-8.0, 8.0)  # x across the line: short side along it
+        T = board_lying(board, mid, yaw, _ground_normal(scene.soil, mid[0], mid[1]))
+        scene.add_board(PlacedBoard(board, T))
+
+
+def _ground_normal(soil: Soil, x: float, y: float, step_m: float = 0.2) -> NDArray[np.float64]:
+    h = soil.height_at
+    gx = (h(x + step_m, y) - h(x - step_m, y)) / (2 * step_m)
+    gy = (h(x, y + step_m) - h(x, y - step_m)) / (2 * step_m)
+    normal = np.array([-gx, -gy, 1.0])
+    return normal / np.linalg.norm(normal)  # type: ignore[no-any-return]
+
+
+def checkerboard_scene(seed: int, rig: RigGeometry) -> Scene:
+    """Bare soil with the calibration boards of :func:`add_calibration_boards`."""
+    scene = empty_scene(seed)
+    add_calibration_boards(scene, rig, seed)
+    return scene
+
+
+def intrinsics_poses(
+    board: Checkerboard, intrinsics: Intrinsics, count: int, seed: int, margin_px: float = 15.0
+) -> list[Matrix4]:
+    """``count`` poses ``T_camera_board`` of ``board`` 0.6-1.1 m from the camera, tilted up to
+    40 degrees, spread over a grid of image positions, each with all corners inside the image."""
+    rng = np.random.default_rng([seed, 29])
+    poses: list[Matrix4] = []
+    cells = [(c, r) for r in range(4) for c in range(5)]
+    while len(poses) < count:
+        c, r = cells[len(poses) % len(cells)]
+        for _ in range(200):
+            T = _random_pose(board, intrinsics, (c + 0.5) / 5, (r + 0.5) / 4, rng)
+            if _fits(board, intrinsics, T, margin_px):
+                poses.append(T)
+                break
+        else:
+            cells[len(poses) % len(cells)] = (2, 2)  # corner too tight: use the centre instead
+    return poses
+
+
+def _random_pose(
+    board: Checkerboard, intrinsics: Intrinsics, fu: float, fv: float, rng: np.random.Generator
+) -> Matrix4:
+    depth = rng.uniform(0.6, 1.1)
+    u = intrinsics.width * (0.5 + 0.8 * (fu - 0.5))
+    v = intrinsics.height * (0.5 + 0.8 * (fv - 0.5))
+    centre = (
+        np.array([(u - intrinsics.cx) / intrinsics.fx, (v - intrinsics.cy) / intrinsics.fy, 1.0])
+        * depth
+    )
+    tilt = (
+        rotation_x(rng.uniform(-40, 40))
+        @ rotation_y(rng.uniform(-40, 40))
+        @ rotation_z(rng.uniform(-25, 25))
+    )
+    return make_transform(tilt, centre - tilt @ board.centre_m)
+
+
+def _fits(
+    board: Checkerboard, intrinsics: Intrinsics, T_camera_board: Matrix4, margin_px: float
+) -> bool:
+    x0, x1, y0, y1 = board.outline_m
+    sheet = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]])
+    camera = transform_points(T_camera_board, sheet)
+    if np.any(camera[:, 2] < 0.5):
+        return False
+    pixels = project(intrinsics, camera)
+    return bool(
+        np.all(pixels >= margin_px)
+        and np.all(pixels[:, 0] <= intrinsics.width - 1 - margin_px)
+        and np.all(pixels[:, 1] <= intrinsics.height - 1 - margin_px)
+    )
+
+
+def intrinsics_scene(board: Checkerboard, T_camera_board: Matrix4) -> Scene:
+    """The board at ``T_camera_board`` before a wall ``WALL_DISTANCE_M`` away; the scene's field
+    frame is the camera frame (render it from the identity)."""
+    scene = Scene(soil=None)
+    scene.add_board(PlacedBoard(board, T_camera_board))
+    half = 4.0
+    wall = np.array(
+        [
+            [-half, -half, WALL_DISTANCE_M],
+            [half, -half, WALL_DISTANCE_M],
+            [half, half, WALL_DISTANCE_M],
+            [-half, half, WALL_DISTANCE_M],
+        ]
+    )
+    triangles = np.array([[0, 2, 1], [0, 3, 2]], dtype=np.int32)
+    scene.bodies.append(
+        Body(
+            "wall",
+            "wall",
+            wall,
+            triangles,
+            np.full((4, 3), 0.4, np.float32),
+            np.full(4, 0.35, np.float32),
+        )
+    )
+    return scene
+
+
+def intrinsics_images(
+    count: int,
+    seed: int,
+    intrinsics: Intrinsics = KINECT_V2_PAPER,
+    board: Checkerboard = INTRINSICS_BOARD,
+) -> Iterator[tuple[Matrix4, NDArray[np.uint16]]]:
+    """``count`` (``T_camera_board``, IR image (H, W) uint16) pairs of ``board`` held before the
+    camera, rendered with 3 x 3 rays per pixel (a real sensor integrates over the pixel)."""
+    sensor = SensorModel(supersample=3)
+    for index, T_camera_board in enumerate(intrinsics_poses(board, intrinsics, count, seed)):
+        frame = Renderer(intrinsics_scene(board, T_camera_board), intrinsics, sensor).render(
+            np.eye(4), np.random.default_rng([seed, 31, index])
+        )
+        assert frame.ir is not None
+        yield T_camera_board, frame.ir

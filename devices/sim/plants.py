@@ -1,0 +1,188 @@
+"""Procedural maize seedlings: a leaning stem and 5-9 arching, tapering leaves on alternate sides.
+
+A plant is drawn from its own seed, independently of its growth stage: ``--day N`` grows the
+same plants (leaves appear every five days, everything lengthens), and the same seed gives the
+same plants. Truth (height, width) is computed from the finished mesh.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.geometry import rotation_x, rotation_z
+
+MAX_LEAVES = 9
+LEAF_SEGMENTS = 14
+STEM_SIDES = 8
+HEIGHT_DAY0_M = 0.30
+GROWTH_PER_DAY = 0.05
+"""Relative height gain per day (linear): 1.25 x on day 5, 2 x on day 20."""
+
+LEAF_RGB = np.array([0.14, 0.36, 0.06], dtype=np.float32)
+STEM_RGB = np.array([0.45, 0.55, 0.25], dtype=np.float32)
+LEAF_IR = 0.55
+"""Near-infrared albedo of green leaves (high: the red edge)."""
+
+
+@dataclass(frozen=True)
+class PlantMesh:
+    """One plant in the field frame.
+
+    - ``vertices_m``: (V, 3) float64; ``triangles``: (T, 3) int32.
+    - ``albedo_rgb``: (V, 3) float32 0-1; ``albedo_ir``: (V,) float32.
+    - ``base_m``: (3,) the stem's foot on the ground.
+    """
+
+    vertices_m: NDArray[np.float64]
+    triangles: NDArray[np.int32]
+    albedo_rgb: NDArray[np.float32]
+    albedo_ir: NDArray[np.float32]
+    base_m: NDArray[np.float64]
+
+    @property
+    def height_m(self) -> float:
+        """From the ground at the base to the highest point of the mesh."""
+        return float(self.vertices_m[:, 2].max() - self.base_m[2])
+
+    @property
+    def width_m(self) -> float:
+        """Diameter of the smallest circle enclosing the projection on the ground."""
+        _, radius = cv2.minEnclosingCircle(self.vertices_m[:, :2].astype(np.float32))
+        return 2.0 * float(radius)
+
+
+def leaves_on_day(base_leaves: int, day: int) -> int:
+    """Visible leaves on ``day``: one more every five days, at most :data:`MAX_LEAVES`."""
+    return int(min(MAX_LEAVES, base_leaves + max(day, 0) // 5))
+
+
+def growth_factor(day: int) -> float:
+    """Height relative to day 0."""
+    return 1.0 + GROWTH_PER_DAY * max(day, 0)
+
+
+def make_plant(seed: int, day: int, base_xy_m: tuple[float, float], ground_z_m: float) -> PlantMesh:
+    """Draw the plant of ``seed`` on ``day``, standing at ``base_xy_m`` on ground ``ground_z_m``.
+
+    Leaf tips may droop below uneven soil: lift them with :func:`settle_on_ground`.
+    """
+    rng = np.random.default_rng([seed, 7])
+    base_leaves = int(rng.integers(5, 8))
+    count = leaves_on_day(base_leaves, day)
+    azimuth0, lean_dir = rng.uniform(0.0, 2 * np.pi, 2)
+    lean_deg = rng.uniform(1.0, 5.0)
+    size = rng.uniform(0.85, 1.15)
+    parts = [_stem(count)]
+    for k in range(MAX_LEAVES):
+        params = rng.uniform(0.0, 1.0, 6)  # drawn for every leaf, so growth keeps the old ones
+        if k < count:
+            parts.append(_leaf(k, count, azimuth0 + np.pi * k, params))
+    vertices = np.concatenate([p[0] for p in parts])
+    triangles = np.concatenate(_offset_triangles([p[1] for p in parts])).astype(np.int32)
+    albedo = np.concatenate([p[2] for p in parts])
+    leaning = (
+        rotation_z(np.degrees(lean_dir)) @ rotation_x(lean_deg) @ rotation_z(-np.degrees(lean_dir))
+    )
+    vertices = vertices @ leaning.T
+    vertices *= HEIGHT_DAY0_M * size * growth_factor(day) / vertices[:, 2].max()
+    base = np.array([base_xy_m[0], base_xy_m[1], ground_z_m])
+    vertices += base
+    shade = 1.0 + 0.12 * (rng.random() - 0.5)
+    return PlantMesh(
+        vertices_m=vertices,
+        triangles=triangles,
+        albedo_rgb=(albedo * shade).astype(np.float32),
+        albedo_ir=np.full(len(vertices), LEAF_IR, np.float32),
+        base_m=base,
+    )
+
+
+def settle_on_ground(mesh: PlantMesh, ground_z_m: NDArray[np.float64]) -> PlantMesh:
+    """Lift vertices that droop below the ground (``ground_z_m`` (V,) under each) 5 mm clear of
+    it, except the stem's foot, which stays rooted."""
+    vertices = mesh.vertices_m.copy()
+    above_foot = vertices[:, 2] > mesh.base_m[2] + 0.01
+    floor = ground_z_m + 0.005
+    lift = above_foot & (vertices[:, 2] < floor)
+    vertices[lift, 2] = floor[lift]
+    return PlantMesh(vertices, mesh.triangles, mesh.albedo_rgb, mesh.albedo_ir, mesh.base_m)
+
+
+def _offset_triangles(parts: list[NDArray[np.int64]]) -> list[NDArray[np.int64]]:
+    out, offset = [], 0
+    for triangles in parts:
+        out.append(triangles + offset)
+        offset += int(triangles.max()) + 1
+    return out
+
+
+Part = tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float32]]
+
+
+def _stem(count: int) -> Part:
+    """A tapering cylinder (unit scale: the plant is scaled afterwards), foot 2 cm in the soil."""
+    top = 0.10 + 0.035 * count
+    z = np.linspace(-0.02, top, 6)
+    radius = np.interp(z, [-0.02, top], [0.012, 0.006])
+    angle = np.linspace(0.0, 2 * np.pi, STEM_SIDES, endpoint=False)
+    ring = np.stack([np.cos(angle), np.sin(angle)], 1)
+    vertices = np.concatenate(
+        [
+            np.column_stack([r * ring, np.full(STEM_SIDES, h)])
+            for r, h in zip(radius, z, strict=True)
+        ]
+    )
+    triangles = _strip(len(z), STEM_SIDES, closed=True)
+    albedo = np.tile(STEM_RGB, (len(vertices), 1))
+    return vertices, triangles, albedo
+
+
+def _leaf(k: int, count: int, azimuth: float, p: NDArray[np.float64]) -> Part:
+    """Leaf ``k`` of ``count`` (0 lowest) as a folded ribbon with three vertices per section.
+
+    Lower leaves are shorter, start flatter and arch over; the top ones stand up in the whorl.
+    """
+    rank = k / max(count - 1, 1)
+    node_z = 0.06 + 0.035 * k
+    length = (0.20 + 0.22 * np.sin(np.pi * (0.25 + 0.6 * rank))) * (0.85 + 0.3 * p[0])
+    width = (0.06 + 0.045 * rank) * (0.85 + 0.3 * p[1])
+    rise = np.radians(np.interp(rank, [0, 0.7, 1], [45, 30, 8]) + 10 * (p[2] - 0.5))
+    tip = np.radians(np.interp(rank, [0, 0.7, 1], [135, 105, 35]) + 20 * (p[3] - 0.5))
+    az = (
+        azimuth
+        + np.radians(30 * (p[4] - 0.5))
+        + np.radians(20 * (p[5] - 0.5)) * np.linspace(0, 1, LEAF_SEGMENTS + 1)
+    )
+    u = np.linspace(0.0, 1.0, LEAF_SEGMENTS + 1)
+    theta = rise + (tip - rise) * u**1.5
+    heading = np.stack([np.cos(az), np.sin(az), np.zeros_like(az)], 1)
+    tangent = np.sin(theta)[:, None] * heading + np.cos(theta)[:, None] * np.array([0, 0, 1.0])
+    steps = np.diff(u, prepend=0.0)[:, None] * length * tangent
+    centre = np.cumsum(steps, axis=0) + np.array([0.0, 0.0, node_z])
+    side = np.stack([-np.sin(az), np.cos(az), np.zeros_like(az)], 1)
+    upper = np.cross(side, tangent)
+    half = 0.5 * width * (0.3 + 0.7 * np.sin(0.5 * np.pi * np.minimum(u / 0.4, 1))) * (1 - u) ** 0.6
+    fold = (0.3 * half)[:, None] * upper
+    sections = [centre - half[:, None] * side + fold, centre, centre + half[:, None] * side + fold]
+    vertices = np.stack(sections, axis=1).reshape(-1, 3)
+    triangles = _strip(LEAF_SEGMENTS + 1, 3, closed=False)
+    midrib = np.tile([0.0, 1.0, 0.0], LEAF_SEGMENTS + 1)
+    tint = (1.0 + 0.25 * np.repeat(u, 3) ** 2 + 0.15 * midrib)[:, None]
+    albedo = (LEAF_RGB[None, :] * tint).astype(np.float32)
+    albedo[:, 0] += 0.04 * np.repeat(u, 3) ** 3  # tips a little yellower
+    return vertices, triangles, albedo
+
+
+def _strip(rings: int, per_ring: int, closed: bool) -> NDArray[np.int64]:
+    """Triangles joining ``rings`` consecutive rings of ``per_ring`` vertices each."""
+    columns = per_ring if closed else per_ring - 1
+    r, c = np.meshgrid(np.arange(rings - 1), np.arange(columns), indexing="ij")
+    a = (r * per_ring + c).ravel()
+    b = (r * per_ring + (c + 1) % per_ring).ravel()
+    return np.concatenate(
+        [np.stack([a, b, a + per_ring], 1), np.stack([b, b + per_ring, a + per_ring], 1)]
+    )

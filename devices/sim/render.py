@@ -1,0 +1,310 @@
+"""Ray casting a scene into Kinect v2 frames: depth with the sensor's noise, colour, IR.
+
+One ray per pixel from a precomputed table (camera-frame directions with z = 1, so Open3D's
+``t_hit`` is the depth along the optical axis), cast with Open3D's ``RaycastingScene``.
+Sensor model (``shared/KINECT-V2.md``): axial noise by distance and incidence angle (Fankhauser
+et al. 2015), flying pixels along depth edges, dropouts at grazing angles and on surfaces too
+dark in IR, no return outside 0.5-4.5 m. Colour: albedo lit by the sun with cast shadows and
+sky light. IR: the camera's own illumination, albedo x cos(incidence) / distance^2.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+import open3d as o3d
+from numpy.typing import NDArray
+
+from devices.camera.frames import Frame, Intrinsics
+from devices.geometry import Matrix4
+from devices.sim.scene import Scene
+
+MIN_RANGE_M = 0.5
+MAX_RANGE_M = 4.5
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """Noise and artefacts. Set ``noise=False`` for exact depth (tests of geometry)."""
+
+    noise: bool = True
+    flying_fraction: float = 0.5
+    """Share of depth-edge pixels that return a mixture of the two surfaces."""
+    edge_jump: float = 0.04
+    """Relative depth jump between neighbours that makes an edge."""
+    grazing_start_deg: float = 75.0
+    grazing_end_deg: float = 88.0
+    """Dropout probability rises from 0 to 1 between these incidence angles."""
+    min_ir: float = 60.0
+    """IR amplitude below which there is no depth (too little returned light)."""
+    ir_gain: float = 24000.0
+    """IR amplitude of a white (albedo 1) surface facing the camera at 1 m."""
+    ir_noise: float = 0.02
+    sun_azimuth_deg: float = 135.0
+    sun_elevation_deg: float = 50.0
+    sky: float = 0.35
+    supersample: int = 1
+    """Rays per pixel side (IR and colour are averaged; 3 for calibration images)."""
+
+
+def tensor(array: NDArray[Any]) -> o3d.core.Tensor:
+    """An Open3D tensor sharing a contiguous copy of ``array``."""
+    return o3d.core.Tensor.from_numpy(np.ascontiguousarray(array))
+
+
+def scene_raycaster(scene: Scene) -> o3d.t.geometry.RaycastingScene:
+    """A raycasting scene of ``scene``'s bodies; geometry id = index in ``scene.bodies``."""
+    raycaster = o3d.t.geometry.RaycastingScene()
+    for body in scene.bodies:
+        raycaster.add_triangles(
+            tensor(body.vertices_m.astype(np.float32)), tensor(body.triangles.astype(np.uint32))
+        )
+    return raycaster
+
+
+def axial_noise_m(
+    depth_m: NDArray[np.floating], incidence_rad: NDArray[np.floating]
+) -> NDArray[np.float64]:
+    """Standard deviation (m) of Kinect v2 depth at ``depth_m`` and incidence angle (rad).
+
+    sigma_z [mm] = 1.5 - 0.5 z + 0.3 z^2 + 0.1 z^1.5 theta^2 / (pi/2 - theta)^2.
+    """
+    z = np.asarray(depth_m, np.float64)
+    theta = np.minimum(np.asarray(incidence_rad, np.float64), np.radians(89.0))
+    sigma_mm = 1.5 - 0.5 * z + 0.3 * z**2 + 0.1 * z**1.5 * theta**2 / (np.pi / 2 - theta) ** 2
+    return sigma_mm / 1000.0  # type: ignore[no-any-return]
+
+
+def ray_table(intrinsics: Intrinsics, supersample: int = 1) -> NDArray[np.float32]:
+    """(H * W * s^2, 3) camera-frame ray directions with z = 1, pixel by pixel (row-major),
+    ``s`` x ``s`` sub-rays per pixel; lens distortion undone by OpenCV when there is some."""
+    s = supersample
+    offsets = (np.arange(s) + 0.5) / s - 0.5
+    v, u, dv, du = np.meshgrid(
+        np.arange(intrinsics.height), np.arange(intrinsics.width), offsets, offsets, indexing="ij"
+    )
+    pixels = np.stack([(u + du).ravel(), (v + dv).ravel()], axis=1).astype(np.float64)
+    if intrinsics.has_distortion:
+        normalised = cv2.undistortPoints(
+            pixels.reshape(-1, 1, 2), intrinsics.K, np.array(intrinsics.distortion)
+        ).reshape(-1, 2)
+    else:
+        normalised = (pixels - [intrinsics.cx, intrinsics.cy]) / [intrinsics.fx, intrinsics.fy]
+    return np.column_stack([normalised, np.ones(len(normalised))]).astype(np.float32)
+
+
+@dataclass
+class Hits:
+    """What the rays hit, flattened: ``t`` (N,) depth along the axis (inf = nothing),
+    ``points`` (N, 3) field frame, ``normals`` (N, 3) facing the camera, ``cos_incidence`` (N,),
+    ``rgb`` (N, 3) and ``ir`` (N,) albedo, ``lit`` (N,) direct sunlight factor."""
+
+    t: NDArray[np.float32]
+    points: NDArray[np.float64]
+    normals: NDArray[np.float64]
+    cos_incidence: NDArray[np.float64]
+    range_m: NDArray[np.float64]
+    rgb: NDArray[np.float32]
+    ir: NDArray[np.float32]
+
+
+class Renderer:
+    """Renders a :class:`Scene` as seen by a camera of ``intrinsics`` at ``T_field_camera``.
+
+    Thread-safe (one render at a time). Building the BVH takes a fraction of a second at the
+    first render; later renders of the same scene reuse it.
+    """
+
+    def __init__(
+        self, scene: Scene, intrinsics: Intrinsics, sensor: SensorModel | None = None
+    ) -> None:
+        self.scene = scene
+        self.intrinsics = intrinsics
+        self.sensor = sensor or SensorModel()
+        self._rays_camera = ray_table(intrinsics, self.sensor.supersample)
+        self._lock = threading.Lock()
+        self._raycaster = scene_raycaster(scene)
+        triangles: list[NDArray[np.int64]] = []
+        offsets: list[int] = []
+        vertex_count = 0
+        for body in scene.bodies:
+            offsets.append(sum(len(t) for t in triangles))
+            triangles.append(body.triangles.astype(np.int64) + vertex_count)
+            vertex_count += len(body.vertices_m)
+        self._triangles = np.concatenate(triangles)
+        self._triangle_offset = np.array(offsets, np.int64)
+        self._rgb = np.concatenate([b.albedo_rgb for b in scene.bodies]).astype(np.float32)
+        self._ir = np.concatenate([b.albedo_ir for b in scene.bodies]).astype(np.float32)
+        self._textured = [(i, b.texture) for i, b in enumerate(scene.bodies) if b.texture]
+        self._is_textured = np.array([b.texture is not None for b in scene.bodies], bool)
+        sun_az, sun_el = (
+            np.radians(self.sensor.sun_azimuth_deg),
+            np.radians(self.sensor.sun_elevation_deg),
+        )
+        self._sun = np.array(
+            [np.cos(sun_el) * np.cos(sun_az), np.cos(sun_el) * np.sin(sun_az), np.sin(sun_el)]
+        )
+
+    @property
+    def raycaster(self) -> o3d.t.geometry.RaycastingScene:
+        """The scene's bodies in order (geometry id = index in ``scene.bodies``)."""
+        return self._raycaster
+
+    def render(self, T_field_camera: Matrix4, rng: np.random.Generator | None = None) -> Frame:
+        """One frame (depth_m float32 NaN = missing, color uint8 RGB, ir uint16)."""
+        rng = rng or np.random.default_rng()
+        with self._lock:
+            hits = self._cast(T_field_camera)
+            rgb = self._shade(hits)
+            lit_ir = self._ir_amplitude(hits)
+        s, h, w = self.sensor.supersample, self.intrinsics.height, self.intrinsics.width
+        depth = _pixels(hits.t.astype(np.float64), h, w, s)
+        ir = _pixels(lit_ir, h, w, s)
+        color = _pixels(rgb, h, w, s)
+        cos_incidence = _pixels(hits.cos_incidence, h, w, s)
+        if self.sensor.noise:
+            ir = ir * (1.0 + self.sensor.ir_noise * rng.standard_normal(ir.shape))
+            depth = self._sensor_depth(depth, cos_incidence, ir, rng)
+        else:
+            depth = np.where(np.isfinite(depth), depth, np.nan)
+        depth[(depth < MIN_RANGE_M) | (depth > MAX_RANGE_M)] = np.nan
+        return Frame(
+            depth_m=depth.astype(np.float32),
+            color=_to_srgb8(color, rng if self.sensor.noise else None),
+            ir=np.clip(ir, 0, 65535).astype(np.uint16),
+        )
+
+    def _cast(self, T_field_camera: Matrix4) -> Hits:
+        R, origin = T_field_camera[:3, :3], T_field_camera[:3, 3]
+        directions = self._rays_camera @ R.T.astype(np.float32)
+        rays = np.empty((len(directions), 6), np.float32)
+        rays[:, :3] = origin
+        rays[:, 3:] = directions
+        result = self._raycaster.cast_rays(tensor(rays), nthreads=0)
+        t = result["t_hit"].numpy()
+        hit = np.isfinite(t)
+        gid = result["geometry_ids"].numpy().astype(np.int64)
+        normals = result["primitive_normals"].numpy().astype(np.float64)
+        norms = np.linalg.norm(directions, axis=1)
+        cos_incidence = -np.einsum("ij,ij->i", normals, directions) / norms
+        flip = cos_incidence < 0  # two-sided surfaces (leaves): the normal faces the camera
+        normals[flip] *= -1.0
+        cos_incidence = np.abs(cos_incidence)
+        points = origin + np.where(hit, t, 0.0)[:, None].astype(np.float64) * directions
+        rgb, ir = self._albedo(hit, gid, result, points)
+        return Hits(t, points, normals, cos_incidence, np.where(hit, t * norms, np.inf), rgb, ir)
+
+    def _albedo(
+        self,
+        hit: NDArray[np.bool_],
+        gid: NDArray[np.int64],
+        result: dict[str, o3d.core.Tensor],
+        points: NDArray[np.float64],
+    ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        n = len(hit)
+        rgb, ir = np.zeros((n, 3), np.float32), np.zeros(n, np.float32)
+        index = np.flatnonzero(hit)
+        plain = index[~self._is_textured[gid[index]]]
+        tri = self._triangle_offset[gid[plain]] + result["primitive_ids"].numpy()[plain]
+        corners = self._triangles[tri]
+        uv = result["primitive_uvs"].numpy()[plain]
+        weights = np.column_stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]])
+        rgb[plain] = np.einsum("nk,nkc->nc", weights, self._rgb[corners])
+        ir[plain] = np.einsum("nk,nk->n", weights, self._ir[corners])
+        for body_index, texture in self._textured:
+            on_body = index[gid[index] == body_index]
+            if len(on_body):
+                rgb[on_body], ir[on_body] = texture(points[on_body])
+        return rgb, ir
+
+    def _shade(self, hits: Hits) -> NDArray[np.float64]:
+        """Linear RGB: albedo x (sky + sun x cos x unshadowed)."""
+        hit = np.isfinite(hits.t)
+        cos_sun = np.clip(hits.normals @ self._sun, 0.0, 1.0)
+        lit = np.zeros(len(hits.t))
+        facing = np.flatnonzero(hit & (cos_sun > 0))
+        if len(facing):
+            origins = hits.points[facing] + 0.002 * hits.normals[facing]
+            rays = np.column_stack([origins, np.tile(self._sun, (len(facing), 1))]).astype(
+                np.float32
+            )
+            occluded = self._raycaster.test_occlusions(tensor(rays), nthreads=0).numpy()
+            lit[facing] = np.where(occluded, 0.0, cos_sun[facing])
+        sky = self.sensor.sky * (0.6 + 0.4 * hits.normals[:, 2])
+        light = np.where(hit, sky + lit, 0.0)
+        background = np.array([0.55, 0.62, 0.70])  # haze beyond the modelled ground
+        return np.where(hit[:, None], hits.rgb * light[:, None], background)
+
+    def _ir_amplitude(self, hits: Hits) -> NDArray[np.float64]:
+        distance = np.where(np.isfinite(hits.range_m), hits.range_m, np.inf)
+        return self.sensor.ir_gain * hits.ir * hits.cos_incidence / np.maximum(distance, 0.2) ** 2  # type: ignore[no-any-return]
+
+    def _sensor_depth(
+        self,
+        depth: NDArray[np.float64],
+        cos_incidence: NDArray[np.float64],
+        ir: NDArray[np.float64],
+        rng: np.random.Generator,
+    ) -> NDArray[np.float64]:
+        sensor = self.sensor
+        valid = np.isfinite(depth)
+        safe = np.where(valid, depth, 1.0)
+        theta = np.arccos(np.clip(cos_incidence, 0.0, 1.0))
+        sigma = axial_noise_m(safe, theta)
+        weak = np.sqrt(np.clip(400.0 / np.maximum(ir, 1.0), 1.0, 9.0))  # dim returns are noisier
+        noisy = safe + sigma * weak * rng.standard_normal(depth.shape)
+        noisy = _flying_pixels(noisy, valid, sensor, rng)
+        grazing = np.degrees(theta)
+        p_drop = np.clip(
+            (grazing - sensor.grazing_start_deg)
+            / (sensor.grazing_end_deg - sensor.grazing_start_deg),
+            0,
+            1,
+        )
+        dropped = (rng.random(depth.shape) < p_drop) | (ir < sensor.min_ir)
+        return np.where(valid & ~dropped, noisy, np.nan)
+
+
+def _flying_pixels(
+    depth: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    sensor: SensorModel,
+    rng: np.random.Generator,
+) -> NDArray[np.float64]:
+    """Mix the depths of both sides at a share of the pixels on depth edges (mixed pixels)."""
+    out = depth.copy()
+    for axis in (0, 1):
+        for shift in (1, -1):
+            other = np.roll(depth, shift, axis=axis)
+            other_valid = np.roll(valid, shift, axis=axis)
+            border = [0, -1][shift == -1]  # np.roll wraps around: no edge across the border
+            if axis == 0:
+                other_valid[border, :] = False
+            else:
+                other_valid[:, border] = False
+            edge = valid & other_valid & (np.abs(other - depth) > sensor.edge_jump * depth)
+            chosen = edge & (rng.random(depth.shape) < sensor.flying_fraction / 4)
+            mix = rng.random(depth.shape)
+            out = np.where(chosen, depth + mix * (other - depth), out)
+    return out
+
+
+def _pixels(values: NDArray[np.floating], h: int, w: int, s: int) -> NDArray[np.float64]:
+    """Per-ray values (N, ...) to an image (H, W, ...), averaging ``s`` x ``s`` sub-rays."""
+    image = np.asarray(values, np.float64).reshape(h, w, s * s, *values.shape[1:])
+    if s == 1:
+        return image[:, :, 0]
+    with np.errstate(invalid="ignore"):
+        return image.mean(axis=2)  # type: ignore[no-any-return]
+
+
+def _to_srgb8(linear: NDArray[np.float64], rng: np.random.Generator | None) -> NDArray[np.uint8]:
+    """Linear RGB 0-1 to 8-bit sRGB-like (gamma 2.2) with a little sensor noise."""
+    if rng is not None:
+        linear = linear * (1.0 + 0.03 * rng.standard_normal(linear.shape[:2]))[..., None]
+    encoded = np.clip(linear, 0.0, 1.0) ** (1 / 2.2) * 255.0
+    return np.clip(encoded + 0.5, 0, 255).astype(np.uint8)

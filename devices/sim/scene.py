@@ -1,0 +1,188 @@
+"""A simulated world: soil, plants, foam spheres and boards as meshes, with their ground truth.
+
+Field frame: z up, z = 0 on the mean ground, origin at the plot centre, metres.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+import open3d as o3d
+from numpy.typing import NDArray
+
+from devices.sim.boards import PlacedBoard
+from devices.sim.plants import PlantMesh, make_plant, settle_on_ground
+from devices.sim.soil import Soil, SoilSpec
+
+SPHERE_DIAMETERS_MM = (200, 300, 350, 400, 500, 600)
+"""The reference foam spheres of the accuracy checks."""
+
+FOAM_RGB = np.array([0.93, 0.93, 0.90], dtype=np.float32)
+FOAM_IR = 0.80
+
+BodyKind = Literal["soil", "plant", "sphere", "board", "board_back", "wall"]
+Texture = Callable[[NDArray[np.float64]], tuple[NDArray[np.float32], NDArray[np.float32]]]
+"""Procedural albedo: points (N, 3) -> colour (N, 3) float32 0-1, NIR albedo (N,) float32."""
+
+
+@dataclass
+class Body:
+    """One mesh of the world: (V, 3) vertices, (T, 3) triangles, per-vertex albedo (colour
+    (V, 3) 0-1 and NIR (V,)), or a ``texture`` that overrides it where a ray hits."""
+
+    name: str
+    kind: BodyKind
+    vertices_m: NDArray[np.float64]
+    triangles: NDArray[np.int32]
+    albedo_rgb: NDArray[np.float32]
+    albedo_ir: NDArray[np.float32]
+    texture: Texture | None = None
+
+
+@dataclass(frozen=True)
+class PlantTruth:
+    name: str
+    x_m: float
+    y_m: float
+    height_cm: float
+    width_cm: float
+
+
+@dataclass(frozen=True)
+class SphereTruth:
+    name: str
+    x_m: float
+    y_m: float
+    z_m: float
+    diameter_mm: float
+
+
+@dataclass
+class Scene:
+    """Bodies to render plus what is true about them."""
+
+    soil: Soil | None
+    bodies: list[Body] = field(default_factory=list)
+    plants: list[PlantTruth] = field(default_factory=list)
+    spheres: list[SphereTruth] = field(default_factory=list)
+    boards: list[PlacedBoard] = field(default_factory=list)
+
+    def add_plant(self, name: str, mesh: PlantMesh) -> None:
+        self.bodies.append(
+            Body(name, "plant", mesh.vertices_m, mesh.triangles, mesh.albedo_rgb, mesh.albedo_ir)
+        )
+        x, y = float(mesh.base_m[0]), float(mesh.base_m[1])
+        self.plants.append(PlantTruth(name, x, y, 100 * mesh.height_m, 100 * mesh.width_m))
+
+    def add_sphere(self, name: str, x_m: float, y_m: float, diameter_mm: float) -> None:
+        """A foam sphere resting on the soil at (``x_m``, ``y_m``)."""
+        radius = diameter_mm / 2000.0
+        z = (self.soil.height_at(x_m, y_m) if self.soil else 0.0) + radius
+        sphere = o3d.geometry.TriangleMesh.create_sphere(radius=radius, resolution=48)
+        vertices = np.asarray(sphere.vertices) + np.array([x_m, y_m, z])
+        triangles = np.asarray(sphere.triangles, dtype=np.int32)
+        n = len(vertices)
+        self.bodies.append(
+            Body(
+                name,
+                "sphere",
+                vertices,
+                triangles,
+                np.tile(FOAM_RGB, (n, 1)),
+                np.full(n, FOAM_IR, np.float32),
+            )
+        )
+        self.spheres.append(SphereTruth(name, x_m, y_m, z, diameter_mm))
+
+    def add_board(self, placed: PlacedBoard) -> None:
+        vertices, triangles = placed.board.mesh(placed.T_field_board)
+        n = len(vertices)
+        grey = np.full((n, 3), 0.5, np.float32)
+        front, back = triangles[:2], triangles[2:]
+        name = placed.board.name
+        self.bodies.append(
+            Body(name, "board", vertices, front, grey, np.full(n, 0.5, np.float32), placed.albedo)
+        )
+        self.bodies.append(
+            Body(f"{name}-back", "board_back", vertices, back, grey, np.full(n, 0.4, np.float32))
+        )
+        self.boards.append(placed)
+
+
+def empty_scene(seed: int, soil_spec: SoilSpec | None = None) -> Scene:
+    """A scene holding only the soil of ``seed``."""
+    soil = Soil(soil_spec or SoilSpec(), seed)
+    vertices, triangles = soil.mesh()
+    n = len(vertices)
+    body = Body(
+        "soil",
+        "soil",
+        vertices,
+        triangles,
+        np.zeros((n, 3), np.float32),
+        np.zeros(n, np.float32),
+        soil.albedo,
+    )
+    return Scene(soil=soil, bodies=[body])
+
+
+@dataclass(frozen=True)
+class PlotLayout:
+    """Plants in ``rows`` x ``cols`` at ``spacing_m``, centred on the field origin, each moved
+    by up to ``jitter_m`` (uniform) from its grid point."""
+
+    rows: int = 4
+    cols: int = 4
+    spacing_m: float = 0.8
+    jitter_m: float = 0.04
+
+    def positions(self, rng: np.random.Generator) -> NDArray[np.float64]:
+        """(rows * cols, 2) plant positions, row by row."""
+        ys = (np.arange(self.rows) - (self.rows - 1) / 2) * self.spacing_m
+        xs = (np.arange(self.cols) - (self.cols - 1) / 2) * self.spacing_m
+        X, Y = np.meshgrid(xs, ys)
+        grid = np.stack([X.ravel(), Y.ravel()], axis=1)
+        return grid + rng.uniform(-self.jitter_m, self.jitter_m, grid.shape)
+
+
+def add_plot(scene: Scene, seed: int, day: int, layout: PlotLayout) -> None:
+    """Sow the plot of ``seed`` (positions and plants do not depend on ``day``)."""
+    if scene.soil is None:
+        raise ValueError("a plot needs soil")
+    rng = np.random.default_rng([seed, 11])
+    for index, (x, y) in enumerate(layout.positions(rng)):
+        mesh = make_plant(seed * 1000 + index, day, (x, y), scene.soil.height_at(x, y))
+        ground = scene.soil.height_m(mesh.vertices_m[:, 0], mesh.vertices_m[:, 1])
+        scene.add_plant(f"p{index + 1:02d}", settle_on_ground(mesh, ground))
+
+
+SPHERE_SPOTS_M = ((-0.8, -0.8), (0.8, -0.8), (-0.8, 0.8), (0.8, 0.8), (0.0, -0.8), (0.0, 0.8))
+"""Where the spheres rest: between the plants of the standard plot, away from the stations.
+Diameters are assigned largest first to the roomiest spots."""
+
+
+def add_spheres(scene: Scene) -> None:
+    """The six reference spheres (600 mm at the first spot, then decreasing)."""
+    for spot, diameter in zip(
+        SPHERE_SPOTS_M, sorted(SPHERE_DIAMETERS_MM, reverse=True), strict=True
+    ):
+        scene.add_sphere(f"sphere-{diameter}", spot[0], spot[1], diameter)
+
+
+def plot_scene(seed: int, day: int = 0, layout: PlotLayout | None = None) -> Scene:
+    """The paper's plot: 16 maize seedlings at 0.8 m on uneven soil."""
+    scene = empty_scene(seed)
+    add_plot(scene, seed, day, layout or PlotLayout())
+    return scene
+
+
+def spheres_scene(seed: int, day: int = 0, with_plants: bool = False) -> Scene:
+    """The six reference spheres on the soil, optionally among the plot's plants."""
+    scene = empty_scene(seed)
+    if with_plants:
+        add_plot(scene, seed, day, PlotLayout())
+    add_spheres(scene)
+    return scene

@@ -1,0 +1,74 @@
+"""``truth.json``: what was really there and where the camera really stood.
+
+Issue 3's fields (``plants``, ``spheres``, ``T_field_camera`` of view 0 of every station) plus
+``boards`` (geometry, pose, corners), ``captures`` (true pose and angle of every capture),
+``intrinsics`` and the rig's nominal geometry.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import asdict
+from typing import Any
+
+from devices.camera.frames import Intrinsics
+from devices.sim.boards import PlacedBoard
+from devices.sim.rig import RigGeometry
+from devices.sim.scene import Scene
+
+TRUTH_FORMAT = "fieldapp-sim-truth/1"
+
+
+def board_truth(placed: PlacedBoard) -> dict[str, Any]:
+    """A board's geometry, pose (``T_field_board``) and inner corners (field frame, OpenCV
+    order)."""
+    board = placed.board
+    return {
+        "name": board.name,
+        "inner_cols": board.inner_cols,
+        "inner_rows": board.inner_rows,
+        "square_m": board.square_m,
+        "margin_squares": board.margin_squares,
+        "T_field_board": placed.T_field_board.tolist(),
+        "corners_field_m": placed.corners_field_m.tolist(),
+    }
+
+
+def truth_document(
+    scene: Scene,
+    captures: Iterable[dict[str, Any]],
+    rig: RigGeometry,
+    intrinsics: Intrinsics,
+    about: dict[str, Any],
+) -> dict[str, Any]:
+    """The truth of a simulated session. ``captures``: :meth:`SimCapture.truth` of each capture;
+    ``about`` (scene name, seed, day...) is kept as is."""
+    captures = list(captures)
+    view0 = {
+        str(c["station"]): c["T_field_camera"]
+        for c in captures
+        if c["view"] == 0 and c["target"] is None
+    }
+    return {
+        "format": TRUTH_FORMAT,
+        **about,
+        "plants": [
+            {
+                "name": p.name,
+                "x_m": p.x_m,
+                "y_m": p.y_m,
+                "height_cm": p.height_cm,
+                "width_cm": p.width_cm,
+            }
+            for p in scene.plants
+        ],
+        "spheres": [
+            {"name": s.name, "x_m": s.x_m, "y_m": s.y_m, "z_m": s.z_m, "diameter_mm": s.diameter_mm}
+            for s in scene.spheres
+        ],
+        "boards": [board_truth(b) for b in scene.boards],
+        "T_field_camera": view0,
+        "captures": captures,
+        "intrinsics": asdict(intrinsics),
+        "rig": {**asdict(rig), "T_field_map": rig.T_field_map.tolist()},
+    }

@@ -1,0 +1,211 @@
+"""``fieldapp simulate --out DIR``: write a simulated capture session with its ground truth.
+
+The session follows the spec (``shared/spec/session-format.md``): captures of the chosen
+stations and views, ``calibration.json`` with the *nominal* rig transforms (what a
+pre-calibration would give), and ``truth.json`` with what was really there (see
+:mod:`devices.sim.truth`). ``--scene checkerboard`` adds the calibration boards, the captures
+tagged with the board they see, and IR images of a board under ``DIR/intrinsics/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from fieldapp.errors import FieldappError
+
+if TYPE_CHECKING:
+    from devices.sim.rig import RigGeometry
+    from devices.sim.survey import SimCapture
+    from devices.sim.world import SimWorld
+    from fieldapp.io.calibration import Calibration
+    from fieldapp.io.writer import SessionWriter
+
+log = logging.getLogger(__name__)
+
+SCENES = ("plot", "spheres", "checkerboard")
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "simulate",
+        help="write a simulated capture session (and its ground truth)",
+        description="Simulate the rig in the default world (a plot of maize seedlings on uneven "
+        "soil) and write a capture session, its nominal calibration and truth.json.",
+    )
+    parser.add_argument("--out", required=True, type=Path, help="the new session folder")
+    parser.add_argument("--scene", default="plot", help="plot (default), spheres or checkerboard")
+    parser.add_argument("--seed", default="0", help="world seed (same seed, same plants)")
+    parser.add_argument("--day", default="0", help="days since the first scan (plants grow)")
+    parser.add_argument("--stations", default="1-9", help="stations to visit, e.g. 4,5 or 1-9")
+    parser.add_argument("--views", default="0-7", help="views per station, e.g. 0,1 or 0-7")
+    parser.add_argument("--plants", action="store_true", help="spheres scene: add the plants")
+    parser.add_argument(
+        "--intrinsics-images", default="20", help="checkerboard scene: IR board images (0-100)"
+    )
+    parser.set_defaults(handler=run)
+
+
+def parse_int(name: str, text: str, low: int, high: int) -> int:
+    """``text`` as an integer in [low, high], or a :class:`FieldappError` naming the option."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise FieldappError(f"--{name}: {text!r} is not a whole number") from None
+    if not low <= value <= high:
+        raise FieldappError(f"--{name}: {value} is outside {low}..{high}")
+    return value
+
+
+def parse_list(name: str, text: str, low: int, high: int) -> list[int]:
+    """``"1,3-5"`` -> ``[1, 3, 4, 5]``, every number in [low, high]; sorted, unique."""
+    values: set[int] = set()
+    for part in text.split(","):
+        first, _, last = part.strip().partition("-")
+        start = parse_int(name, first, low, high)
+        values.update(range(start, parse_int(name, last, low, high) + 1) if last else [start])
+    if not values:
+        raise FieldappError(f"--{name}: {text!r} selects nothing")
+    return sorted(values)
+
+
+def run(args: argparse.Namespace) -> int:
+    from devices.sim.rig import RigGeometry
+
+    if args.scene not in SCENES:
+        raise FieldappError(f"--scene: {args.scene!r} is not one of {', '.join(SCENES)}")
+    seed = parse_int("seed", args.seed, 0, 2**31 - 1)
+    day = parse_int("day", args.day, 0, 120)
+    rig = RigGeometry()
+    stations = parse_list("stations", args.stations, 1, 9)
+    views = parse_list("views", args.views, 0, rig.views - 1)
+    shots = parse_int("intrinsics-images", args.intrinsics_images, 0, 100)
+    if args.out.exists() and not args.out.is_dir():
+        raise FieldappError(f"--out: {args.out} exists and is not a folder")
+    world = build_world(args.scene, seed, day, rig, args.plants)
+    about = {"scene": args.scene, "seed": seed, "day": day}
+    count = write_session(args.out, world, stations, views, seed, about)
+    if args.scene == "checkerboard" and shots:
+        write_intrinsics_images(args.out, seed, shots)
+    print(f"{args.out}: {count} captures of the {args.scene} scene (truth in truth.json)")
+    return 0
+
+
+def build_world(scene_name: str, seed: int, day: int, rig: RigGeometry, plants: bool) -> SimWorld:
+    from devices.sim.calibration_scenes import checkerboard_scene
+    from devices.sim.scene import plot_scene, spheres_scene
+    from devices.sim.world import SimWorld
+
+    if scene_name == "plot":
+        scene = plot_scene(seed, day)
+    elif scene_name == "spheres":
+        scene = spheres_scene(seed, day, with_plants=plants)
+    else:
+        scene = checkerboard_scene(seed, rig)
+    return SimWorld(scene, rig, seed=seed)
+
+
+def nominal_calibration(world: SimWorld) -> Calibration:
+    """The rig's pre-calibration: exact view step, stations from their nominal poses on level
+    ground, ground = the nominal reference camera in the field frame."""
+    from devices.geometry import invert
+    from devices.sim.rig import REFERENCE_STATION, STATIONS
+    from fieldapp.io.calibration import Calibration, DepthCamera, Ground, Stations, ViewStep
+
+    rig = world.rig
+    nominal = {s: rig.T_field_camera(rig.station_pose(s), 0.0) for s in STATIONS}
+    T_field_reference = nominal[REFERENCE_STATION]
+    return Calibration(
+        format="fieldapp-calibration/1",
+        depth_camera=DepthCamera.from_intrinsics(world.intrinsics),
+        view_step=ViewStep(
+            angle_deg=rig.view_step_deg, matrix=rig.T_camera0_camera(rig.view_step_deg)
+        ),
+        stations=Stations(
+            reference=REFERENCE_STATION,
+            to_reference={s: invert(T_field_reference) @ T for s, T in nominal.items()},
+        ),
+        ground=Ground(matrix=T_field_reference),
+    )
+
+
+def write_session(
+    folder: Path,
+    world: SimWorld,
+    stations: list[int],
+    views: list[int],
+    seed: int,
+    about: dict[str, Any],
+) -> int:
+    """Simulate and write the session; returns the number of captures written."""
+    from devices.sim.survey import survey
+    from devices.sim.truth import truth_document
+    from fieldapp.io.durable import write_json_durably
+    from fieldapp.io.writer import SessionWriter
+
+    session_id = f"sim-{about['scene']}-seed{seed}-day{about['day']}"
+    writer = SessionWriter.create(
+        folder, session_id, nominal_calibration(world), extra={"simulated": about}
+    )
+    truths = []
+    tag_boards = bool(world.scene.boards)
+    with ThreadPoolExecutor(max_workers=1) as saver:  # encode and write while rendering the next
+        pending: deque[Future[Any]] = deque()
+        for capture in survey(world, stations, views, seed, tag_boards=tag_boards):
+            pending.append(saver.submit(save_capture, writer, capture))
+            truths.append(capture.truth())
+            while len(pending) > 2:
+                pending.popleft().result()
+        for future in pending:
+            future.result()
+    document = truth_document(world.scene, truths, world.rig, world.intrinsics, about)
+    write_json_durably(folder / "truth.json", document)
+    return len(truths)
+
+
+def save_capture(writer: SessionWriter, capture: SimCapture) -> None:
+    """Write one simulated capture as the devices would have reported it."""
+    from fieldapp.io.session import BasePose
+
+    pose = capture.reported_pose
+    writer.add_capture(
+        capture.station,
+        capture.view,
+        capture.frame.depth_m,
+        capture.frame.color,
+        ir=capture.frame.ir,
+        angle_deg=capture.reported_angle_deg,
+        base_pose=BasePose(x=pose.x_m, y=pose.y_m, yaw_deg=pose.yaw_deg),
+        target=capture.target,
+    )
+    log.debug("station %d view %d %s", capture.station, capture.view, capture.target or "")
+
+
+def write_intrinsics_images(folder: Path, seed: int, count: int) -> None:
+    """IR images of the intrinsics board under ``folder/intrinsics/``, listed in truth.json."""
+    from devices.sim.calibration_scenes import INTRINSICS_BOARD, intrinsics_images
+    from fieldapp.io.durable import write_bytes_durably, write_json_durably
+    from fieldapp.io.images import encode_png
+    from fieldapp.io.jsonfile import read_json
+
+    entries = []
+    for index, (T_camera_board, ir) in enumerate(intrinsics_images(count, seed)):
+        name = f"intrinsics/ir-{index:02d}.png"
+        write_bytes_durably(folder / name, encode_png(ir))
+        entries.append({"ir": name, "T_camera_board": T_camera_board.tolist()})
+    document = read_json(folder / "truth.json")
+    document["intrinsics_images"] = {"board": INTRINSICS_BOARD.name, "images": entries}
+    document["boards"].append(
+        {
+            "name": INTRINSICS_BOARD.name,
+            "inner_cols": INTRINSICS_BOARD.inner_cols,
+            "inner_rows": INTRINSICS_BOARD.inner_rows,
+            "square_m": INTRINSICS_BOARD.square_m,
+            "margin_squares": INTRINSICS_BOARD.margin_squares,
+        }
+    )
+    write_json_durably(folder / "truth.json", document)
