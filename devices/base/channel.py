@@ -1,0 +1,162 @@
+"""Reliable request-reply to the base: Lazy Pirate over a REQ socket, with a handshake monitor.
+
+Each attempt waits ``timeout_s`` for the reply; on silence the socket is closed and reopened and
+the SAME request (same id) is sent again, at most ``retries`` more times, then
+:class:`BaseOffline`. A reply whose id is not the request's is discarded as no reply. The
+socket's monitor reports the CURVE handshake: a refused key raises :class:`BaseAuthRejected` at
+once (the base sends nothing else to a stranger), never "offline".
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import threading
+import time
+from dataclasses import dataclass
+
+import zmq
+from zmq.utils.monitor import parse_monitor_message
+
+from devices.base.errors import BaseAuthRejected, BaseError, BaseOffline
+from devices.base.keys import ClientKeys, require_loopback_without_keys
+from devices.base.protocol import ProtocolError, Reply, decode_reply
+
+log = logging.getLogger(__name__)
+
+_monitor_ids = itertools.count()
+
+_KEY_HINT = "is base.key the base's public key, and do both ends use CURVE?"
+_HANDSHAKE_FAILURES: dict[int, str] = {
+    zmq.EVENT_HANDSHAKE_FAILED_AUTH: "the base refused this client's key: is client.key in the "
+    "base's authorized_clients folder?",
+    zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL: f"the security handshake failed: {_KEY_HINT}",
+    zmq.EVENT_HANDSHAKE_FAILED_NO_DETAIL: f"the security handshake failed: {_KEY_HINT}",
+}
+
+
+@dataclass(frozen=True)
+class RetryPolicy:
+    timeout_s: float = 0.5
+    retries: int = 2
+
+
+class RequestChannel:
+    """One REQ connection to a base's command socket; thread-safe (one request at a time)."""
+
+    def __init__(
+        self,
+        context: zmq.Context[zmq.Socket[bytes]],
+        endpoint: str,
+        keys: ClientKeys | None = None,
+        policy: RetryPolicy | None = None,
+    ) -> None:
+        require_loopback_without_keys(endpoint, keys is not None)
+        self.endpoint = endpoint
+        self.policy = policy or RetryPolicy()
+        self._context = context
+        self._keys = keys
+        self._lock = threading.Lock()
+        self._socket: zmq.Socket[bytes] | None = None
+        self._monitor: zmq.Socket[bytes] | None = None
+        self._failures = 0
+        self._last_failure: BaseError | None = None
+
+    def request(self, request_id: str, data: bytes) -> Reply:
+        """Send ``data`` and return the reply with id ``request_id`` (Lazy Pirate)."""
+        failures_seen = self._failures
+        with self._lock:
+            if self._failures != failures_seen and self._last_failure is not None:
+                raise type(self._last_failure)(str(self._last_failure))
+            try:
+                return self._request_locked(request_id, data)
+            except BaseError as error:
+                self._failures += 1
+                self._last_failure = error
+                self._close_socket()
+                raise
+
+    def _request_locked(self, request_id: str, data: bytes) -> Reply:
+        attempts = self.policy.retries + 1
+        for attempt in range(1, attempts + 1):
+            if self._socket is None:
+                self._open_socket()
+            reply = self._attempt(request_id, data)
+            if reply is not None:
+                return reply
+            log.warning(
+                "no reply to %s (attempt %d of %d): reconnecting", request_id, attempt, attempts
+            )
+            self._close_socket()
+        total_s = attempts * self.policy.timeout_s
+        raise BaseOffline(
+            f"base at {self.endpoint} is offline: no reply in {attempts} tries over {total_s:.1f} s"
+        )
+
+    def _attempt(self, request_id: str, data: bytes) -> Reply | None:
+        sock, monitor = self._socket, self._monitor
+        if sock is None or monitor is None:
+            raise RuntimeError("request channel is closed")
+        sock.send(data)
+        poller = zmq.Poller()
+        poller.register(sock, zmq.POLLIN)
+        poller.register(monitor, zmq.POLLIN)
+        deadline_s = time.monotonic() + self.policy.timeout_s
+        while (remaining_s := deadline_s - time.monotonic()) > 0:
+            events = dict(poller.poll(timeout=max(1, round(remaining_s * 1000))))
+            if monitor in events:
+                self._read_monitor(monitor)
+            if sock in events:
+                return self._read_reply(sock.recv(), request_id)
+        return None
+
+    def _read_reply(self, raw: bytes, request_id: str) -> Reply | None:
+        try:
+            reply = decode_reply(raw)
+        except ProtocolError as error:
+            log.warning("malformed reply to %s discarded: %s", request_id, error.message)
+            return None
+        if reply.id != request_id:
+            log.warning("reply for %r does not match request %s: discarded", reply.id, request_id)
+            return None
+        return reply
+
+    def _read_monitor(self, monitor: zmq.Socket[bytes]) -> None:
+        while True:
+            try:
+                event = parse_monitor_message(monitor.recv_multipart(zmq.NOBLOCK))
+            except zmq.Again:
+                return
+            reason = _HANDSHAKE_FAILURES.get(int(event["event"]))
+            if reason is not None:
+                raise BaseAuthRejected(
+                    f"authentication rejected by the base at {self.endpoint}: {reason} "
+                    f"(zmq code {event['value']})"
+                )
+
+    def _open_socket(self) -> None:
+        sock = self._context.socket(zmq.REQ)
+        sock.setsockopt(zmq.LINGER, 0)
+        if self._keys is not None:
+            sock.curve_secretkey = self._keys.pair.secret.reveal()
+            sock.curve_publickey = self._keys.pair.public
+            sock.curve_serverkey = self._keys.server_public
+        address = f"inproc://base-channel-monitor-{next(_monitor_ids)}"
+        sock.monitor(address, zmq.EVENT_ALL)
+        monitor = self._context.socket(zmq.PAIR)
+        monitor.setsockopt(zmq.LINGER, 0)
+        monitor.connect(address)
+        sock.connect(self.endpoint)
+        self._socket, self._monitor = sock, monitor
+
+    def _close_socket(self) -> None:
+        if self._socket is not None:
+            self._socket.disable_monitor()
+            self._socket.close(linger=0)
+        if self._monitor is not None:
+            self._monitor.close(linger=0)
+        self._socket = self._monitor = None
+
+    def close(self) -> None:
+        with self._lock:
+            self._close_socket()

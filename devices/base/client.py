@@ -1,0 +1,279 @@
+"""The application's driver for the mobile base (fieldapp-base/1 client).
+
+``BaseClient`` sends requests through a Lazy Pirate :class:`RequestChannel`, keeps the base's
+watchdog fed with ``heartbeat`` every 0.25 s while a goal is active (a background thread), and
+optionally subscribes to telemetry, re-emitted as psygnal signals. ``goto`` blocks until
+``arrived`` (or raises), or with ``wait=False`` returns at once; :meth:`BaseClient.follow_goal`
+is a generator yielding each status until the goal ends.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any
+
+import zmq
+from psygnal import Signal
+
+from devices.base.channel import RequestChannel, RetryPolicy
+from devices.base.errors import (
+    BaseError,
+    BaseRequestRejected,
+    BaseStopped,
+    NavigationFailed,
+)
+from devices.base.keys import ClientKeys
+from devices.base.protocol import (
+    BaseState,
+    Command,
+    ErrorCode,
+    Pose,
+    ProtocolError,
+    Request,
+    Status,
+    encode_request,
+)
+from devices.base.telemetry import TelemetrySubscriber
+
+log = logging.getLogger(__name__)
+
+CLIENT_NAME = "fieldapp 0.1"
+
+
+@dataclass(frozen=True)
+class BaseInfo:
+    """The ``hello`` result."""
+
+    name: str
+    protocol: int
+    frame: str
+    bounds_m: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class ClientTiming:
+    request_timeout_s: float = 0.5
+    retries: int = 2
+    heartbeat_period_s: float = 0.25
+    status_poll_period_s: float = 0.1
+
+
+def _error_for(cmd: Command, code: ErrorCode, message: str) -> BaseError:
+    if code is ErrorCode.STOPPED:
+        return BaseStopped(f"base is stopped: {message}", code.value)
+    if code is ErrorCode.NAV_FAILED:
+        return NavigationFailed(f"navigation failed: {message}", code.value)
+    return BaseRequestRejected(f"{cmd.value} refused ({code.value}): {message}", code.value)
+
+
+class BaseClient:
+    """Drives one base. Thread-safe; signals fire on the telemetry thread."""
+
+    pose_received = Signal(float, Pose)
+    """(base clock t_s, pose) from ``pose`` telemetry."""
+    state_received = Signal(Status)
+
+    def __init__(
+        self,
+        endpoint: str,
+        telemetry_endpoint: str | None = None,
+        *,
+        keys: ClientKeys | None = None,
+        timing: ClientTiming | None = None,
+    ) -> None:
+        self.timing = timing or ClientTiming()
+        self._context: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
+        policy = RetryPolicy(self.timing.request_timeout_s, self.timing.retries)
+        try:
+            self._channel = RequestChannel(self._context, endpoint, keys, policy)
+            self._telemetry = (
+                None
+                if telemetry_endpoint is None
+                else TelemetrySubscriber(
+                    self._context,
+                    telemetry_endpoint,
+                    self.pose_received.emit,
+                    self.state_received.emit,
+                    keys,
+                )
+            )
+        except BaseError:
+            self._context.term()
+            raise
+        self._session = uuid.uuid4().hex[:12]
+        self._counter = itertools.count(1)
+        self._active_goal: str | None = None
+        self._link_error: BaseError | None = None
+        self._closed = threading.Event()
+        self._goal_event = threading.Event()
+        self._heartbeat = threading.Thread(target=self._beat, name="base-heartbeat", daemon=True)
+        self._heartbeat.start()
+
+    @property
+    def endpoint(self) -> str:
+        return self._channel.endpoint
+
+    @property
+    def link_error(self) -> BaseError | None:
+        """Why background heartbeats failed during the current goal, if they did."""
+        return self._link_error
+
+    # --- commands ---
+
+    def hello(self) -> BaseInfo:
+        result = self._request(Command.HELLO, {"client": CLIENT_NAME})
+        try:
+            xmin, ymin, xmax, ymax = (float(v) for v in result["bounds"])
+            return BaseInfo(
+                str(result["name"]),
+                int(result["protocol"]),
+                str(result["frame"]),
+                (xmin, ymin, xmax, ymax),
+            )
+        except (KeyError, TypeError, ValueError) as error:
+            raise BaseRequestRejected(f"malformed hello result from the base: {error}") from None
+
+    def status(self) -> Status:
+        status = self._status_from(self._request(Command.STATUS, {}))
+        if self._active_goal is not None and status.state is not BaseState.MOVING:
+            self._end_goal()
+        return status
+
+    def goto(
+        self, goal_id: str, goal: Pose, *, wait: bool = True, timeout_s: float = 300.0
+    ) -> Status:
+        """Send the base to ``goal`` (map frame); block until arrival unless ``wait`` is False.
+
+        Raises :class:`BaseStopped` (latched), :class:`NavigationFailed` (aborted, refused,
+        cancelled or not arrived within ``timeout_s``), :class:`BaseOffline`.
+        """
+        self._request(Command.GOTO, {"goal_id": goal_id, **goal.to_json()})
+        self._begin_goal(goal_id)
+        if not wait:
+            return self.status()
+        statuses = self.follow_goal(goal_id, timeout_s)
+        last = next(statuses)
+        for last in statuses:  # noqa: B007 (the last one is the result)
+            pass
+        return last
+
+    def follow_goal(self, goal_id: str, timeout_s: float = 300.0) -> Iterator[Status]:
+        """Yield the status every poll period until ``goal_id`` arrives; raise if it does not."""
+        deadline_s = time.monotonic() + timeout_s
+        while True:
+            if self._link_error is not None:
+                raise self._link_error
+            status = self.status()
+            yield status
+            if status.goal_id == goal_id and status.state is BaseState.ARRIVED:
+                return
+            _raise_if_over(status, goal_id)
+            if time.monotonic() > deadline_s:
+                self.cancel(goal_id)
+                raise NavigationFailed(
+                    f"goal {goal_id} not reached within {timeout_s:g} s: cancelled"
+                )
+            time.sleep(self.timing.status_poll_period_s)
+
+    def cancel(self, goal_id: str) -> bool:
+        cancelled = bool(self._request(Command.CANCEL, {"goal_id": goal_id}).get("cancelled"))
+        self._end_goal()
+        return cancelled
+
+    def stop(self) -> None:
+        """Zero velocity now and set the base's stop latch."""
+        self._end_goal()
+        self._request(Command.STOP, {})
+
+    def reset(self) -> None:
+        """Clear the stop latch (never starts motion)."""
+        self._request(Command.RESET, {})
+
+    def heartbeat(self) -> None:
+        self._request(Command.HEARTBEAT, {})
+
+    # --- internals ---
+
+    def _request(self, cmd: Command, args: dict[str, Any]) -> dict[str, Any]:
+        request = Request(f"{self._session}-{next(self._counter):06d}", cmd, args)
+        try:
+            data = encode_request(request)
+        except ValueError as error:
+            raise BaseRequestRejected(
+                f"{cmd.value}: arguments are not finite JSON ({error})"
+            ) from None
+        reply = self._channel.request(request.id, data)
+        if reply.ok:
+            return reply.result or {}
+        code = reply.error_code or ErrorCode.BAD_REQUEST
+        raise _error_for(cmd, code, reply.error_message or "")
+
+    @staticmethod
+    def _status_from(result: dict[str, Any]) -> Status:
+        try:
+            return Status.from_json(result)
+        except ProtocolError as error:
+            raise BaseRequestRejected(f"malformed status from the base: {error.message}") from None
+
+    def _begin_goal(self, goal_id: str) -> None:
+        self._link_error = None
+        self._active_goal = goal_id
+        self._goal_event.set()
+
+    def _end_goal(self) -> None:
+        self._active_goal = None
+        self._goal_event.clear()
+
+    def _beat(self) -> None:
+        while not self._closed.is_set():
+            if not self._goal_event.wait(timeout=0.1):
+                continue
+            try:
+                self.heartbeat()
+            except BaseError as error:
+                log.warning("heartbeat failed during goal %s: %s", self._active_goal, error)
+                self._link_error = error
+                self._end_goal()
+            self._closed.wait(self.timing.heartbeat_period_s)
+
+    def close(self) -> None:
+        """Stop heartbeats and telemetry and release the sockets (the base is not told)."""
+        self._closed.set()
+        self._end_goal()
+        self._heartbeat.join(timeout=5.0)
+        if self._telemetry is not None:
+            self._telemetry.close()
+        self._channel.close()
+        self._context.term()
+
+    def __enter__(self) -> BaseClient:
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _raise_if_over(status: Status, goal_id: str) -> None:
+    """Raise when ``goal_id`` ended without arriving."""
+    if status.state is BaseState.STOPPED:
+        raise BaseStopped(
+            f"base stopped during goal {goal_id}: {status.error}", ErrorCode.STOPPED.value
+        )
+    if status.state is BaseState.ABORTED:
+        raise NavigationFailed(
+            f"goal {goal_id} aborted: {status.error}", ErrorCode.NAV_FAILED.value
+        )
+    if status.goal_id != goal_id or status.state is not BaseState.MOVING:
+        raise NavigationFailed(f"goal {goal_id} is no longer active (state {status.state.value})")

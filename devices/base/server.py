@@ -1,0 +1,274 @@
+"""The protocol server shared by the simulated base and the ROS bridge.
+
+A ROUTER socket for commands and a PUB socket for telemetry (both CURVE with ``zmq.auth`` when
+keys are given, loopback only otherwise), ZMQ_MAXMSGSIZE 65536, a 256-reply cache by request id,
+and one loop thread that answers requests, ticks the :class:`BaseController` (watchdog, stop
+latch) and publishes telemetry. Faults for tests: :meth:`ProtocolServer.freeze` (alive but
+silent) and :meth:`ProtocolServer.crash` (sockets gone at once, nothing halted).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import zmq
+from zmq.auth.thread import ThreadAuthenticator
+
+from devices.base.controller import BaseController
+from devices.base.keys import ServerKeys, require_loopback_without_keys
+from devices.base.protocol import (
+    MAX_MESSAGE_BYTES,
+    BaseState,
+    ErrorCode,
+    ProtocolError,
+    Reply,
+    Status,
+    decode_request,
+    encode_pose_telemetry,
+    encode_reply,
+    encode_state_telemetry,
+)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ServerTiming:
+    reply_cache_size: int = 256
+    poll_period_s: float = 0.01
+    pose_period_moving_s: float = 0.05
+    pose_period_rest_s: float = 1.0
+    state_period_s: float = 1.0
+
+
+class ReplyCache:
+    """The last ``size`` replies by request id, oldest evicted first."""
+
+    def __init__(self, size: int) -> None:
+        self._size = size
+        self._replies: OrderedDict[str, bytes] = OrderedDict()
+
+    def get(self, request_id: str) -> bytes | None:
+        return self._replies.get(request_id)
+
+    def put(self, request_id: str, reply: bytes) -> None:
+        self._replies[request_id] = reply
+        while len(self._replies) > self._size:
+            self._replies.popitem(last=False)
+
+    def __len__(self) -> int:
+        return len(self._replies)
+
+
+def split_envelope(frames: list[bytes]) -> tuple[list[bytes], list[bytes]]:
+    """(routing envelope, body) of a ROUTER message from a REQ (empty delimiter) or a DEALER."""
+    cut = frames.index(b"", 1) + 1 if b"" in frames[1:] else 1
+    return frames[:cut], frames[cut:]
+
+
+class ProtocolServer:
+    """Serves fieldapp-base/1 for a :class:`BaseController` on one loop thread."""
+
+    def __init__(
+        self,
+        controller: BaseController,
+        command_endpoint: str,
+        telemetry_endpoint: str,
+        keys: ServerKeys | None = None,
+        timing: ServerTiming | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        for endpoint in (command_endpoint, telemetry_endpoint):
+            require_loopback_without_keys(endpoint, keys is not None)
+        self.controller = controller
+        self.timing = timing or ServerTiming()
+        self._endpoints = (command_endpoint, telemetry_endpoint)
+        self._keys = keys
+        self._clock = clock
+        self._cache = ReplyCache(self.timing.reply_cache_size)
+        self._lock = threading.Lock()
+        self._status = controller.status()
+        self._stopping = threading.Event()
+        self._frozen = threading.Event()
+        self._crashed = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._context: zmq.Context[zmq.Socket[bytes]] | None = None
+        self._auth: ThreadAuthenticator | None = None
+        self.command_endpoint = command_endpoint
+        self.telemetry_endpoint = telemetry_endpoint
+        self.on_tick: Callable[[Status], None] | None = None
+
+    # --- lifecycle ---
+
+    def start(self) -> None:
+        """Bind both sockets and start serving; endpoints with port ``*`` are resolved."""
+        self._context = zmq.Context()
+        if self._keys is not None:
+            self._auth = ThreadAuthenticator(
+                self._context, log=logging.getLogger(f"{__name__}.zap")
+            )
+            self._auth.start()
+            self._auth.configure_curve(domain="*", location=str(self._keys.authorized_dir))
+        router = self._socket(zmq.ROUTER)
+        publisher = self._socket(zmq.PUB)
+        try:
+            router.bind(self._endpoints[0])
+            publisher.bind(self._endpoints[1])
+        except zmq.ZMQError:
+            router.close(linger=0)
+            publisher.close(linger=0)
+            self._shutdown_context()
+            raise
+        self.command_endpoint = router.getsockopt_string(zmq.LAST_ENDPOINT)
+        self.telemetry_endpoint = publisher.getsockopt_string(zmq.LAST_ENDPOINT)
+        self._thread = threading.Thread(
+            target=self._serve, args=(router, publisher), name="base-server", daemon=True
+        )
+        self._thread.start()
+        log.info("serving %s (telemetry %s)", self.command_endpoint, self.telemetry_endpoint)
+
+    def _socket(self, kind: int) -> zmq.Socket[bytes]:
+        assert self._context is not None
+        sock = self._context.socket(kind)
+        sock.setsockopt(zmq.LINGER, 0)
+        if kind == zmq.ROUTER:
+            sock.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES)
+        if self._keys is not None:
+            sock.curve_secretkey = self._keys.pair.secret.reveal()
+            sock.curve_publickey = self._keys.pair.public
+            sock.curve_server = True
+        return sock
+
+    def close(self) -> None:
+        """Halt the base, stop serving and release the sockets."""
+        self._stopping.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None
+        self._shutdown_context()
+
+    def _shutdown_context(self) -> None:
+        if self._auth is not None:
+            self._auth.stop()
+            self._auth = None
+        if self._context is not None:
+            self._context.term()
+            self._context = None
+
+    def freeze(self, frozen: bool = True) -> None:
+        """Stop (or resume) answering, publishing and updating, like a hung computer."""
+        if frozen:
+            self._frozen.set()
+        else:
+            self._frozen.clear()
+
+    def crash(self) -> None:
+        """Drop both sockets at once without halting anything, like a dead process."""
+        self._crashed.set()
+
+    def status(self) -> Status:
+        with self._lock:
+            return self._status
+
+    # --- loop ---
+
+    def _serve(self, router: zmq.Socket[bytes], publisher: zmq.Socket[bytes]) -> None:
+        telemetry = _TelemetryClock()
+        poller = zmq.Poller()
+        poller.register(router, zmq.POLLIN)
+        try:
+            while not self._stopping.is_set() and not self._crashed.is_set():
+                if self._frozen.is_set():
+                    time.sleep(self.timing.poll_period_s)
+                    continue
+                events = dict(poller.poll(timeout=round(self.timing.poll_period_s * 1000)))
+                if router in events:
+                    self._drain(router)
+                self._tick(publisher, telemetry)
+        finally:
+            if not self._crashed.is_set():
+                self.controller.backend.halt()
+            router.close(linger=0)
+            publisher.close(linger=0)
+
+    def _drain(self, router: zmq.Socket[bytes]) -> None:
+        for _ in range(100):
+            try:
+                frames = router.recv_multipart(zmq.NOBLOCK)
+            except zmq.Again:
+                return
+            envelope, reply = self._answer(frames)
+            if reply is not None:
+                router.send_multipart([*envelope, reply])
+
+    def _answer(self, frames: list[bytes]) -> tuple[list[bytes], bytes | None]:
+        envelope, body = split_envelope(frames)
+        if len(body) != 1:
+            log.warning("dropping a message of %d body frames", len(body))
+            reply = Reply.failure(None, ErrorCode.BAD_REQUEST, "a request is exactly one frame")
+            return envelope, encode_reply(reply)
+        try:
+            request = decode_request(body[0])
+        except ProtocolError as error:
+            log.warning("bad request (id %r): %s", error.request_id, error.message)
+            reply = Reply.failure(error.request_id, error.code, error.message)
+            return envelope, self._cached(error.request_id, reply)
+        cached = self._cache.get(request.id)
+        if cached is not None:
+            log.info("repeated request %s (%s): sending the cached reply", request.id, request.cmd)
+            return envelope, cached
+        return envelope, self._cached(request.id, self.controller.handle(request, self._clock()))
+
+    def _cached(self, request_id: str | None, reply: Reply) -> bytes:
+        if request_id is None:
+            return encode_reply(reply)
+        previous = self._cache.get(request_id)
+        if previous is not None:
+            return previous
+        data = encode_reply(reply)
+        self._cache.put(request_id, data)
+        return data
+
+    def _tick(self, publisher: zmq.Socket[bytes], telemetry: _TelemetryClock) -> None:
+        now_s = self._clock()
+        self.controller.tick(now_s)
+        status = self.controller.status()
+        with self._lock:
+            self._status = status
+        if self.on_tick is not None:
+            self.on_tick(status)
+        moving = status.state is BaseState.MOVING
+        pose_period_s = (
+            self.timing.pose_period_moving_s if moving else self.timing.pose_period_rest_s
+        )
+        if telemetry.due_pose(now_s, pose_period_s):
+            publisher.send_multipart(encode_pose_telemetry(now_s, status.pose))
+        if telemetry.due_state(now_s, status, self.timing.state_period_s):
+            publisher.send_multipart(encode_state_telemetry(status))
+
+
+class _TelemetryClock:
+    """When the next pose and state messages are due."""
+
+    def __init__(self) -> None:
+        self._last_pose_s = -1e9
+        self._last_state_s = -1e9
+        self._last_key: tuple[object, ...] | None = None
+
+    def due_pose(self, now_s: float, period_s: float) -> bool:
+        if now_s - self._last_pose_s < period_s:
+            return False
+        self._last_pose_s = now_s
+        return True
+
+    def due_state(self, now_s: float, status: Status, period_s: float) -> bool:
+        key = (status.state, status.goal_id, status.error)
+        if key == self._last_key and now_s - self._last_state_s < period_s:
+            return False
+        self._last_key, self._last_state_s = key, now_s
+        return True

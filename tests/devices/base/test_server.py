@@ -1,0 +1,364 @@
+"""The client against the simulated base over real loopback sockets."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+import zmq
+
+from devices.base import (
+    BaseClient,
+    BaseOffline,
+    BaseRequestRejected,
+    BaseState,
+    BaseStopped,
+    ClientTiming,
+    NavigationFailed,
+    Pose,
+    SimFault,
+    SimulatedBase,
+)
+from devices.base.motion import wrap_deg
+from devices.base.protocol import Command
+
+MakeSim = Callable[..., SimulatedBase]
+MakeClient = Callable[..., BaseClient]
+WaitFor = Callable[[Callable[[], bool], float], float]
+
+
+def _request(sock: zmq.Socket[bytes], body: bytes, timeout_ms: int = 1000) -> dict[str, Any] | None:
+    """Send one REQ-style frame from a DEALER; the decoded reply, or None if none came."""
+    sock.send_multipart([b"", body])
+    if not sock.poll(timeout_ms):
+        return None
+    frames = sock.recv_multipart()
+    assert frames[0] == b""
+    reply: dict[str, Any] = json.loads(frames[1])
+    return reply
+
+
+def test_goto_arrives_near_the_goal_and_reports_it(
+    sim: SimulatedBase, make_client: MakeClient
+) -> None:
+    client = make_client(sim.command_endpoint)
+    info = client.hello()
+    assert info.protocol == 1
+    assert info.frame == "map"
+    assert info.bounds_m == (-5.0, -5.0, 5.0, 5.0)
+    goal = Pose(1.5, -0.5, 90.0)
+    status = client.goto("g1", goal, timeout_s=20.0)
+    assert status.state is BaseState.ARRIVED
+    assert status.goal_id == "g1"
+    assert math.hypot(status.pose.x_m - goal.x_m, status.pose.y_m - goal.y_m) <= 0.04 + 1e-6
+    assert abs(wrap_deg(status.pose.yaw_deg - goal.yaw_deg)) <= 2.0 + 1e-6
+    assert status.pose == sim.pose
+    assert status.battery_pct < 100.0
+    assert sim.executed[Command.GOTO] == 1
+
+
+def test_telemetry_streams_pose_while_moving_and_state_changes(
+    sim: SimulatedBase, make_client: MakeClient, wait_for: WaitFor
+) -> None:
+    client = make_client(sim.command_endpoint, sim.telemetry_endpoint)
+    poses: list[tuple[float, Pose]] = []
+    states: list[BaseState] = []
+    client.pose_received.connect(lambda t_s, pose: poses.append((t_s, pose)))
+    client.state_received.connect(lambda status: states.append(status.state))
+    wait_for(lambda: len(states) > 0, 3.0)  # the subscription is live (1 Hz state at rest)
+    client.goto("g1", Pose(2.0, 0.0, 0.0), wait=False)
+    wait_for(lambda: BaseState.ARRIVED in states, 10.0)
+    moving_times = [t for (_, before), (t, pose) in itertools.pairwise(poses) if pose != before]
+    assert len(moving_times) >= 5
+    gaps_s = [b - a for a, b in itertools.pairwise(moving_times)]
+    assert max(gaps_s) <= 0.1 + 0.05  # at least 10 Hz while moving
+    assert BaseState.MOVING in states
+    assert states.index(BaseState.MOVING) < states.index(BaseState.ARRIVED)
+    wait_for(lambda: poses[-1][1] == sim.pose, 2.0)
+
+
+def test_sim_reports_its_pose_to_listeners(sim: SimulatedBase, make_client: MakeClient) -> None:
+    seen: list[Pose] = []
+    sim.on_pose.connect(seen.append)
+    make_client(sim.command_endpoint).goto("g", Pose(0.5, 0.5, 0.0), timeout_s=10.0)
+    assert len(seen) > 2
+    assert seen[-1] == sim.pose
+
+
+def test_lost_link_stops_and_latches_the_base_until_reset_and_new_goto(
+    make_sim: MakeSim, make_client: MakeClient, make_link: Callable[[str], Any], wait_for: WaitFor
+) -> None:
+    sim = make_sim(time_scale=2.0)
+    link = make_link(sim.command_endpoint)
+    client = make_client(link.endpoint)
+    client.goto("far", Pose(4.5, 0.0, 0.0), wait=False)
+    wait_for(lambda: sim.pose.x_m > 0.05, 5.0)  # really moving
+    time.sleep(0.4)  # heartbeats are keeping it going
+    assert sim.status().state is BaseState.MOVING
+    link.blackhole = True
+    silent_since_s = time.monotonic()
+    wait_for(lambda: sim.latched, 3.0)
+    assert time.monotonic() - silent_since_s <= 1.5
+    assert sim.status().state is BaseState.STOPPED
+    assert sim.status().error == "link lost"
+    stopped_at = sim.pose
+    wait_for(lambda: isinstance(client.link_error, BaseOffline), 3.0)  # the client noticed too
+    time.sleep(0.3)
+    link.blackhole = False
+    status = client.status()
+    assert status.state is BaseState.STOPPED
+    assert status.error == "link lost"
+    with pytest.raises(BaseStopped, match="link lost"):
+        client.goto("again", Pose(4.5, 0.0, 0.0))
+    client.reset()
+    time.sleep(0.3)
+    assert client.status().state is BaseState.IDLE
+    assert sim.pose == stopped_at  # never moved again by itself
+    client.goto("again", Pose(stopped_at.x_m + 0.3, 0.0, 0.0), timeout_s=10.0)
+    assert sim.pose.x_m > stopped_at.x_m + 0.25
+
+
+def test_heartbeats_keep_a_long_goal_alive(make_sim: MakeSim, make_client: MakeClient) -> None:
+    sim = make_sim(time_scale=1.0)
+    client = make_client(sim.command_endpoint)
+    client.goto("slow", Pose(3.0, 0.0, 0.0), wait=False)
+    time.sleep(2.5)  # over twice the watchdog period, with no request from the caller
+    assert sim.status().state is BaseState.MOVING
+    assert sim.executed[Command.HEARTBEAT] >= 6
+    assert client.cancel("slow") is True
+    assert client.status().state is BaseState.IDLE
+
+
+def test_retried_request_executes_once(
+    sim: SimulatedBase, make_client: MakeClient, make_link: Callable[[str], Any]
+) -> None:
+    link = make_link(sim.command_endpoint)
+    client = make_client(link.endpoint)
+    link.drop_replies = 2  # the goto is executed, its reply lost twice; the third try gets it
+    client.goto("once", Pose(1.0, 0.0, 0.0), wait=False)
+    assert link.replies_dropped == 2
+    assert sim.executed[Command.GOTO] == 1
+    for _ in client.follow_goal("once", timeout_s=10.0):  # arrival ends the heartbeats
+        pass
+    link.drop_replies = 1
+    client.stop()
+    assert link.replies_dropped == 3
+    assert sim.executed[Command.STOP] == 1
+    assert sim.latched
+
+
+def test_same_id_gets_the_cached_reply_and_the_cache_keeps_256(
+    sim: SimulatedBase, raw_dealer: Callable[[str], zmq.Socket[bytes]]
+) -> None:
+    sock = raw_dealer(sim.command_endpoint)
+    goto = {
+        "v": 1,
+        "id": "r-1",
+        "cmd": "goto",
+        "args": {"goal_id": "g", "x": 1.0, "y": 0.0, "yaw_deg": 0.0},
+    }
+    first = _request(sock, json.dumps(goto).encode())
+    again = _request(sock, json.dumps(goto).encode())
+    assert first == again == {"v": 1, "id": "r-1", "ok": True, "result": {"accepted": True}}
+    assert sim.executed[Command.GOTO] == 1
+    for n in range(256):
+        reply = _request(sock, json.dumps({"v": 1, "id": f"h-{n}", "cmd": "heartbeat"}).encode())
+        assert reply is not None
+        assert reply["id"] == f"h-{n}"
+    beats = sim.executed[Command.HEARTBEAT]
+    _request(sock, json.dumps({"v": 1, "id": "h-255", "cmd": "heartbeat"}).encode())
+    assert sim.executed[Command.HEARTBEAT] == beats  # still cached
+    reply = _request(sock, json.dumps(goto).encode())  # r-1 was evicted: executed anew
+    assert sim.executed[Command.GOTO] == 2
+    assert reply is not None
+    assert reply["error"]["code"] == "busy"
+
+
+def test_bad_requests_get_errors_or_are_dropped_and_nothing_moves(
+    sim: SimulatedBase, raw_dealer: Callable[[str], zmq.Socket[bytes]], make_client: MakeClient
+) -> None:
+    sock = raw_dealer(sim.command_endpoint)
+    goal = '"goal_id": "g", "y": 0.0, "yaw_deg": 0.0'
+    cases: list[tuple[bytes, str, str | None]] = [
+        (b"\x00garbage", "bad_request", None),
+        (
+            b'{"v": 1, "cmd": "goto", "args": {' + goal.encode() + b', "x": 1.0}}',
+            "bad_request",
+            None,
+        ),
+        (
+            b'{"v": 1, "id": "b1", "cmd": "goto", "args": {' + goal.encode() + b', "x": NaN}}',
+            "bad_request",
+            "b1",
+        ),
+        (
+            b'{"v": 1, "id": "b2", "cmd": "goto", "args": {' + goal.encode() + b', "x": Infinity}}',
+            "bad_request",
+            "b2",
+        ),
+        (
+            b'{"v": 1, "id": "b3", "cmd": "goto", "args": {' + goal.encode() + b', "x": 1e999}}',
+            "bad_request",
+            "b3",
+        ),
+        (
+            b'{"v": 1, "id": "b4", "cmd": "goto", "args": {' + goal.encode() + b', "x": 1e300}}',
+            "bad_request",
+            "b4",
+        ),
+        (
+            b'{"v": 1, "id": "b5", "cmd": "goto", "args": {' + goal.encode() + b', "x": 12.0}}',
+            "out_of_bounds",
+            "b5",
+        ),
+        (b'{"v": 1, "id": "b6", "cmd": "launch"}', "unknown_command", "b6"),
+        (b'{"v": 7, "id": "b7", "cmd": "status"}', "version", "b7"),
+    ]
+    for body, code, request_id in cases:
+        reply = _request(sock, body)
+        assert reply is not None, body
+        assert reply["ok"] is False
+        assert reply["error"]["code"] == code, body
+        assert reply["id"] == request_id
+    sock.send_multipart([b"", b"x" * (1 << 20)])  # 1 MB: over ZMQ_MAXMSGSIZE, dropped
+    sock.send_multipart([b"", b"{}", b"{}"])
+    time.sleep(0.3)
+    assert sim.executed[Command.GOTO] == 1  # only the well-formed one off the map got through
+    assert sim.status().goal_id is None
+    assert sim.pose == Pose(0.0, 0.0, 0.0)
+    assert make_client(sim.command_endpoint).status().state is BaseState.IDLE  # still serving
+
+
+def test_replies_always_match_requests(make_client: MakeClient) -> None:
+    """A server that first answers with a stale id: the client discards it and retries."""
+    context: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
+    router = context.socket(zmq.ROUTER)
+    router.setsockopt(zmq.LINGER, 0)
+    router.bind("tcp://127.0.0.1:*")
+    endpoint = router.getsockopt_string(zmq.LAST_ENDPOINT)
+    seen_ids: list[str] = []
+
+    def serve() -> None:
+        for attempt in range(2):
+            if not router.poll(3000):
+                return
+            envelope_and_body = router.recv_multipart()
+            request = json.loads(envelope_and_body[-1])
+            seen_ids.append(request["id"])
+            reply_id = "stale-000001" if attempt == 0 else request["id"]
+            reply = {"v": 1, "id": reply_id, "ok": True, "result": {}}
+            router.send_multipart([*envelope_and_body[:-1], json.dumps(reply).encode()])
+
+    thread = threading.Thread(target=serve)
+    thread.start()
+    try:
+        make_client(endpoint).heartbeat()
+    finally:
+        thread.join()
+        router.close()
+        context.term()
+    assert len(seen_ids) == 2
+    assert seen_ids[0] == seen_ids[1]  # the same request, resent with the same id
+
+
+def test_concurrent_callers_each_get_their_own_reply(
+    sim: SimulatedBase, make_client: MakeClient
+) -> None:
+    client = make_client(sim.command_endpoint)
+    errors: list[BaseException] = []
+
+    def hammer() -> None:
+        try:
+            for _ in range(20):
+                assert client.status().state is BaseState.IDLE
+                assert client.hello().protocol == 1
+        except BaseException as error:
+            errors.append(error)
+
+    threads = [threading.Thread(target=hammer) for _ in range(3)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert errors == []
+
+
+def test_command_semantics(sim: SimulatedBase, make_client: MakeClient) -> None:
+    client = make_client(sim.command_endpoint)
+    client.goto("a", Pose(4.0, 0.0, 0.0), wait=False)
+    with pytest.raises(BaseRequestRejected) as busy:
+        client.goto("b", Pose(1.0, 1.0, 0.0), wait=False)
+    assert busy.value.code == "busy"
+    assert client.cancel("not-a") is False
+    assert client.cancel("a") is True
+    here = sim.pose
+    time.sleep(0.2)
+    assert sim.pose == here
+    client.stop()
+    with pytest.raises(BaseStopped):
+        client.goto("c", Pose(1.0, 1.0, 0.0))
+    client.reset()
+    client.reset()  # idempotent, starts nothing
+    assert client.status().state is BaseState.IDLE
+    with pytest.raises(BaseRequestRejected, match="outside the map") as bounds:
+        client.goto("d", Pose(0.0, 9.0, 0.0))
+    assert bounds.value.code == "out_of_bounds"
+
+
+def test_blocked_path_and_navigation_failure_raise_navigation_failed(
+    make_sim: MakeSim, make_client: MakeClient
+) -> None:
+    sim = make_sim(time_scale=20.0)
+    client = make_client(sim.command_endpoint)
+    sim.inject_fault(SimFault.BLOCKED_PATH)
+    with pytest.raises(NavigationFailed, match="path blocked"):
+        client.goto("blocked", Pose(2.0, 0.0, 0.0), timeout_s=10.0)
+    sim.clear_faults()
+    sim.inject_fault(SimFault.NAV_FAILURE)
+    with pytest.raises(NavigationFailed, match="no valid plan"):
+        client.goto("noplan", Pose(1.0, 0.0, 0.0), timeout_s=10.0)
+    assert client.status().state is BaseState.ABORTED
+    sim.clear_faults()
+    assert client.goto("fine", Pose(0.5, 0.0, 0.0), timeout_s=10.0).state is BaseState.ARRIVED
+
+
+@pytest.mark.parametrize("fault", [SimFault.FREEZE, SimFault.CRASH])
+def test_frozen_or_crashed_base_is_reported_offline_within_3_s(
+    make_sim: MakeSim, make_client: MakeClient, fault: SimFault
+) -> None:
+    sim = make_sim(time_scale=1.0)
+    client = make_client(sim.command_endpoint)
+    client.goto("g", Pose(3.0, 0.0, 0.0), wait=False)
+    failed: list[BaseException] = []
+
+    def follow() -> None:
+        try:
+            for _ in client.follow_goal("g", timeout_s=30.0):
+                pass
+        except BaseException as error:
+            failed.append(error)
+
+    thread = threading.Thread(target=follow)
+    thread.start()
+    time.sleep(0.3)
+    sim.inject_fault(fault)
+    faulted_s = time.monotonic()
+    thread.join(timeout=5.0)
+    assert time.monotonic() - faulted_s <= 3.0
+    assert len(failed) == 1
+    assert isinstance(failed[0], BaseOffline)
+    assert "offline" in str(failed[0])
+
+
+def test_offline_when_nothing_listens(make_client: MakeClient) -> None:
+    client = make_client("tcp://127.0.0.1:9", timing=ClientTiming(request_timeout_s=0.2, retries=1))
+    started_s = time.monotonic()
+    with pytest.raises(BaseOffline):
+        client.hello()
+    assert time.monotonic() - started_s < 1.0
