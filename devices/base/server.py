@@ -203,13 +203,12 @@ class ProtocolServer:
             except zmq.Again:
                 return
             envelope, reply = self._answer(frames)
-            if reply is not None:
-                router.send_multipart([*envelope, reply])
+            router.send_multipart([*envelope, reply])
 
-    def _answer(self, frames: list[bytes]) -> tuple[list[bytes], bytes | None]:
+    def _answer(self, frames: list[bytes]) -> tuple[list[bytes], bytes]:
         envelope, body = split_envelope(frames)
         if len(body) != 1:
-            log.warning("dropping a message of %d body frames", len(body))
+            log.warning("a message of %d body frames: answered bad_request", len(body))
             reply = Reply.failure(None, ErrorCode.BAD_REQUEST, "a request is exactly one frame")
             return envelope, encode_reply(reply)
         try:
@@ -222,7 +221,10 @@ class ProtocolServer:
         if cached is not None:
             log.info("repeated request %s (%s): sending the cached reply", request.id, request.cmd)
             return envelope, cached
-        return envelope, self._cached(request.id, self.controller.handle(request, self._clock()))
+        reply = self.controller.handle(request, self._clock())
+        with self._lock:  # status() reflects every command whose reply has been sent
+            self._status = self.controller.status()
+        return envelope, self._cached(request.id, reply)
 
     def _cached(self, request_id: str | None, reply: Reply) -> bytes:
         if request_id is None:
