@@ -114,8 +114,8 @@ class ProtocolServer:
             )
             self._auth.start()
             self._auth.configure_curve(domain="*", location=str(self._keys.authorized_dir))
-        router = self._socket(zmq.ROUTER)
-        publisher = self._socket(zmq.PUB)
+        router = self._socket(self._context, zmq.ROUTER)
+        publisher = self._socket(self._context, zmq.PUB)
         try:
             router.bind(self._endpoints[0])
             publisher.bind(self._endpoints[1])
@@ -132,9 +132,8 @@ class ProtocolServer:
         self._thread.start()
         log.info("serving %s (telemetry %s)", self.command_endpoint, self.telemetry_endpoint)
 
-    def _socket(self, kind: int) -> zmq.Socket[bytes]:
-        assert self._context is not None
-        sock = self._context.socket(kind)
+    def _socket(self, context: zmq.Context[zmq.Socket[bytes]], kind: int) -> zmq.Socket[bytes]:
+        sock = context.socket(kind)
         sock.setsockopt(zmq.LINGER, 0)
         if kind == zmq.ROUTER:
             sock.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES)
