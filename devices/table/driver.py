@@ -1,0 +1,325 @@
+"""The rotary table driver: Grbl 1.1 over a serial port (``spec/turntable-grbl.md``).
+
+The driver is handed an open pyserial-like port and never opens one itself; :func:`open_table`
+is the small factory that opens a device path or pyserial URL. A move is ``G90 G0 X<deg>``
+(``ok`` = queued), then ``G4 P0`` (``ok`` = motion buffer empty), then ``?`` and the read-back
+position must be within ``tolerance_deg`` of the target. In Alarm the driver refuses to move;
+it never sends ``$X`` or ``$H`` unless the operator calls :meth:`GrblTable.unlock` or
+:meth:`GrblTable.home`. Signals are emitted on the reader thread.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from psygnal import Signal
+
+from devices.table import protocol as p
+from devices.table.codes import alarm_meaning
+from devices.table.errors import (
+    TableAlarm,
+    TableDisconnected,
+    TableError,
+    TableException,
+    TableHeld,
+    TableMissedTarget,
+    TableTimeout,
+)
+from devices.table.link import READ_POLL_S, GrblLink, SerialPort
+
+log = logging.getLogger(__name__)
+
+BAUD_RATE = 115200
+TOLERANCE_DEG = 0.2
+
+
+@dataclass(frozen=True)
+class TableTimeouts:
+    """Bounds on every wait, seconds. A move waits its estimated travel time x 1.5 plus
+    ``move_margin_s`` when the controller's ``$110``/``$120`` are known, else ``move_max_s``."""
+
+    banner_s: float = 2.0
+    reply_s: float = 2.0
+    status_s: float = 0.5
+    move_margin_s: float = 5.0
+    move_max_s: float = 120.0
+    hold_s: float = 10.0
+    poll_s: float = 0.25
+
+
+@dataclass(frozen=True)
+class TableStatus:
+    """One status report, with the driver's knowledge of the position and alarm."""
+
+    state: str
+    substate: int | None
+    position_deg: float
+    position_known: bool
+    alarm_code: int | None
+
+    def __str__(self) -> str:
+        state = self.state if self.substate is None else f"{self.state}:{self.substate}"
+        if self.alarm_code:
+            state += f" (ALARM:{self.alarm_code}: {alarm_meaning(self.alarm_code)})"
+        known = "" if self.position_known else ", position unknown: home before capturing"
+        return f"{state} at {self.position_deg:.3f} deg{known}"
+
+
+class GrblTable:
+    """A rotary table behind a Grbl 1.1 controller. Thread-safe; one move at a time."""
+
+    alarm_raised = Signal(int, str)
+    message_received = Signal(str)
+    position_deg_changed = Signal(float)
+    position_unknown = Signal(str)
+    disconnected = Signal(str)
+
+    def __init__(
+        self,
+        port: SerialPort,
+        *,
+        timeouts: TableTimeouts | None = None,
+        tolerance_deg: float = TOLERANCE_DEG,
+    ) -> None:
+        self.timeouts = timeouts or TableTimeouts()
+        self.tolerance_deg = tolerance_deg
+        self._link = GrblLink(port, self._on_line, self.disconnected.emit)
+        self._holds = 0
+        self._position_known = False
+
+    # --- connection -----------------------------------------------------------------------
+
+    def connect(self) -> TableStatus:
+        """Wait for the banner (Ctrl-X if none comes), read status and settings."""
+        self._link.start()
+        state = self._link.state
+        if not self._link.wait_until(lambda: state.banners > 0, self.timeouts.banner_s):
+            log.info("no Grbl banner within %.1f s: sending Ctrl-X", self.timeouts.banner_s)
+            self._link.send_reset()
+            if not self._link.wait_until(lambda: state.banners > 0, self.timeouts.banner_s):
+                raise TableTimeout(
+                    f"no Grbl banner within {self.timeouts.banner_s:.1f} s, nor after a reset "
+                    "(Ctrl-X): is a Grbl 1.1 controller on this port at 115200 baud?"
+                )
+        status = self.status()
+        with self._link.cond:
+            self._position_known = status.state != "Alarm" and not state.position_lost
+        self._read_settings()
+        return self.status()
+
+    def close(self) -> None:
+        """Stop the reader and close the port."""
+        self._link.close()
+
+    @property
+    def position_known(self) -> bool:
+        with self._link.cond:
+            return self._position_known and not self._link.state.position_lost
+
+    @property
+    def settings(self) -> dict[int, float]:
+        """The controller's ``$$`` settings as read at connect (``$110`` deg/min etc.)."""
+        with self._link.cond:
+            return dict(self._link.state.settings)
+
+    # --- queries --------------------------------------------------------------------------
+
+    def status(self) -> TableStatus:
+        report = self._link.query_status(self.timeouts.status_s)
+        with self._link.cond:
+            position_deg = report.machine_x_deg(self._link.state.wco_x_deg)
+            position_deg -= self._link.state.wco_x_deg
+            alarm_code = self._link.state.alarm_code if report.state == "Alarm" else None
+        return TableStatus(
+            report.state, report.substate, position_deg, self.position_known, alarm_code
+        )
+
+    def position_deg(self) -> float:
+        """The table angle the controller reports now (work X = MPos - WCO), degrees."""
+        return self.status().position_deg
+
+    # --- motion -------------------------------------------------------------------------
+
+    def goto_deg(self, target_deg: float) -> float:
+        """Turn to ``target_deg`` and return the angle reached (checked within tolerance)."""
+        move_line = p.goto_line(target_deg)
+        start = self.status()
+        self._refuse_if_not_ready(start)
+        interrupted = self._interruption_since()
+        timeout_s = self._move_timeout_s(abs(target_deg - start.position_deg))
+        self._run(move_line, self.timeouts.reply_s, interrupted)
+        self._run(p.BARRIER_LINE, timeout_s, interrupted, poll=True)
+        stop = interrupted()
+        if stop is not None:
+            raise stop
+        end = self.status()
+        self._refuse_if_not_ready(end)
+        if end.state != "Idle":
+            raise TableException(f"controller reports {end.state} after the move barrier")
+        if abs(end.position_deg - target_deg) > self.tolerance_deg:
+            raise TableMissedTarget(target_deg, end.position_deg, self.tolerance_deg)
+        log.info("table at %.3f deg (target %.3f deg)", end.position_deg, target_deg)
+        return end.position_deg
+
+    def hold(self) -> TableStatus:
+        """Feed hold (``!``): controlled stop; returns once stopped (``Hold:0``)."""
+        with self._link.cond:
+            self._holds += 1
+            self._link.cond.notify_all()
+        self._link.write(p.FEED_HOLD)
+        deadline_s = time.monotonic() + self.timeouts.hold_s
+        while time.monotonic() < deadline_s:
+            status = self.status()
+            if status.state in ("Idle", "Alarm") or (status.state, status.substate) == (
+                "Hold",
+                0,
+            ):
+                return status
+            time.sleep(READ_POLL_S)
+        raise TableTimeout(f"table not stopped within {self.timeouts.hold_s:.1f} s of a hold")
+
+    def resume(self) -> None:
+        """Cycle start (``~``): a held move carries on to its target."""
+        self._link.write(p.CYCLE_START)
+
+    def reset(self) -> TableStatus:
+        """Ctrl-X: immediate stop and controller reset. The position is unknown afterwards."""
+        with self._link.cond:
+            self._position_known = False
+            banners = self._link.state.banners
+        self._link.send_reset()
+        if not self._link.wait_until(
+            lambda: self._link.state.banners > banners, self.timeouts.banner_s
+        ):
+            raise TableTimeout(f"no banner within {self.timeouts.banner_s:.1f} s of a reset")
+        self.position_unknown.emit("controller reset: home the table before the next capture")
+        return self.status()
+
+    def home(self) -> float:
+        """Operator-requested homing cycle (``$H``); the position is known afterwards."""
+        with self._link.cond:
+            alarms = self._link.state.alarms
+
+        def new_alarm() -> TableException | None:
+            return self._alarm_error() if self._link.state.alarms > alarms else None
+
+        self._run(p.HOME_LINE, self.timeouts.move_max_s, new_alarm, poll=True)
+        with self._link.cond:
+            self._position_known = True
+            self._link.state.position_lost = False
+        return self.position_deg()
+
+    def unlock(self) -> TableStatus:
+        """Operator-requested alarm unlock (``$X``). The position stays unknown if it was."""
+        with self._link.cond:
+            critical = self._link.state.critical
+        if critical:
+            raise self._alarm_error()
+        self._run(p.UNLOCK_LINE, self.timeouts.reply_s, lambda: None)
+        return self.status()
+
+    def confirm_position_known(self) -> None:
+        """The operator confirms the reported angle is right (e.g. checked the zero mark)."""
+        with self._link.cond:
+            self._position_known = True
+            self._link.state.position_lost = False
+
+    # --- helpers --------------------------------------------------------------------------
+
+    def _run(
+        self,
+        line: str,
+        timeout_s: float,
+        interrupted: Callable[[], TableException | None],
+        *,
+        poll: bool = False,
+    ) -> None:
+        poll_s = self.timeouts.poll_s if poll else None
+        reply = self._link.send_line(line, timeout_s, interrupted, poll_s=poll_s)
+        if isinstance(reply, p.ErrorReply):
+            raise TableError(reply.code, reply.meaning, line)
+
+    def _refuse_if_not_ready(self, status: TableStatus) -> None:
+        if status.state == "Alarm":
+            raise self._alarm_error()
+        if status.state in ("Hold", "Door"):
+            raise TableHeld(f"table is in {status.state}: resume (~) or reset it before moving")
+
+    def _interruption_since(self) -> Callable[[], TableException | None]:
+        with self._link.cond:
+            alarms, holds = self._link.state.alarms, self._holds
+
+        def interrupted() -> TableException | None:
+            state = self._link.state
+            if state.alarms > alarms or state.in_alarm:
+                return self._alarm_error()
+            if self._holds > holds:
+                return TableHeld("move interrupted by a feed hold; resume (~) to finish it")
+            return None
+
+        return interrupted
+
+    def _alarm_error(self) -> TableAlarm:
+        with self._link.cond:
+            code, critical = self._link.state.alarm_code, self._link.state.critical
+        meaning = alarm_meaning(code) if code else "controller locked in Alarm"
+        advice = "operator: check the table, then unlock ($X) or home ($H)"
+        if critical:
+            advice = "operator: check the table, reset it (Ctrl-X), then unlock or home"
+        return TableAlarm(code or None, meaning, advice + "; moves refused until then")
+
+    def _move_timeout_s(self, distance_deg: float) -> float:
+        settings = self.settings
+        rate_deg_s = settings.get(110, 0.0) / 60.0
+        accel_deg_s2 = settings.get(120, 0.0)
+        if rate_deg_s <= 0.0 or accel_deg_s2 <= 0.0:
+            return self.timeouts.move_max_s
+        if distance_deg >= rate_deg_s**2 / accel_deg_s2:
+            travel_s = distance_deg / rate_deg_s + rate_deg_s / accel_deg_s2
+        else:
+            travel_s = 2.0 * math.sqrt(distance_deg / accel_deg_s2)
+        return 1.5 * travel_s + self.timeouts.move_margin_s
+
+    def _read_settings(self) -> None:
+        try:
+            self._run(p.SETTINGS_LINE, self.timeouts.reply_s, lambda: None)
+        except (TableError, TableTimeout) as error:
+            log.warning("could not read the controller settings ($$): %s", error)
+
+    def _on_line(self, reply: p.Reply) -> None:
+        if isinstance(reply, p.AlarmReply):
+            log.error("ALARM:%d from the table: %s", reply.code, reply.meaning)
+            self.alarm_raised.emit(reply.code, reply.meaning)
+            if self._link.state.position_lost:
+                self.position_unknown.emit(f"ALARM:{reply.code}: {reply.meaning}")
+        elif isinstance(reply, p.Message):
+            log.info("table controller says: %s", reply.text)
+            self.message_received.emit(reply.text)
+        elif isinstance(reply, p.StatusReport):
+            wco_x_deg = self._link.state.wco_x_deg
+            self.position_deg_changed.emit(reply.machine_x_deg(wco_x_deg) - wco_x_deg)
+
+
+def open_table(
+    url_or_path: str, *, timeouts: TableTimeouts | None = None, connect: bool = True
+) -> GrblTable:
+    """Open ``url_or_path`` (``/dev/ttyUSB0``, ``socket://host:port``...) at 115200 baud and
+    return the driver, connected unless ``connect`` is False."""
+    import serial
+
+    try:
+        port = serial.serial_for_url(url_or_path, baudrate=BAUD_RATE, timeout=READ_POLL_S)
+    except (serial.SerialException, OSError, ValueError) as error:
+        raise TableDisconnected(f"cannot open serial port {url_or_path!r}: {error}") from error
+    table = GrblTable(port, timeouts=timeouts)
+    if connect:
+        try:
+            table.connect()
+        except TableException:
+            table.close()
+            raise
+    return table

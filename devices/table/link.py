@@ -1,0 +1,329 @@
+"""The serial link to a Grbl controller: one reader thread, strict ok/error accounting.
+
+Grbl answers every line with exactly one ``ok`` or ``error:N``, in order. The link keeps a
+FIFO of lines waiting for their answer; a line whose wait was given up (timeout, alarm, hold)
+stays in the FIFO as *stale*, so its late answer is still matched to it. Before the next line
+is sent, stale lines are flushed by a resync: ``$G`` is sent and its ``[GC:...]`` line marks
+the point after which nothing older can be answered (an answer lost to noise is dropped there).
+Asynchronous lines (status, ``ALARM:N``, ``[MSG:...]``, the banner) are handled whenever they
+arrive. Between a Ctrl-X and the banner that follows, ``ok``/``error`` are ignored.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from devices.table import protocol as p
+from devices.table.codes import POSITION_LOST_ALARMS
+from devices.table.errors import TableDisconnected, TableException, TableReset, TableTimeout
+
+log = logging.getLogger(__name__)
+
+READ_POLL_S = 0.05
+MAX_STALE_LINES = 3
+
+
+class SerialPort(Protocol):
+    """What the link needs of a pyserial ``Serial`` (or anything that behaves like one)."""
+
+    @property
+    def in_waiting(self) -> int: ...
+
+    def read(self, size: int = 1) -> bytes: ...
+
+    def write(self, data: bytes, /) -> int | None: ...
+
+    def close(self) -> None: ...
+
+
+@dataclass
+class _Slot:
+    line: str
+    reply: p.Reply | None = None
+    error: TableException | None = None
+    stale: bool = False
+    sync: bool = False
+    deadline_s: float = 0.0
+
+    @property
+    def done(self) -> bool:
+        return self.reply is not None or self.error is not None
+
+
+@dataclass
+class ControllerState:
+    """What the reader has learnt; read under :attr:`GrblLink.cond`."""
+
+    alarm_code: int | None = None
+    in_alarm: bool = False
+    critical: bool = False
+    position_lost: bool = False
+    status: p.StatusReport | None = None
+    wco_x_deg: float = 0.0
+    settings: dict[int, float] = field(default_factory=dict)
+    banners: int = 0
+    alarms: int = 0
+    statuses: int = 0
+    garbled_lines: int = 0
+    disconnected: str | None = None
+
+
+class GrblLink:
+    """Owns the port once started. ``on_line`` sees every parsed line and ``on_disconnect``
+    the loss of the port, both on the reader thread: they must not block."""
+
+    def __init__(
+        self,
+        port: SerialPort,
+        on_line: Callable[[p.Reply], None],
+        on_disconnect: Callable[[str], None],
+    ) -> None:
+        self._port = port
+        self._on_line = on_line
+        self._on_disconnect = on_disconnect
+        self.cond = threading.Condition()
+        self.state = ControllerState()
+        self._pending: deque[_Slot] = deque()
+        self._resetting = False
+        self._splitter = p.LineSplitter()
+        self._send_lock = threading.Lock()
+        self._write_lock = threading.Lock()
+        self._closing = threading.Event()
+        self._thread = threading.Thread(target=self._read_loop, name="grbl-reader", daemon=True)
+
+    def start(self) -> None:
+        if not self._thread.is_alive():
+            self._thread.start()
+
+    def close(self) -> None:
+        self._closing.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        try:
+            self._port.close()
+        except Exception as error:  # closing a port that is already gone
+            log.debug("closing the port: %s", error)
+
+    # --- writing --------------------------------------------------------------------------
+
+    def write(self, data: bytes) -> None:
+        with self.cond:
+            self._raise_if_disconnected()
+        try:
+            with self._write_lock:
+                self._port.write(data)
+        except Exception as error:
+            self._disconnect(f"write failed: {error}")
+            raise TableDisconnected(f"table disconnected: {error}") from error
+
+    def send_reset(self) -> None:
+        """Ctrl-X: every waiting line fails with TableReset; answers until the banner are void."""
+        with self.cond:
+            self._resetting = True
+            self._fail_pending(TableReset("controller reset while the line was running"))
+        self.write(p.SOFT_RESET)
+
+    def send_line(
+        self,
+        line: str,
+        timeout_s: float,
+        interrupted: Callable[[], TableException | None],
+        poll_s: float | None = None,
+    ) -> p.Reply:
+        """Send one line and wait for its ``ok`` (returned) or ``error:N`` (returned too).
+
+        ``interrupted`` is checked while waiting: an exception it returns is raised and the
+        line is left stale. With ``poll_s``, a ``?`` is sent that often while waiting, so an
+        Alarm is seen even if its ``ALARM:N`` line was lost. Raises TableTimeout,
+        TableDisconnected or TableReset.
+        """
+        data = p.encode_line(line)
+        with self._send_lock:
+            self._resync(timeout_s)
+            slot = _Slot(line)
+            with self.cond:
+                self._pending.append(slot)
+            self.write(data)
+            return self._wait_slot(slot, timeout_s, interrupted, poll_s)
+
+    def _wait_slot(
+        self,
+        slot: _Slot,
+        timeout_s: float,
+        interrupted: Callable[[], TableException | None],
+        poll_s: float | None = None,
+    ) -> p.Reply:
+        deadline_s = slot.deadline_s = time.monotonic() + timeout_s
+        next_poll_s = time.monotonic() + (poll_s or 0.0)
+        with self.cond:
+            while not slot.done:
+                if poll_s is not None and time.monotonic() >= next_poll_s:
+                    next_poll_s += poll_s
+                    self.write(p.STATUS_QUERY)
+                self._raise_if_disconnected()
+                stop = interrupted()
+                left_s = deadline_s - time.monotonic()
+                if stop is None and left_s <= 0.0:
+                    stop = TableTimeout(f"no answer to {slot.line!r} within {timeout_s:.1f} s")
+                if stop is not None:
+                    slot.stale = True
+                    raise stop
+                self.cond.wait(min(left_s, READ_POLL_S))
+            if slot.reply is not None:
+                return slot.reply
+            raise slot.error or TableException(f"no answer to {slot.line!r}")
+
+    def _resync(self, timeout_s: float) -> None:
+        with self.cond:
+            stale = sum(1 for s in self._pending if s.stale)
+            last_deadline_s = max((s.deadline_s for s in self._pending), default=0.0)
+        if stale == 0:
+            return
+        # a stale line may still be running (a held move): wait as long as it was given
+        timeout_s += max(0.0, last_deadline_s - time.monotonic())
+        if stale > MAX_STALE_LINES:
+            raise TableTimeout(
+                f"controller out of step ({stale} lines unanswered); reset the table"
+            )
+        log.info("resynchronising with the controller (%d stale lines)", stale)
+        slot = _Slot(p.PARSER_STATE_LINE, sync=True)
+        with self.cond:
+            self._pending.append(slot)
+        self.write(p.encode_line(p.PARSER_STATE_LINE))
+        self._wait_slot(slot, timeout_s, lambda: None)
+
+    # --- waiting for asynchronous lines -----------------------------------------------------
+
+    def wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
+        """Wait (under :attr:`cond`) until ``predicate()``; False on timeout."""
+        deadline_s = time.monotonic() + timeout_s
+        with self.cond:
+            while not predicate():
+                self._raise_if_disconnected()
+                left_s = deadline_s - time.monotonic()
+                if left_s <= 0.0:
+                    return False
+                self.cond.wait(min(left_s, READ_POLL_S))
+            return True
+
+    def query_status(self, timeout_s: float, attempts: int = 3) -> p.StatusReport:
+        """Send ``?`` and return the first status report received after it (retrying)."""
+        for _ in range(attempts):
+            with self.cond:
+                seen = self.state.statuses
+            self.write(p.STATUS_QUERY)
+            if self.wait_until(self._newer_status_than(seen), timeout_s):
+                with self.cond:
+                    status = self.state.status
+                if status is not None:
+                    return status
+        raise TableTimeout(f"no status report within {attempts} x {timeout_s:.1f} s")
+
+    def _newer_status_than(self, seen: int) -> Callable[[], bool]:
+        return lambda: self.state.statuses > seen
+
+    # --- reading ----------------------------------------------------------------------------
+
+    def _read_loop(self) -> None:
+        while not self._closing.is_set():
+            try:
+                data = self._port.read(1)
+                if data:
+                    data += self._port.read(self._port.in_waiting)
+            except Exception as error:
+                if not self._closing.is_set():
+                    self._disconnect(f"read failed: {error}")
+                return
+            for raw in self._splitter.feed(data):
+                self._handle(p.parse_line(raw))
+
+    def _handle(self, reply: p.Reply) -> None:
+        with self.cond:
+            self._account(reply)
+            self.cond.notify_all()
+        try:
+            self._on_line(reply)
+        except Exception:
+            log.exception("handler of %r failed", reply)
+
+    def _account(self, reply: p.Reply) -> None:
+        state = self.state
+        if isinstance(reply, p.Ok | p.ErrorReply):
+            self._answer(reply)
+        elif isinstance(reply, p.StatusReport):
+            state.status, state.statuses = reply, state.statuses + 1
+            state.wco_x_deg = reply.wco[0] if reply.wco else state.wco_x_deg
+            state.in_alarm = reply.state == "Alarm"
+            if not state.in_alarm:
+                state.alarm_code, state.critical = None, False
+        elif isinstance(reply, p.AlarmReply):
+            state.alarm_code, state.in_alarm, state.alarms = reply.code, True, state.alarms + 1
+            state.position_lost |= reply.code in POSITION_LOST_ALARMS
+        elif isinstance(reply, p.Message):
+            self._account_message(reply.text)
+        elif isinstance(reply, p.Banner):
+            self._account_banner()
+        elif isinstance(reply, p.Feedback) and reply.tag == "GC":
+            self._drop_before_sync()
+        elif isinstance(reply, p.SettingLine):
+            state.settings[reply.number] = reply.value
+        elif isinstance(reply, p.Garbled):
+            state.garbled_lines += 1
+            log.warning("garbled line from the controller: %r", reply.raw)
+
+    def _answer(self, reply: p.Ok | p.ErrorReply) -> None:
+        if self._resetting:
+            log.debug("ignoring %r answered during a reset", reply)
+        elif not self._pending:
+            log.warning("unexpected %r: no line is waiting for an answer", reply)
+        else:
+            self._pending.popleft().reply = reply
+
+    def _account_message(self, text: str) -> None:
+        if text == "Reset to continue":
+            self.state.critical = self.state.in_alarm = True
+        elif text == "'$H'|'$X' to unlock":
+            self.state.in_alarm = True
+        elif text == "Caution: Unlocked":
+            self.state.in_alarm, self.state.alarm_code = False, None
+
+    def _account_banner(self) -> None:
+        if not self._resetting and self.state.banners > 0:
+            log.warning("the controller reset itself; the table position is unknown")
+            self.state.position_lost = True
+        self._resetting = False
+        self._fail_pending(TableReset("controller reset while the line was running"))
+        self.state.critical = False
+        self.state.banners += 1
+
+    def _drop_before_sync(self) -> None:
+        while self._pending and not self._pending[0].sync:
+            lost = self._pending.popleft()
+            lost.error = TableTimeout(f"the answer to {lost.line!r} was lost")
+            log.warning("answer to %r lost (noise on the line?)", lost.line)
+
+    def _fail_pending(self, error: TableException) -> None:
+        while self._pending:
+            self._pending.popleft().error = error
+
+    def _disconnect(self, reason: str) -> None:
+        with self.cond:
+            first = self.state.disconnected is None
+            if first:
+                log.error("table disconnected: %s", reason)
+                self.state.disconnected = reason
+                self.state.position_lost = True
+                self._fail_pending(TableDisconnected(f"table disconnected: {reason}"))
+            self.cond.notify_all()
+        if first:
+            self._on_disconnect(reason)
+
+    def _raise_if_disconnected(self) -> None:
+        if self.state.disconnected is not None:
+            raise TableDisconnected(f"table disconnected: {self.state.disconnected}")

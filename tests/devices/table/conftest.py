@@ -1,0 +1,70 @@
+"""Fixtures: simulated Grbl controllers on real pseudo-terminals, and drivers connected to them."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import pytest
+import serial
+
+from devices.table import GrblSimulator, GrblTable, PtyGrblServer, TableTimeouts
+
+FAST = TableTimeouts(
+    banner_s=0.5, reply_s=0.5, status_s=0.2, move_margin_s=0.5, hold_s=3.0, poll_s=0.05
+)
+"""Short bounds so fault tests finish quickly; the simulator answers within milliseconds."""
+
+QUICK_TABLE = {110: 1800.0, 120: 60.0}
+"""30 deg/s, 60 deg/s^2: a 20 degree move takes 1.17 s in real time."""
+
+
+def connect(server: PtyGrblServer, timeouts: TableTimeouts = FAST) -> GrblTable:
+    port = serial.serial_for_url(server.device_path, baudrate=115200, timeout=0.05)
+    table = GrblTable(port, timeouts=timeouts)
+    table.connect()
+    return table
+
+
+@pytest.fixture
+def make_server() -> Iterator[Callable[..., PtyGrblServer]]:
+    servers: list[PtyGrblServer] = []
+
+    def make(simulator: GrblSimulator | None = None, **kwargs: object) -> PtyGrblServer:
+        server = PtyGrblServer(simulator, **kwargs).start()  # type: ignore[arg-type]
+        servers.append(server)
+        return server
+
+    yield make
+    for server in servers:
+        server.close()
+
+
+@pytest.fixture
+def make_table() -> Iterator[Callable[..., GrblTable]]:
+    tables: list[GrblTable] = []
+
+    def make(server: PtyGrblServer, timeouts: TableTimeouts = FAST) -> GrblTable:
+        table = connect(server, timeouts)
+        tables.append(table)
+        return table
+
+    yield make
+    for table in tables:
+        table.close()
+
+
+@pytest.fixture
+def server(make_server: Callable[..., PtyGrblServer]) -> PtyGrblServer:
+    """An instant simulated table."""
+    return make_server(GrblSimulator())
+
+
+@pytest.fixture
+def timed_server(make_server: Callable[..., PtyGrblServer]) -> PtyGrblServer:
+    """A simulated table moving in real time (30 deg/s, 60 deg/s^2)."""
+    return make_server(GrblSimulator(settings=QUICK_TABLE), time_scale=1.0)
+
+
+@pytest.fixture
+def table(server: PtyGrblServer, make_table: Callable[..., GrblTable]) -> GrblTable:
+    return make_table(server)
