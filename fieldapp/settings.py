@@ -18,6 +18,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from fieldapp.io.jsonfile import field_path
+from fieldapp.recon.settings import ReconstructionSettings
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +53,7 @@ class PathSettings(Section):
 class Settings(Section):
     devices: DeviceSettings = Field(default_factory=DeviceSettings)
     paths: PathSettings = Field(default_factory=PathSettings)
+    reconstruction: ReconstructionSettings = Field(default_factory=ReconstructionSettings)
 
 
 def default_settings_path() -> Path:

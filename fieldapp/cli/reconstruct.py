@@ -1,0 +1,62 @@
+"""``fieldapp reconstruct SESSION --out DIR``: the plot's plants and their traits."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "reconstruct",
+        help="reconstruct a capture session and measure its plants",
+        description="Reconstruct a session (views, levelling, plant filtering, ICP between "
+        "stations, plants, traits) and write plants.csv, cloud.ply, plants/<id>.ply and "
+        "report.json into DIR.",
+    )
+    parser.add_argument("session", type=Path, help="the session folder")
+    parser.add_argument("--out", type=Path, required=True, help="folder for the results")
+    parser.add_argument("--no-icp", action="store_true", help="keep the coarse station poses")
+    parser.add_argument("--settings", type=Path, help="settings YAML (default: the user's)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from rich.progress import Progress as Bar
+
+    from fieldapp.io.session import load_session
+    from fieldapp.recon.outputs import write_outputs
+    from fieldapp.recon.pipeline import reconstruct
+    from fieldapp.recon.progress import Progress
+    from fieldapp.settings import load_settings
+
+    settings = load_settings(args.settings).reconstruction
+    if args.no_icp:
+        settings.registration.enabled = False
+    session = load_session(args.session)
+    steps = reconstruct(session, settings)
+    with Bar(disable=args.quiet, transient=True) as bar:
+        task = bar.add_task("reconstructing", total=1.0)
+        while True:
+            try:
+                event: Progress = next(steps)
+            except StopIteration as done:
+                result = done.value
+                break
+            bar.update(
+                task, completed=event.fraction, description=f"{event.stage}: {event.message}"
+            )
+    write_outputs(
+        args.out,
+        result.rows(),
+        result.cloud,
+        {p.id: p.cloud for p in result.plants},
+        result.report(),
+    )
+    for warning in result.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    print(f"{len(result.plants)} plants -> {args.out / 'plants.csv'}")
+    return 0

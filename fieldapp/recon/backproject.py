@@ -1,0 +1,59 @@
+"""Depth to points: back-projection through a ray table, keeping colour, cropped to a radius.
+
+The ray table holds, for every pixel, the direction (x/z, y/z, 1) of its ray in the camera frame
+(OpenCV: x right, y down, z forward). With lens distortion the pixel is undistorted first, so a
+point is simply ``depth * ray``: one multiply per pixel.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.camera.frames import Intrinsics
+from fieldapp.recon.cloud import Cloud
+
+
+def ray_table(intrinsics: Intrinsics) -> NDArray[np.float64]:
+    """(H, W, 3) float64: the ray direction of every pixel with unit z (undistorted if needed)."""
+    v, u = np.mgrid[0 : intrinsics.height, 0 : intrinsics.width].astype(np.float64)
+    if intrinsics.has_distortion:
+        pixels = np.stack([u.ravel(), v.ravel()], axis=1).reshape(-1, 1, 2)
+        distortion = np.asarray(intrinsics.distortion, dtype=np.float64)
+        normalised = cv2.undistortPoints(pixels, intrinsics.K, distortion).reshape(
+            intrinsics.height, intrinsics.width, 2
+        )
+        x, y = normalised[..., 0], normalised[..., 1]
+    else:
+        x = (u - intrinsics.cx) / intrinsics.fx
+        y = (v - intrinsics.cy) / intrinsics.fy
+    return np.stack([x, y, np.ones_like(x)], axis=-1)
+
+
+def backproject(
+    depth_m: NDArray[np.floating],
+    color: NDArray[np.uint8],
+    rays: NDArray[np.float64],
+    crop_radius_m: float,
+    min_depth_m: float = 0.0,
+) -> Cloud:
+    """The valid pixels of one frame as a coloured cloud in the camera frame.
+
+    ``depth_m``: (H, W) metres along z, NaN or 0 where missing. ``color``: (H, W, 3) uint8 RGB
+    registered to depth. ``rays``: from :func:`ray_table`. Points farther than ``crop_radius_m``
+    from the optical centre, or nearer than ``min_depth_m`` in z, are dropped.
+    """
+    if depth_m.shape != rays.shape[:2] or color.shape[:2] != rays.shape[:2]:
+        raise ValueError(
+            f"depth {depth_m.shape} / colour {color.shape[:2]} do not match the camera "
+            f"{rays.shape[:2]}"
+        )
+    depth = np.asarray(depth_m, dtype=np.float64)
+    valid = np.isfinite(depth) & (depth > max(min_depth_m, 0.0))
+    z = depth[valid]
+    ray = rays[valid]
+    points = ray * z[:, None]
+    range_m = z * np.sqrt(ray[:, 0] ** 2 + ray[:, 1] ** 2 + 1.0)
+    inside = range_m <= crop_radius_m
+    return Cloud(points[inside], color[valid][inside])

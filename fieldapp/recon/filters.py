@@ -1,0 +1,187 @@
+"""Plant filtering: pass-through above the ground, excess green, outlier removal, voxel means.
+
+Cheap per-point tests (pass-through, ExG) run first, on every frame, so the neighbourhood
+searches (SOR, ROR) only see the few plant points left.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.settings import FilterSettings
+
+OTSU_BINS = 256
+VALLEY_SMOOTHING_BINS = 5
+
+
+def pass_through(height_m: NDArray[np.float64], min_m: float, max_m: float) -> NDArray[np.bool_]:
+    """Mask of the points whose height above the ground (N,) is within [min_m, max_m]."""
+    return (height_m >= min_m) & (height_m <= max_m)
+
+
+def excess_green(colors: NDArray[np.uint8]) -> NDArray[np.float64]:
+    """ExG = 2g - r - b on chromaticity-normalised colour (r = R / (R + G + B)...), (N,) in
+    [-1, 2]; black pixels get 0."""
+    rgb = colors.astype(np.float64)
+    total = rgb.sum(axis=1)
+    total[total == 0] = 1.0
+    return (2.0 * rgb[:, 1] - rgb[:, 0] - rgb[:, 2]) / total  # type: ignore[no-any-return]
+
+
+def otsu_threshold(values: NDArray[np.float64]) -> float:
+    """Otsu's threshold of ``values`` (N,), placed in the valley between the two classes.
+
+    Otsu's cut maximises the between-class variance; its two class means bracket the valley of
+    the histogram. The threshold returned is the middle of the first lowest run of bins between
+    the means: the same cut as Otsu's on a continuous histogram, and on a gappy one (soil, then
+    a small class of yellow-green stems, then leaves) it does not split the small class off
+    with the soil.
+    """
+    if len(values) == 0:
+        raise ValueError("Otsu's threshold of no values")
+    low, high = float(values.min()), float(values.max())
+    if high - low < 1e-12:
+        return high
+    counts, edges = np.histogram(values, bins=OTSU_BINS, range=(low, high))
+    centres = (edges[:-1] + edges[1:]) / 2.0
+    weight_low = np.cumsum(counts)
+    weight_high = weight_low[-1] - weight_low
+    sum_low = np.cumsum(counts * centres)
+    mean_low = sum_low / np.maximum(weight_low, 1)
+    mean_high = (sum_low[-1] - sum_low) / np.maximum(weight_high, 1)
+    between = weight_low * weight_high * (mean_low - mean_high) ** 2
+    cut = int(np.argmax(between))
+    return _valley(counts, edges, mean_low[cut], mean_high[cut])
+
+
+def _valley(
+    counts: NDArray[np.intp], edges: NDArray[np.float64], mean_low: float, mean_high: float
+) -> float:
+    """The middle of the first run of least-populated bins (after a light smoothing, so a
+    stray empty bin in a tail is no valley) with centres in (mean_low, mean_high)."""
+    centres = (edges[:-1] + edges[1:]) / 2.0
+    inside = np.flatnonzero((centres > mean_low) & (centres < mean_high))
+    if len(inside) == 0:
+        return float((mean_low + mean_high) / 2.0)
+    smooth = np.convolve(counts, np.ones(VALLEY_SMOOTHING_BINS), mode="same")
+    lowest = inside[smooth[inside] == smooth[inside].min()]
+    run_end = lowest[0]
+    while run_end + 1 in lowest:
+        run_end += 1
+    return float((edges[lowest[0]] + edges[run_end + 1]) / 2.0)
+
+
+def statistical_outliers(
+    points: NDArray[np.float64], neighbors: int, std_ratio: float, workers: int = 1
+) -> NDArray[np.bool_]:
+    """Mask of the inliers of statistical outlier removal: a point is kept when its mean
+    distance to its ``neighbors`` nearest neighbours is within ``std_ratio`` standard
+    deviations of the cloud's average."""
+    if len(points) <= neighbors:
+        return np.ones(len(points), dtype=bool)
+    distances, _ = cKDTree(points).query(points, k=neighbors + 1, workers=workers)
+    mean_distance = distances[:, 1:].mean(axis=1)
+    limit = mean_distance.mean() + std_ratio * mean_distance.std()
+    return mean_distance <= limit  # type: ignore[no-any-return]
+
+
+def radius_outliers(
+    points: NDArray[np.float64], radius_m: float, min_points: int, workers: int = 1
+) -> NDArray[np.bool_]:
+    """Mask of the inliers of radius outlier removal: at least ``min_points`` other points
+    within ``radius_m``."""
+    if len(points) == 0:
+        return np.ones(0, dtype=bool)
+    tree = cKDTree(points)
+    counts = tree.query_ball_point(points, radius_m, workers=workers, return_length=True)
+    return counts - 1 >= min_points  # type: ignore[no-any-return]
+
+
+def voxel_keys(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.int64]:
+    """(N,) int64: one key per voxel of edge ``voxel_m`` (21 bits per axis)."""
+    cells = np.floor(points / voxel_m).astype(np.int64) + (1 << 20)
+    if len(cells) and (cells.min() < 0 or cells.max() >= (1 << 21)):
+        raise ValueError(f"points span more than 2^21 voxels of {voxel_m} m")
+    return (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]
+
+
+def voxel_mean(cloud: Cloud, voxel_m: float) -> Cloud:
+    """One point per occupied voxel: the mean position and mean colour of its points."""
+    if len(cloud) == 0:
+        return cloud
+    _, inverse, counts = np.unique(
+        voxel_keys(cloud.points, voxel_m), return_inverse=True, return_counts=True
+    )
+    inverse = inverse.ravel()
+    points = _group_means(inverse, cloud.points, counts)
+    colors = np.rint(_group_means(inverse, cloud.colors, counts)).astype(np.uint8)
+    return Cloud(points, colors)
+
+
+def _group_means(
+    group: NDArray[np.intp], values: NDArray[np.generic], counts: NDArray[np.intp]
+) -> NDArray[np.float64]:
+    columns = [
+        np.bincount(group, weights=values[:, i], minlength=len(counts))
+        for i in range(values.shape[1])
+    ]
+    return np.stack(columns, axis=1) / counts[:, None]
+
+
+@dataclass(frozen=True)
+class FilteredStation:
+    """A station's plant points (pass-through and ExG passed) and a sparse sample of its
+    soil, with the points each filter kept and the ExG threshold used."""
+
+    plants: Cloud
+    soil_m: NDArray[np.float64]
+    kept: dict[str, int]
+    exg_threshold: float
+
+
+def filter_station(
+    cloud_field: Cloud,
+    settings: FilterSettings,
+    soil_band_m: float,
+    soil_voxel_m: float,
+) -> FilteredStation:
+    """The per-point filters on one levelled station (``cloud_field``: z is the height above
+    the ground): pass-through and excess green with Otsu's threshold over the station, then
+    voxel means. The soil (not green, near the ground) is kept as a sparse sample."""
+    kept = {"cropped": len(cloud_field)}
+    height = cloud_field.points[:, 2]
+    exg = excess_green(cloud_field.colors)
+    threshold = (
+        otsu_threshold(exg) if settings.exg_threshold == "otsu" else float(settings.exg_threshold)
+    )
+    green = exg > threshold
+    above = pass_through(height, settings.pass_through_min_m, settings.pass_through_max_m)
+    kept["pass_through"] = int(above.sum())
+    plants = cloud_field.select(above & green)
+    kept["excess_green"] = len(plants)
+    plants = voxel_mean(plants, settings.voxel_size_m)
+    kept["voxel_mean"] = len(plants)
+    soil = cloud_field.select(~green & (np.abs(height) <= soil_band_m))
+    return FilteredStation(plants, voxel_mean(soil, soil_voxel_m).points, kept, threshold)
+
+
+def remove_outliers(
+    cloud: Cloud, settings: FilterSettings, workers: int = 1
+) -> tuple[Cloud, dict[str, int]]:
+    """Statistical then radius outlier removal on the fused plant cloud of the plot (every
+    station's view of a leaf together: a real surface has support, a stray point has none).
+    Returns the cloud kept and the points kept by each filter."""
+    kept = cloud.select(
+        statistical_outliers(cloud.points, settings.sor_neighbors, settings.sor_std_ratio, workers)
+    )
+    counts = {"statistical_outliers": len(kept)}
+    kept = kept.select(
+        radius_outliers(kept.points, settings.ror_radius_m, settings.ror_min_points, workers)
+    )
+    counts["radius_outliers"] = len(kept)
+    return kept, counts

@@ -1,0 +1,49 @@
+"""What the reconstruction reports while it runs, and how long each stage took."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Progress:
+    """One progress event: the stage running, the overall fraction done (0-1), a message."""
+
+    stage: str
+    fraction: float
+    message: str
+
+
+STAGES = {
+    "local reconstruction": (0.00, 0.40),
+    "levelling": (0.40, 0.45),
+    "filtering": (0.45, 0.70),
+    "registration": (0.70, 0.90),
+    "plants": (0.90, 0.98),
+    "traits": (0.98, 1.00),
+}
+"""Each stage's share of the overall fraction (start, end)."""
+
+
+def progress(stage: str, done: float, message: str) -> Progress:
+    """A :class:`Progress` for ``done`` (0-1) of ``stage``."""
+    start, end = STAGES[stage]
+    return Progress(stage, start + (end - start) * min(max(done, 0.0), 1.0), message)
+
+
+@dataclass
+class StageTimer:
+    """Wall time per stage in seconds, accumulated over every call of :meth:`stage`."""
+
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    @contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - start

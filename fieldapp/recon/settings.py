@@ -1,0 +1,101 @@
+"""Parameters of the reconstruction, with the paper's values as defaults.
+
+Every length carries its unit. The model lives here and is mounted in
+:class:`fieldapp.settings.Settings` as ``reconstruction``.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class CropSettings(_Section):
+    """Back-projection: keep what lies within ``radius_m`` of the camera (paper: 2.25 m)."""
+
+    radius_m: float = Field(default=2.25, gt=0.0)
+    min_depth_m: float = Field(default=0.5, ge=0.0)
+
+
+class GroundSettings(_Section):
+    """Levelling: a RANSAC plane near the expected ground, refined per station."""
+
+    ransac_distance_m: float = Field(default=0.01, gt=0.0)
+    ransac_iterations: int = Field(default=300, ge=10)
+    sample_points: int = Field(default=40_000, ge=500)
+    search_band_m: float = Field(default=0.15, gt=0.0)
+    max_tilt_deg: float = Field(default=15.0, gt=0.0, le=60.0)
+    min_inlier_fraction: float = Field(default=0.3, gt=0.0, le=1.0)
+    soil_band_m: float = Field(default=0.15, gt=0.0)
+    soil_voxel_m: float = Field(default=0.02, gt=0.0)
+    local_ground_radius_m: float = Field(default=0.15, gt=0.0)
+
+
+class FilterSettings(_Section):
+    """Plant filtering (paper: pass-through, ExG with Otsu, SOR k=35 1.5 sigma, ROR 8 mm / 5)."""
+
+    pass_through_min_m: float = Field(default=0.01, ge=0.0)
+    pass_through_max_m: float = Field(default=1.5, gt=0.0)
+    exg_threshold: float | Literal["otsu"] = "otsu"
+    sor_neighbors: int = Field(default=35, ge=2)
+    sor_std_ratio: float = Field(default=1.5, gt=0.0)
+    ror_radius_m: float = Field(default=0.008, gt=0.0)
+    ror_min_points: int = Field(default=2, ge=1)
+    voxel_size_m: float = Field(default=0.002, gt=0.0)
+
+
+class RegistrationSettings(_Section):
+    """Fine registration by ICP on the overlap of neighbouring stations."""
+
+    enabled: bool = True
+    method: Literal["GICP", "VGICP", "PLANE_ICP"] = "GICP"
+    voxel_sizes_m: tuple[float, ...] = (0.05, 0.02, 0.008)
+    correspondence_factor: float = Field(default=5.0, gt=0.0)
+    max_correspondence_m: float = Field(default=0.02, gt=0.0)
+    max_iterations: int = Field(default=50, ge=1)
+    include_soil: bool = True
+    min_points: int = Field(default=300, ge=10)
+    max_translation_m: float = Field(default=0.20, gt=0.0)
+    max_rotation_deg: float = Field(default=6.0, gt=0.0)
+    min_fitness: float = Field(default=0.3, ge=0.0, le=1.0)
+
+
+class GridPrior(_Section):
+    """The planting grid: plants stand at ``origin + (i * column_spacing, j * row_spacing)``."""
+
+    rows: int = Field(ge=1)
+    columns: int = Field(ge=1)
+    row_spacing_m: float = Field(gt=0.0)
+    column_spacing_m: float = Field(gt=0.0)
+    origin_x_m: float = 0.0
+    origin_y_m: float = 0.0
+    snap_radius_m: float = Field(default=0.15, gt=0.0)
+
+
+class PlantSettings(_Section):
+    """Splitting the plant cloud into plants and measuring them."""
+
+    cluster_voxel_m: float = Field(default=0.025, gt=0.0)
+    min_points: int = Field(default=200, ge=1)
+    min_height_m: float = Field(default=0.03, ge=0.0)
+    base_slice_m: float = Field(default=0.02, gt=0.0)
+    row_gap_m: float = Field(default=0.1, gt=0.0)
+    top_support_points: int = Field(default=3, ge=1)
+    top_support_radius_m: float = Field(default=0.006, gt=0.0)
+    grid: GridPrior | None = None
+
+
+class ReconstructionSettings(_Section):
+    """All the reconstruction's parameters (defaults from the paper)."""
+
+    crop: CropSettings = Field(default_factory=CropSettings)
+    ground: GroundSettings = Field(default_factory=GroundSettings)
+    filters: FilterSettings = Field(default_factory=FilterSettings)
+    registration: RegistrationSettings = Field(default_factory=RegistrationSettings)
+    plants: PlantSettings = Field(default_factory=PlantSettings)
+    threads: int = Field(default=2, ge=1)

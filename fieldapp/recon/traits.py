@@ -1,0 +1,169 @@
+"""Per-plant traits: position of the base, height above the local ground, maximum width.
+
+- **base**: the foot of the stem: the column of points standing at the most heights in the
+  plant's lower half (leaf tips droop low but lie flat), its lowest ``base_slice_m``;
+- **local ground**: the median height of the soil points around the base;
+- **top**, taken robustly: the highest point that has at least ``top_support_points`` other
+  plant points within ``top_support_radius_m`` (a stray point left by the filters has none);
+- **width**: the diameter of the smallest circle enclosing the plant's projection on the ground
+  (Welzl's algorithm on the convex hull of the projection).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.ndimage import uniform_filter
+from scipy.spatial import ConvexHull, QhullError, cKDTree
+
+STEM_CELL_M = 0.01
+"""Cell size of the column search for the stem."""
+
+FOOT_RADIUS_M = 0.06
+"""The stem's foot is looked for this close to the stem column (a thick stem's far side is
+in; a leaf tip resting on the soil a leaf length away is not)."""
+
+TOP_CANDIDATES = 200
+"""Only this many of the highest points are tested as the top."""
+
+
+@dataclass(frozen=True)
+class PlantTraits:
+    x_m: float
+    y_m: float
+    height_m: float
+    width_m: float
+    points: int
+    ground_z_m: float
+
+
+@dataclass(frozen=True)
+class Circle:
+    centre_x_m: float
+    centre_y_m: float
+    radius_m: float
+
+    def contains(self, point: NDArray[np.float64], tolerance_m: float = 1e-9) -> bool:
+        dx, dy = point[0] - self.centre_x_m, point[1] - self.centre_y_m
+        return bool(dx * dx + dy * dy <= (self.radius_m + tolerance_m) ** 2)
+
+
+def _circle_two(a: NDArray[np.float64], b: NDArray[np.float64]) -> Circle:
+    centre = (a + b) / 2.0
+    return Circle(float(centre[0]), float(centre[1]), float(np.linalg.norm(a - b)) / 2.0)
+
+
+def _circle_three(a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64]) -> Circle:
+    d = 2.0 * (a[0] * (b[1] - c[1]) + b[0] * (c[1] - a[1]) + c[0] * (a[1] - b[1]))
+    if abs(d) < 1e-15:  # collinear: the widest pair's circle
+        pairs = [(a, b), (a, c), (b, c)]
+        return max((_circle_two(p, q) for p, q in pairs), key=lambda circle: circle.radius_m)
+    sa, sb, sc = a @ a, b @ b, c @ c
+    ux = (sa * (b[1] - c[1]) + sb * (c[1] - a[1]) + sc * (a[1] - b[1])) / d
+    uy = (sa * (c[0] - b[0]) + sb * (a[0] - c[0]) + sc * (b[0] - a[0])) / d
+    return Circle(float(ux), float(uy), float(np.hypot(a[0] - ux, a[1] - uy)))
+
+
+def smallest_enclosing_circle(points_xy: NDArray[np.float64], seed: int = 0) -> Circle:
+    """The smallest circle enclosing ``points_xy`` (N, 2): Welzl's algorithm in its iterative
+    move-to-front form, expected linear time on shuffled input."""
+    if len(points_xy) == 0:
+        raise ValueError("no points to enclose")
+    points = _hull(np.asarray(points_xy, dtype=np.float64))
+    points = points[np.random.default_rng(seed).permutation(len(points))]
+    circle = Circle(float(points[0, 0]), float(points[0, 1]), 0.0)
+    for i in range(1, len(points)):
+        if circle.contains(points[i]):
+            continue
+        circle = Circle(float(points[i, 0]), float(points[i, 1]), 0.0)
+        for j in range(i):
+            if circle.contains(points[j]):
+                continue
+            circle = _circle_two(points[i], points[j])
+            for k in range(j):
+                if not circle.contains(points[k]):
+                    circle = _circle_three(points[i], points[j], points[k])
+    return circle
+
+
+def _hull(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The convex hull's vertices (the circle depends on nothing else), or all points when
+    they are too few or degenerate for a hull."""
+    if len(points) < 4:
+        return points
+    try:
+        return points[ConvexHull(points).vertices]  # type: ignore[no-any-return]
+    except QhullError:
+        return points
+
+
+def stem_xy_m(points_m: NDArray[np.float64], cell_m: float = STEM_CELL_M) -> NDArray[np.float64]:
+    """(2,) where the stem stands: in the lower half of the plant, the xy column (3 x 3 cells
+    of ``cell_m``) with points at the most distinct heights. Drooping leaf tips reach low but
+    lie flat; the stem is the one tall stack of points."""
+    z = points_m[:, 2]
+    low = points_m[z <= z.min() + 0.5 * (z.max() - z.min())]
+    origin = low.min(axis=0)
+    cells = np.floor((low - origin) / cell_m).astype(np.intp)
+    occupied = np.zeros(tuple(cells.max(axis=0) + 1), dtype=bool)
+    occupied[cells[:, 0], cells[:, 1], cells[:, 2]] = True
+    heights = uniform_filter(occupied.sum(axis=2).astype(np.float64), size=3, mode="constant")
+    best = np.unravel_index(int(np.argmax(heights)), heights.shape)
+    centre = origin[:2] + (np.array(best, dtype=np.float64) + 0.5) * cell_m
+    return centre  # type: ignore[no-any-return]
+
+
+def base_xy_m(points_m: NDArray[np.float64], slice_m: float) -> NDArray[np.float64]:
+    """(2,) the foot of the stem: the mean xy of the lowest ``slice_m`` of the points within
+    :data:`FOOT_RADIUS_M` of the stem column (:func:`stem_xy_m`)."""
+    stem = stem_xy_m(points_m)
+    near = np.sum((points_m[:, :2] - stem) ** 2, axis=1) <= FOOT_RADIUS_M**2
+    column = points_m[near]
+    foot = column[column[:, 2] <= column[:, 2].min() + slice_m]
+    return foot[:, :2].mean(axis=0)  # type: ignore[no-any-return]
+
+
+def local_ground_z_m(
+    soil_m: NDArray[np.float64], base_xy: NDArray[np.float64], radius_m: float
+) -> float:
+    """Median z of the soil points (M, 3) within ``radius_m`` of ``base_xy`` in xy; 0 (the
+    fitted ground) when there are none."""
+    if len(soil_m) == 0:
+        return 0.0
+    near = np.sum((soil_m[:, :2] - base_xy) ** 2, axis=1) <= radius_m**2
+    return float(np.median(soil_m[near, 2])) if near.any() else 0.0
+
+
+def robust_top_z_m(points_m: NDArray[np.float64], support_points: int, radius_m: float) -> float:
+    """The z of the highest point with at least ``support_points`` other points within
+    ``radius_m``; the highest point of all when none has such support."""
+    order = np.argsort(points_m[:, 2])[::-1][:TOP_CANDIDATES]
+    counts = cKDTree(points_m).query_ball_point(points_m[order], radius_m, return_length=True)
+    supported = np.flatnonzero(counts - 1 >= support_points)
+    chosen = order[supported[0]] if len(supported) else order[0]
+    return float(points_m[chosen, 2])
+
+
+def measure_plant(
+    points_m: NDArray[np.float64],
+    soil_m: NDArray[np.float64],
+    base_slice_m: float,
+    ground_radius_m: float,
+    top_support_points: int,
+    top_support_radius_m: float,
+) -> PlantTraits:
+    """Traits of one plant from its points (N, 3) and the soil around it (M, 3), field frame."""
+    base = base_xy_m(points_m, base_slice_m)
+    ground_z = local_ground_z_m(soil_m, base, ground_radius_m)
+    top_z = robust_top_z_m(points_m, top_support_points, top_support_radius_m)
+    circle = smallest_enclosing_circle(points_m[:, :2])
+    return PlantTraits(
+        x_m=float(base[0]),
+        y_m=float(base[1]),
+        height_m=top_z - ground_z,
+        width_m=2.0 * circle.radius_m,
+        points=len(points_m),
+        ground_z_m=ground_z,
+    )

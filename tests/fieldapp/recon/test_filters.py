@@ -1,0 +1,113 @@
+import cv2
+import numpy as np
+import pytest
+
+from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.filters import (
+    excess_green,
+    filter_station,
+    otsu_threshold,
+    pass_through,
+    radius_outliers,
+    remove_outliers,
+    statistical_outliers,
+    voxel_mean,
+)
+from fieldapp.recon.settings import FilterSettings
+
+from .synthetic import LEAF_RGB, SOIL_RGB, colored, cylinder, ground_patch
+
+
+def test_excess_green_on_normalised_colour() -> None:
+    colors = np.array(
+        [[0, 255, 0], [255, 0, 0], [100, 100, 100], [0, 0, 0], [50, 110, 25]], np.uint8
+    )
+    np.testing.assert_allclose(
+        excess_green(colors), [2.0, -1.0, 0.0, 0.0, (220 - 75) / 185], atol=1e-12
+    )
+
+
+def test_otsu_splits_two_modes_at_the_valley() -> None:
+    rng = np.random.default_rng(0)
+    low, high = rng.normal(0.0, 0.05, 50_000), rng.normal(0.8, 0.05, 5000)
+    values = np.concatenate([low, high])
+    threshold = otsu_threshold(values)
+    assert np.mean(low > threshold) < 0.001 and np.mean(high <= threshold) < 0.001
+    assert 0.15 < threshold < 0.65  # in the empty stretch between the modes
+    with pytest.raises(ValueError, match="no values"):
+        otsu_threshold(np.zeros(0))
+
+
+def test_otsu_keeps_a_small_middle_class_with_the_greens() -> None:
+    rng = np.random.default_rng(1)
+    soil = rng.uniform(-0.02, 0.007, 1_700_000)
+    stems = rng.uniform(0.14, 0.16, 1700)
+    leaves = rng.uniform(0.38, 0.44, 34_000)
+    threshold = otsu_threshold(np.concatenate([soil, stems, leaves]))
+    assert 0.007 < threshold < 0.14
+    # plain Otsu on the same values (OpenCV, 8-bit) would cut the stems off with the soil
+    values = np.concatenate([soil, stems, leaves])
+    span = values.max() - values.min()
+    scaled = np.round((values - values.min()) / span * 255).astype(np.uint8)
+    cv_threshold, _ = cv2.threshold(scaled, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    assert values.min() + cv_threshold / 255 * span > 0.14
+
+
+def test_pass_through_keeps_the_band() -> None:
+    kept = pass_through(np.array([-0.1, 0.005, 0.02, 1.0, 2.0]), 0.01, 1.5)
+    assert kept.tolist() == [False, False, True, True, False]
+
+
+def test_statistical_and_radius_outlier_removal_drop_isolated_points() -> None:
+    rng = np.random.default_rng(1)
+    surface = ground_patch(rng, 0.05, 4000, noise_m=0.0)  # about 1.6 mm spacing
+    strays = np.array([[0.2, 0.2, 0.2], [-0.3, 0.1, 0.05], [0.0, 0.0, 0.1]])
+    points = np.concatenate([surface, strays])
+    sor = statistical_outliers(points, 35, 1.5)
+    ror = radius_outliers(points, 0.008, 5)
+    assert not sor[-3:].any() and not ror[-3:].any()
+    assert sor[:-3].mean() > 0.95 and ror[:-3].all()
+
+
+def test_voxel_mean_averages_points_and_colours_per_voxel() -> None:
+    points = np.array([[0.001, 0.001, 0.001], [0.003, 0.003, 0.003], [0.011, 0.0, 0.0]])
+    colors = np.array([[0, 100, 0], [100, 200, 0], [7, 7, 7]], np.uint8)
+    out = voxel_mean(Cloud(points, colors), 0.01)
+    order = np.argsort(out.points[:, 0])
+    np.testing.assert_allclose(out.points[order], [[0.002, 0.002, 0.002], [0.011, 0.0, 0.0]])
+    assert out.colors[order].tolist() == [[50, 150, 0], [7, 7, 7]]
+
+
+def test_filter_chain_keeps_the_plant_and_drops_soil_and_strays() -> None:
+    rng = np.random.default_rng(2)
+    soil = colored(ground_patch(rng, 1.0, 60_000, noise_m=0.002), SOIL_RGB)
+    plant = colored(cylinder(rng, 0.2, 0.1, 0.01, 0.3, 20_000), LEAF_RGB)
+    green_stray = colored(np.array([[0.6, 0.6, 0.4]]), LEAF_RGB)
+    station = Cloud.concatenate([soil, plant, green_stray])
+    result = filter_station(station, FilterSettings(), soil_band_m=0.03, soil_voxel_m=0.02)
+    assert 0.0 <= result.exg_threshold < 0.78  # soil ExG is 0, leaf ExG 0.78
+    assert list(result.kept) == ["cropped", "pass_through", "excess_green", "voxel_mean"]
+    counts = list(result.kept.values())
+    assert counts == sorted(counts, reverse=True)
+    assert len(result.soil_m) > 1000 and np.abs(result.soil_m[:, 2]).max() < 0.03
+    assert len(result.plants) > 1000 and np.any(result.plants.points[:, 2] > 0.35)  # the stray
+
+    kept, counts_after = remove_outliers(result.plants, FilterSettings())
+    points = kept.points
+    assert np.all(np.hypot(points[:, 0] - 0.2, points[:, 1] - 0.1) < 0.0125)
+    assert points[:, 2].min() >= 0.01 and points[:, 2].max() <= 0.3 + 1e-9
+    assert list(counts_after) == ["statistical_outliers", "radius_outliers"]
+    assert counts_after["radius_outliers"] == len(kept) > 0.95 * len(result.plants)
+
+
+def test_a_set_exg_threshold_is_used() -> None:
+    rng = np.random.default_rng(3)
+    station = Cloud.concatenate(
+        [
+            colored(ground_patch(rng, 0.5, 5000), SOIL_RGB),
+            colored(cylinder(rng, 0, 0, 0.02, 0.2, 3000), LEAF_RGB),
+        ]
+    )
+    everything = filter_station(station, FilterSettings(exg_threshold=-1.0), 0.03, 0.02)
+    assert everything.exg_threshold == -1.0
+    assert everything.kept["excess_green"] == everything.kept["pass_through"]

@@ -1,0 +1,90 @@
+import itertools
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from fieldapp.recon.traits import (
+    base_xy_m,
+    local_ground_z_m,
+    measure_plant,
+    robust_top_z_m,
+    smallest_enclosing_circle,
+)
+
+from .synthetic import cylinder, seedling
+
+
+def _brute_force_radius(points: np.ndarray) -> float:
+    """The smallest enclosing circle by trying every circle through 2 or 3 points."""
+    best = np.inf
+    candidates = []
+    for a, b in itertools.combinations(points, 2):
+        candidates.append(((a + b) / 2, np.linalg.norm(a - b) / 2))
+    for a, b, c in itertools.combinations(points, 3):
+        d = 2 * (a[0] * (b[1] - c[1]) + b[0] * (c[1] - a[1]) + c[0] * (a[1] - b[1]))
+        if abs(d) < 1e-12:
+            continue
+        ux = ((a @ a) * (b[1] - c[1]) + (b @ b) * (c[1] - a[1]) + (c @ c) * (a[1] - b[1])) / d
+        uy = ((a @ a) * (c[0] - b[0]) + (b @ b) * (a[0] - c[0]) + (c @ c) * (b[0] - a[0])) / d
+        candidates.append((np.array([ux, uy]), np.linalg.norm(a - [ux, uy])))
+    for centre, radius in candidates:
+        if np.all(np.linalg.norm(points - centre, axis=1) <= radius + 1e-9):
+            best = min(best, radius)
+    return float(best)
+
+
+coordinates = st.floats(-1.0, 1.0, allow_nan=False, width=32)
+
+
+@settings(max_examples=60, deadline=None)
+@given(arrays(np.float64, st.tuples(st.integers(1, 9), st.just(2)), elements=coordinates))
+def test_smallest_enclosing_circle_matches_brute_force(points: np.ndarray) -> None:
+    circle = smallest_enclosing_circle(points)
+    expected = 0.0 if len(np.unique(points, axis=0)) == 1 else _brute_force_radius(points)
+    assert circle.radius_m == pytest.approx(expected, abs=1e-7)
+    assert all(circle.contains(p, 1e-7) for p in points)
+
+
+def test_smallest_enclosing_circle_agrees_with_opencv_on_many_points() -> None:
+    rng = np.random.default_rng(0)
+    points = rng.normal(0, 0.1, (5000, 2)) * [1.0, 0.4]
+    circle = smallest_enclosing_circle(points)
+    (cx, cy), radius = cv2.minEnclosingCircle(points.astype(np.float32))
+    # OpenCV pads its radius by a relative 1e-3 at most; ours is exact and still encloses all
+    assert radius * (1 - 1e-3) <= circle.radius_m <= radius
+    assert (circle.centre_x_m, circle.centre_y_m) == pytest.approx((cx, cy), abs=1e-4)
+    assert all(circle.contains(p, 1e-9) for p in points)
+
+
+def test_robust_top_ignores_a_stray_point_above_the_plant() -> None:
+    rng = np.random.default_rng(1)
+    plant = cylinder(rng, 0.0, 0.0, 0.02, 0.25, 6000)
+    stray = np.array([[0.0, 0.0, 0.4]])
+    top = robust_top_z_m(np.concatenate([plant, stray]), support_points=3, radius_m=0.006)
+    assert top == pytest.approx(0.25, abs=1e-9)
+
+
+def test_measure_plant_on_a_raised_bed() -> None:
+    rng = np.random.default_rng(2)
+    plant = seedling(rng, 0.3, -0.2, 0.08, 0.35, 8000) + np.array([0.0, 0.0, 0.05])
+    droop = np.column_stack([np.linspace(0.38, 0.5, 50), np.full(50, -0.2), np.full(50, 0.05)])
+    plant = np.concatenate([plant, droop])  # a leaf tip resting on the soil, 20 cm out
+    xy = rng.uniform(-1, 1, (20_000, 2))
+    soil = np.column_stack([xy, np.full(len(xy), 0.05)])
+    traits = measure_plant(plant, soil, 0.02, 0.15, 3, 0.006)
+    assert traits.height_m == pytest.approx(0.35, abs=1e-6)
+    assert traits.width_m == pytest.approx(0.24, abs=1e-3)  # the drooping tip is the widest
+    assert (traits.x_m, traits.y_m) == pytest.approx((0.3, -0.2), abs=0.002)
+    assert traits.points == 8050 and traits.ground_z_m == pytest.approx(0.05)
+
+
+def test_base_and_local_ground_helpers() -> None:
+    points = np.array([[0.0, 0.0, 0.0], [0.02, 0.0, 0.01], [0.5, 0.5, 0.3]])
+    np.testing.assert_allclose(base_xy_m(points, 0.02), [0.01, 0.0])
+    assert local_ground_z_m(np.zeros((0, 3)), np.zeros(2), 0.1) == 0.0
+    soil = np.array([[0.0, 0.0, 0.01], [0.05, 0.0, 0.03], [0.0, 0.05, 0.02], [2.0, 0.0, 1.0]])
+    assert local_ground_z_m(soil, np.zeros(2), 0.1) == pytest.approx(0.02)
