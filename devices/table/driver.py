@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from psygnal import Signal
 
 from devices.table import protocol as p
-from devices.table.codes import alarm_meaning
+from devices.table.codes import POSITION_LOST_ALARMS, alarm_meaning
 from devices.table.errors import (
     TableAlarm,
     TableDisconnected,
@@ -294,13 +294,13 @@ class GrblTable:
         if isinstance(reply, p.AlarmReply):
             log.error("ALARM:%d from the table: %s", reply.code, reply.meaning)
             self.alarm_raised.emit(reply.code, reply.meaning)
-            if self._link.state.position_lost:
+            if reply.code in POSITION_LOST_ALARMS:
                 self.position_unknown.emit(f"ALARM:{reply.code}: {reply.meaning}")
         elif isinstance(reply, p.Message):
             log.info("table controller says: %s", reply.text)
             self.message_received.emit(reply.text)
         elif isinstance(reply, p.StatusReport):
-            wco_x_deg = self._link.state.wco_x_deg
+            wco_x_deg = reply.wco[0] if reply.wco else self._link.state.wco_x_deg
             self.position_deg_changed.emit(reply.machine_x_deg(wco_x_deg) - wco_x_deg)
 
 

@@ -75,8 +75,9 @@ class ControllerState:
 
 
 class GrblLink:
-    """Owns the port once started. ``on_line`` sees every parsed line and ``on_disconnect``
-    the loss of the port, both on the reader thread: they must not block."""
+    """Owns the port once started. ``on_line`` sees every parsed line (before the link
+    accounts for it) and ``on_disconnect`` the loss of the port, both on the reader thread:
+    they must not block."""
 
     def __init__(
         self,
@@ -95,6 +96,7 @@ class GrblLink:
         self._send_lock = threading.Lock()
         self._write_lock = threading.Lock()
         self._closing = threading.Event()
+        self._disconnect_seen = False
         self._thread = threading.Thread(target=self._read_loop, name="grbl-reader", daemon=True)
 
     def start(self) -> None:
@@ -244,13 +246,13 @@ class GrblLink:
                 self._handle(p.parse_line(raw))
 
     def _handle(self, reply: p.Reply) -> None:
-        with self.cond:
-            self._account(reply)
-            self.cond.notify_all()
-        try:
+        try:  # first the listeners, so the operator is told before a waiting move raises
             self._on_line(reply)
         except Exception:
             log.exception("handler of %r failed", reply)
+        with self.cond:
+            self._account(reply)
+            self.cond.notify_all()
 
     def _account(self, reply: p.Reply) -> None:
         state = self.state
@@ -314,15 +316,19 @@ class GrblLink:
 
     def _disconnect(self, reason: str) -> None:
         with self.cond:
-            first = self.state.disconnected is None
-            if first:
-                log.error("table disconnected: %s", reason)
-                self.state.disconnected = reason
-                self.state.position_lost = True
-                self._fail_pending(TableDisconnected(f"table disconnected: {reason}"))
-            self.cond.notify_all()
-        if first:
+            if self._disconnect_seen:
+                return
+            self._disconnect_seen = True
+        log.error("table disconnected: %s", reason)
+        try:  # first the listeners, so the operator is told before a waiting move raises
             self._on_disconnect(reason)
+        except Exception:
+            log.exception("disconnect handler failed")
+        with self.cond:
+            self.state.disconnected = reason
+            self.state.position_lost = True
+            self._fail_pending(TableDisconnected(f"table disconnected: {reason}"))
+            self.cond.notify_all()
 
     def _raise_if_disconnected(self) -> None:
         if self.state.disconnected is not None:

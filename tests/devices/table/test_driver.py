@@ -75,7 +75,8 @@ def test_goto_in_real_time_waits_for_the_move(
     started_s = time.monotonic()
     assert table.goto_deg(20.0) == pytest.approx(20.0, abs=5e-4)
     elapsed_s = time.monotonic() - started_s
-    assert elapsed_s == pytest.approx(20.0 / 30.0 + 30.0 / 60.0, abs=0.15)  # trapezoid time
+    travel_s = 20.0 / 30.0 + 30.0 / 60.0  # trapezoid: cruise + accelerate/brake
+    assert travel_s - 0.05 <= elapsed_s <= travel_s + 0.4
     assert any(0.0 < deg < 20.0 for deg in seen)  # positions polled during the move
 
 
