@@ -37,12 +37,14 @@ def backproject(
     rays: NDArray[np.float64],
     crop_radius_m: float,
     min_depth_m: float = 0.0,
+    pixels: NDArray[np.bool_] | None = None,
 ) -> Cloud:
     """The valid pixels of one frame as a coloured cloud in the camera frame.
 
     ``depth_m``: (H, W) metres along z, NaN or 0 where missing. ``color``: (H, W, 3) uint8 RGB
     registered to depth. ``rays``: from :func:`ray_table`. Points farther than ``crop_radius_m``
-    from the optical centre, or nearer than ``min_depth_m`` in z, are dropped.
+    from the optical centre, or nearer than ``min_depth_m`` in z, are dropped; with
+    ``pixels`` (H, W) only those pixels are back-projected.
     """
     if depth_m.shape != rays.shape[:2] or color.shape[:2] != rays.shape[:2]:
         raise ValueError(
@@ -51,6 +53,8 @@ def backproject(
         )
     depth = np.asarray(depth_m, dtype=np.float64)
     valid = np.isfinite(depth) & (depth > max(min_depth_m, 0.0))
+    if pixels is not None:
+        valid &= pixels
     z = depth[valid]
     ray = rays[valid]
     points = ray * z[:, None]

@@ -135,39 +135,33 @@ def _group_means(
 
 @dataclass(frozen=True)
 class FilteredStation:
-    """A station's plant points (pass-through and ExG passed) and a sparse sample of its
-    soil, with the points each filter kept and the ExG threshold used."""
+    """A station's plant points (green, above the ground, voxel means) and a sparse sample of
+    its soil, both in the field frame, with the points each filter kept."""
 
     plants: Cloud
     soil_m: NDArray[np.float64]
     kept: dict[str, int]
-    exg_threshold: float
 
 
 def filter_station(
-    cloud_field: Cloud,
+    green_field: Cloud,
+    soil_field: Cloud,
     settings: FilterSettings,
     soil_band_m: float,
     soil_voxel_m: float,
 ) -> FilteredStation:
-    """The per-point filters on one levelled station (``cloud_field``: z is the height above
-    the ground): pass-through and excess green with Otsu's threshold over the station, then
-    voxel means. The soil (not green, near the ground) is kept as a sparse sample."""
-    kept = {"cropped": len(cloud_field)}
-    height = cloud_field.points[:, 2]
-    exg = excess_green(cloud_field.colors)
-    threshold = (
-        otsu_threshold(exg) if settings.exg_threshold == "otsu" else float(settings.exg_threshold)
+    """Pass-through on a levelled station's green points (z is the height above the ground),
+    then voxel means; the soil points near the ground are kept as a sparse sample."""
+    kept = {"excess_green": len(green_field)}
+    above = pass_through(
+        green_field.points[:, 2], settings.pass_through_min_m, settings.pass_through_max_m
     )
-    green = exg > threshold
-    above = pass_through(height, settings.pass_through_min_m, settings.pass_through_max_m)
-    kept["pass_through"] = int(above.sum())
-    plants = cloud_field.select(above & green)
-    kept["excess_green"] = len(plants)
+    plants = green_field.select(above)
+    kept["pass_through"] = len(plants)
     plants = voxel_mean(plants, settings.voxel_size_m)
     kept["voxel_mean"] = len(plants)
-    soil = cloud_field.select(~green & (np.abs(height) <= soil_band_m))
-    return FilteredStation(plants, voxel_mean(soil, soil_voxel_m).points, kept, threshold)
+    soil = soil_field.select(np.abs(soil_field.points[:, 2]) <= soil_band_m)
+    return FilteredStation(plants, voxel_mean(soil, soil_voxel_m).points, kept)
 
 
 def remove_outliers(

@@ -38,7 +38,7 @@ def T_field_reference_initial(
         return calibration.ground.matrix
     if calibration.stations is None:
         raise FieldappError("the calibration has no stations")
-    points = subsample(scan.cloud.points, settings.sample_points)
+    points = subsample(scan.soil.points, settings.sample_points)
     try:
         plane = fit_ground_plane(
             points,
@@ -66,7 +66,7 @@ def level_stations(
     levelled = {}
     for station, scan in scans.items():
         points = transform_points(
-            T_field_coarse[station], subsample(scan.cloud.points, settings.sample_points)
+            T_field_coarse[station], subsample(scan.soil.points, settings.sample_points)
         )
         try:
             T_correction, plane = level_station(

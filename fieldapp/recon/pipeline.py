@@ -50,7 +50,7 @@ def reconstruct(
     # 1-2. Depth to points, every view of a station into its view 0 (Eq. 9).
     scans: dict[int, StationScan] = {}
     for index, count, scan in _timed_iter(
-        timer, "local reconstruction", read_stations(session, settings.crop, warnings)
+        timer, "local reconstruction", read_stations(session, settings, warnings)
     ):
         if scan is not None and scan.station not in to_reference:
             warnings.append(f"station {scan.station} has no to_reference calibration: skipped")
@@ -70,18 +70,21 @@ def reconstruct(
         T_field_levelled = level_stations(scans, T_field_coarse, settings.ground, warnings)
     yield progress("levelling", 1.0, "stations levelled")
 
-    # 4. Plant filtering per station: pass-through and ExG (Otsu) on every point, voxel means.
+    # 4. Plant filtering per station: pass-through above the ground, voxel means.
     filtered: dict[int, FilteredStation] = {}
     for i, (station, scan) in enumerate(scans.items()):
         with timer.stage("filtering"):
             filtered[station] = filter_station(
-                scan.cloud.transformed(T_field_levelled[station]),
+                scan.green.transformed(T_field_levelled[station]),
+                scan.soil.transformed(T_field_levelled[station]),
                 settings.filters,
                 settings.ground.soil_band_m,
                 settings.ground.soil_voxel_m,
             )
         yield progress("filtering", (i + 1) / len(scans), f"station {station} filtered")
-    scans.clear()  # the raw clouds are no longer needed
+    exg_thresholds = {s: scan.exg_threshold for s, scan in scans.items()}
+    measured_pixels = sum(scan.measured_pixels for scan in scans.values())
+    scans.clear()  # the station clouds are no longer needed
 
     # 5. Global registration: ICP on the overlaps, outward from the reference station.
     registrations: dict[int, StationRegistration] = {}
@@ -129,8 +132,8 @@ def reconstruct(
         cloud=cloud,
         registrations=registrations,
         T_field_reference=registrations[reference].T_field_station,
-        kept=_sum_kept(filtered) | kept | outlier_counts,
-        exg_thresholds={s: f.exg_threshold for s, f in filtered.items()},
+        kept={"measured_pixels": measured_pixels} | _sum_kept(filtered) | kept | outlier_counts,
+        exg_thresholds=exg_thresholds,
         timings_s=dict(timer.seconds),
         warnings=warnings,
     )

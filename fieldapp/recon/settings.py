@@ -32,6 +32,7 @@ class GroundSettings(_Section):
     max_tilt_deg: float = Field(default=15.0, gt=0.0, le=60.0)
     min_inlier_fraction: float = Field(default=0.3, gt=0.0, le=1.0)
     soil_band_m: float = Field(default=0.15, gt=0.0)
+    soil_pixel_stride: int = Field(default=4, ge=1)
     soil_voxel_m: float = Field(default=0.02, gt=0.0)
     local_ground_radius_m: float = Field(default=0.15, gt=0.0)
 
