@@ -33,6 +33,11 @@ from devices.sim.visibility import project
 INTRINSICS_BOARD = Checkerboard("intrinsics", inner_cols=9, inner_rows=6, square_m=0.04)
 VIEW_STEP_BOARD = Checkerboard("view-step", inner_cols=9, inner_rows=6, square_m=0.05)
 WALL_DISTANCE_M = 3.0
+VIEW_STEP_DISTANCE_M = 1.1
+"""How far the view-step board stands from the camera, along the bisector of views 0 and 1."""
+SIDE_OFFSET_M = 0.15
+"""Station boards lie this far to the right of the line between their stations, clear of the
+view-step board's shadow in the line of sight."""
 
 
 def neighbour_pairs() -> list[tuple[int, int]]:
@@ -46,27 +51,41 @@ def station_board(a: int, b: int) -> Checkerboard:
 
 
 def add_calibration_boards(scene: Scene, rig: RigGeometry, seed: int) -> None:
-    """The view-step board near the reference station and one board between each pair of
-    neighbouring stations (lying on the soil, short side towards the stations)."""
+    """The view-step board near the reference station (standing, facing the camera between
+    views 0 and 1) and one board between each pair of neighbouring stations (lying on the soil,
+    short side towards the stations)."""
     if scene.soil is None:
         raise ValueError("the calibration boards stand on soil")
     rng = np.random.default_rng([seed, 23])
     reference = rig.station_pose(REFERENCE_STATION)
     T_camera = rig.T_field_camera(reference, rig.view_step_deg / 2, scene.soil)
-    centre = transform_points(T_camera, np.array([[0.0, 0.0, 1.25]]))[0]
+    centre = transform_points(T_camera, np.array([[0.0, 0.0, VIEW_STEP_DISTANCE_M]]))[0]
     scene.add_board(
         PlacedBoard(VIEW_STEP_BOARD, board_facing(VIEW_STEP_BOARD, centre, T_camera[:3, 3]))
     )
     for a, b in neighbour_pairs():
         pa, pb = rig.station_pose(a), rig.station_pose(b)
         mid_map = np.array([(pa.x_m + pb.x_m) / 2, (pa.y_m + pb.y_m) / 2, 0.0])
-        mid = transform_points(rig.T_field_map, mid_map[None, :])[0]
-        mid[2] = scene.soil.height_at(mid[0], mid[1]) + 0.004
-        heading = np.degrees(np.arctan2(pb.y_m - pa.y_m, pb.x_m - pa.x_m))
+        heading_rad = np.arctan2(pb.y_m - pa.y_m, pb.x_m - pa.x_m)
+        right = np.array([np.sin(heading_rad), -np.cos(heading_rad), 0.0])
+        mid = transform_points(rig.T_field_map, (mid_map + SIDE_OFFSET_M * right)[None, :])[0]
+        mid[2] = scene.soil.height_at(mid[0], mid[1])
         board = station_board(a, b)
-        yaw = heading + 90.0 + rng.uniform(-8.0, 8.0)  # x across the line: short side along it
+        # x across the line, so the short side points at the stations
+        yaw = np.degrees(heading_rad) + 90.0 + rng.uniform(-8.0, 8.0)
         T = board_lying(board, mid, yaw, _ground_normal(scene.soil, mid[0], mid[1]))
-        scene.add_board(PlacedBoard(board, T))
+        scene.add_board(PlacedBoard(board, _rest_on(scene.soil, board, T)))
+
+
+def _rest_on(soil: Soil, board: Checkerboard, T_field_board: Matrix4) -> Matrix4:
+    """``T_field_board`` lifted so the whole sheet clears the soil's bumps (by 2 mm)."""
+    x0, x1, y0, y1 = board.outline_m
+    gx, gy = np.meshgrid(np.linspace(x0, x1, 25), np.linspace(y0, y1, 25))
+    sheet = transform_points(T_field_board, np.stack([gx.ravel(), gy.ravel(), 0 * gx.ravel()], 1))
+    lift = float(np.max(soil.height_m(sheet[:, 0], sheet[:, 1]) - sheet[:, 2])) + 0.002
+    lifted = T_field_board.copy()
+    lifted[2, 3] += lift
+    return lifted
 
 
 def _ground_normal(soil: Soil, x: float, y: float, step_m: float = 0.2) -> NDArray[np.float64]:
@@ -87,7 +106,7 @@ def checkerboard_scene(seed: int, rig: RigGeometry) -> Scene:
 def intrinsics_poses(
     board: Checkerboard, intrinsics: Intrinsics, count: int, seed: int, margin_px: float = 15.0
 ) -> list[Matrix4]:
-    """``count`` poses ``T_camera_board`` of ``board`` 0.6-1.1 m from the camera, tilted up to
+    """``count`` poses ``T_camera_board`` of ``board`` 0.5-0.85 m from the camera, tilted up to
     40 degrees, spread over a grid of image positions, each with all corners inside the image."""
     rng = np.random.default_rng([seed, 29])
     poses: list[Matrix4] = []
@@ -107,7 +126,7 @@ def intrinsics_poses(
 def _random_pose(
     board: Checkerboard, intrinsics: Intrinsics, fu: float, fv: float, rng: np.random.Generator
 ) -> Matrix4:
-    depth = rng.uniform(0.6, 1.1)
+    depth = rng.uniform(0.5, 0.85)
     u = intrinsics.width * (0.5 + 0.8 * (fu - 0.5))
     v = intrinsics.height * (0.5 + 0.8 * (fv - 0.5))
     centre = (
@@ -171,10 +190,12 @@ def intrinsics_images(
     seed: int,
     intrinsics: Intrinsics = KINECT_V2_PAPER,
     board: Checkerboard = INTRINSICS_BOARD,
+    supersample: int = 3,
 ) -> Iterator[tuple[Matrix4, NDArray[np.uint16]]]:
     """``count`` (``T_camera_board``, IR image (H, W) uint16) pairs of ``board`` held before the
-    camera, rendered with 3 x 3 rays per pixel (a real sensor integrates over the pixel)."""
-    sensor = SensorModel(supersample=3)
+    camera, rendered with ``supersample`` x ``supersample`` rays per pixel (a real sensor
+    integrates light over each pixel)."""
+    sensor = SensorModel(supersample=supersample, shadows=False)
     for index, T_camera_board in enumerate(intrinsics_poses(board, intrinsics, count, seed)):
         frame = Renderer(intrinsics_scene(board, T_camera_board), intrinsics, sensor).render(
             np.eye(4), np.random.default_rng([seed, 31, index])

@@ -10,6 +10,7 @@ sky light. IR: the camera's own illumination, albedo x cos(incidence) / distance
 
 from __future__ import annotations
 
+import functools
 import threading
 from dataclasses import dataclass
 from typing import Any
@@ -21,7 +22,7 @@ from numpy.typing import NDArray
 
 from devices.camera.frames import Frame, Intrinsics
 from devices.geometry import Matrix4
-from devices.sim.scene import Scene
+from devices.sim.scene import Body, Scene
 
 MIN_RANGE_M = 0.5
 MAX_RANGE_M = 4.5
@@ -47,6 +48,8 @@ class SensorModel:
     sun_azimuth_deg: float = 135.0
     sun_elevation_deg: float = 50.0
     sky: float = 0.35
+    shadows: bool = True
+    """Cast shadow rays towards the sun for the colour image."""
     supersample: int = 1
     """Rays per pixel side (IR and colour are averaged; 3 for calibration images)."""
 
@@ -79,6 +82,7 @@ def axial_noise_m(
     return sigma_mm / 1000.0  # type: ignore[no-any-return]
 
 
+@functools.lru_cache(maxsize=4)
 def ray_table(intrinsics: Intrinsics, supersample: int = 1) -> NDArray[np.float32]:
     """(H * W * s^2, 3) camera-frame ray directions with z = 1, pixel by pixel (row-major),
     ``s`` x ``s`` sub-rays per pixel; lens distortion undone by OpenCV when there is some."""
@@ -94,20 +98,22 @@ def ray_table(intrinsics: Intrinsics, supersample: int = 1) -> NDArray[np.float3
         ).reshape(-1, 2)
     else:
         normalised = (pixels - [intrinsics.cx, intrinsics.cy]) / [intrinsics.fx, intrinsics.fy]
-    return np.column_stack([normalised, np.ones(len(normalised))]).astype(np.float32)
+    table = np.column_stack([normalised, np.ones(len(normalised))]).astype(np.float32)
+    table.flags.writeable = False  # shared between renderers
+    return table
 
 
 @dataclass
 class Hits:
-    """What the rays hit, flattened: ``t`` (N,) depth along the axis (inf = nothing),
+    """What the rays hit, flattened, float32: ``t`` (N,) depth along the axis (inf = nothing),
     ``points`` (N, 3) field frame, ``normals`` (N, 3) facing the camera, ``cos_incidence`` (N,),
-    ``rgb`` (N, 3) and ``ir`` (N,) albedo, ``lit`` (N,) direct sunlight factor."""
+    ``range_m`` (N,) distance along the ray, ``rgb`` (N, 3) and ``ir`` (N,) albedo."""
 
     t: NDArray[np.float32]
-    points: NDArray[np.float64]
-    normals: NDArray[np.float64]
-    cos_incidence: NDArray[np.float64]
-    range_m: NDArray[np.float64]
+    points: NDArray[np.float32]
+    normals: NDArray[np.float32]
+    cos_incidence: NDArray[np.float32]
+    range_m: NDArray[np.float32]
     rgb: NDArray[np.float32]
     ir: NDArray[np.float32]
 
@@ -125,7 +131,9 @@ class Renderer:
         self.scene = scene
         self.intrinsics = intrinsics
         self.sensor = sensor or SensorModel()
-        self._rays_camera = ray_table(intrinsics, self.sensor.supersample)
+        # a writeable copy: numpy's matmul takes a slow path on read-only arrays
+        self._rays_camera = ray_table(intrinsics, self.sensor.supersample).copy()
+        self._ray_norms = np.linalg.norm(self._rays_camera, axis=1)
         self._lock = threading.Lock()
         self._raycaster = scene_raycaster(scene)
         triangles: list[NDArray[np.int64]] = []
@@ -141,6 +149,9 @@ class Renderer:
         self._ir = np.concatenate([b.albedo_ir for b in scene.bodies]).astype(np.float32)
         self._textured = [(i, b.texture) for i, b in enumerate(scene.bodies) if b.texture]
         self._is_textured = np.array([b.texture is not None for b in scene.bodies], bool)
+        self._is_uniform = np.array([_uniform(b) for b in scene.bodies], bool) & ~self._is_textured
+        self._body_rgb = np.array([b.albedo_rgb[0] for b in scene.bodies], np.float32)
+        self._body_ir = np.array([b.albedo_ir[0] for b in scene.bodies], np.float32)
         sun_az, sun_el = (
             np.radians(self.sensor.sun_azimuth_deg),
             np.radians(self.sensor.sun_elevation_deg),
@@ -179,8 +190,9 @@ class Renderer:
         )
 
     def _cast(self, T_field_camera: Matrix4) -> Hits:
-        R, origin = T_field_camera[:3, :3], T_field_camera[:3, 3]
-        directions = self._rays_camera @ R.T.astype(np.float32)
+        R = T_field_camera[:3, :3].astype(np.float32)
+        origin = T_field_camera[:3, 3].astype(np.float32)
+        directions = self._rays_camera @ R.T
         rays = np.empty((len(directions), 6), np.float32)
         rays[:, :3] = origin
         rays[:, 3:] = directions
@@ -188,15 +200,13 @@ class Renderer:
         t = result["t_hit"].numpy()
         hit = np.isfinite(t)
         gid = result["geometry_ids"].numpy().astype(np.int64)
-        normals = result["primitive_normals"].numpy().astype(np.float64)
-        norms = np.linalg.norm(directions, axis=1)
-        cos_incidence = -np.einsum("ij,ij->i", normals, directions) / norms
-        flip = cos_incidence < 0  # two-sided surfaces (leaves): the normal faces the camera
-        normals[flip] *= -1.0
-        cos_incidence = np.abs(cos_incidence)
-        points = origin + np.where(hit, t, 0.0)[:, None].astype(np.float64) * directions
+        normals = result["primitive_normals"].numpy()
+        facing = np.einsum("ij,ij->i", normals, directions) / -self._ray_norms
+        normals *= np.where(facing < 0, np.float32(-1), np.float32(1))[:, None]  # two-sided
+        points = origin + np.where(hit, t, np.float32(0))[:, None] * directions
         rgb, ir = self._albedo(hit, gid, result, points)
-        return Hits(t, points, normals, cos_incidence, np.where(hit, t * norms, np.inf), rgb, ir)
+        range_m = np.where(hit, t * self._ray_norms, np.float32(np.inf))
+        return Hits(t, points, normals, np.abs(facing), range_m, rgb, ir)
 
     def _albedo(
         self,
@@ -208,13 +218,17 @@ class Renderer:
         n = len(hit)
         rgb, ir = np.zeros((n, 3), np.float32), np.zeros(n, np.float32)
         index = np.flatnonzero(hit)
-        plain = index[~self._is_textured[gid[index]]]
-        tri = self._triangle_offset[gid[plain]] + result["primitive_ids"].numpy()[plain]
+        body = gid[index]
+        uniform = self._is_uniform[body]
+        rgb[index[uniform]] = self._body_rgb[body[uniform]]
+        ir[index[uniform]] = self._body_ir[body[uniform]]
+        varied = index[~uniform & ~self._is_textured[body]]
+        tri = self._triangle_offset[gid[varied]] + result["primitive_ids"].numpy()[varied]
         corners = self._triangles[tri]
-        uv = result["primitive_uvs"].numpy()[plain]
+        uv = result["primitive_uvs"].numpy()[varied]
         weights = np.column_stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]])
-        rgb[plain] = np.einsum("nk,nkc->nc", weights, self._rgb[corners])
-        ir[plain] = np.einsum("nk,nk->n", weights, self._ir[corners])
+        rgb[varied] = np.einsum("nk,nkc->nc", weights, self._rgb[corners])
+        ir[varied] = np.einsum("nk,nk->n", weights, self._ir[corners])
         for body_index, texture in self._textured:
             on_body = index[gid[index] == body_index]
             if len(on_body):
@@ -227,13 +241,15 @@ class Renderer:
         cos_sun = np.clip(hits.normals @ self._sun, 0.0, 1.0)
         lit = np.zeros(len(hits.t))
         facing = np.flatnonzero(hit & (cos_sun > 0))
-        if len(facing):
+        if len(facing) and self.sensor.shadows:
             origins = hits.points[facing] + 0.002 * hits.normals[facing]
             rays = np.column_stack([origins, np.tile(self._sun, (len(facing), 1))]).astype(
                 np.float32
             )
             occluded = self._raycaster.test_occlusions(tensor(rays), nthreads=0).numpy()
             lit[facing] = np.where(occluded, 0.0, cos_sun[facing])
+        elif len(facing):
+            lit[facing] = cos_sun[facing]
         sky = self.sensor.sky * (0.6 + 0.4 * hits.normals[:, 2])
         light = np.where(hit, sky + lit, 0.0)
         background = np.array([0.55, 0.62, 0.70])  # haze beyond the modelled ground
@@ -267,6 +283,12 @@ class Renderer:
         )
         dropped = (rng.random(depth.shape) < p_drop) | (ir < sensor.min_ir)
         return np.where(valid & ~dropped, noisy, np.nan)
+
+
+def _uniform(body: Body) -> bool:
+    """Whether a body has one albedo all over (no interpolation needed)."""
+    same_rgb = np.all(body.albedo_rgb == body.albedo_rgb[0])
+    return bool(same_rgb and np.all(body.albedo_ir == body.albedo_ir[0]))
 
 
 def _flying_pixels(

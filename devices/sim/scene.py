@@ -44,9 +44,12 @@ class Body:
 
 @dataclass(frozen=True)
 class PlantTruth:
+    """A plant's base (``x_m``, ``y_m``, ground height ``z_m`` there) and traits."""
+
     name: str
     x_m: float
     y_m: float
+    z_m: float
     height_cm: float
     width_cm: float
 
@@ -74,8 +77,8 @@ class Scene:
         self.bodies.append(
             Body(name, "plant", mesh.vertices_m, mesh.triangles, mesh.albedo_rgb, mesh.albedo_ir)
         )
-        x, y = float(mesh.base_m[0]), float(mesh.base_m[1])
-        self.plants.append(PlantTruth(name, x, y, 100 * mesh.height_m, 100 * mesh.width_m))
+        x, y, z = (float(v) for v in mesh.base_m)
+        self.plants.append(PlantTruth(name, x, y, z, 100 * mesh.height_m, 100 * mesh.width_m))
 
     def add_sphere(self, name: str, x_m: float, y_m: float, diameter_mm: float) -> None:
         """A foam sphere resting on the soil at (``x_m``, ``y_m``)."""

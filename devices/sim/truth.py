@@ -57,6 +57,7 @@ def truth_document(
                 "name": p.name,
                 "x_m": p.x_m,
                 "y_m": p.y_m,
+                "z_m": p.z_m,
                 "height_cm": p.height_cm,
                 "width_cm": p.width_cm,
             }

@@ -14,6 +14,8 @@ from devices.sim.render import MAX_RANGE_M, MIN_RANGE_M, scene_raycaster, tensor
 from devices.sim.scene import Scene
 
 MARGIN_PX = 12.0
+MIN_SQUARE_PX = 8.0
+"""Squares smaller than this in the image are too small to detect reliably."""
 
 
 def project(intrinsics: Intrinsics, points_camera_m: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -47,6 +49,8 @@ def sees_board(
         & (pixels[:, 1] <= intrinsics.height - 1 - margin_px)
     )
     if not inside.all():
+        return False
+    if placed.board.square_m * intrinsics.fx / float(camera[:, 2].max()) < MIN_SQUARE_PX:
         return False
     normal_into_board = placed.T_field_board[:3, 2]
     eye = T_field_camera[:3, 3]
