@@ -87,8 +87,14 @@ def write_outputs(
     plant_clouds: dict[int, Cloud],
     report: dict[str, Any],
 ) -> list[Path]:
-    """Write every output file into ``folder`` (created); returns the paths written."""
+    """Write every output file into ``folder`` (created); returns the paths written. Plant
+    clouds left in ``plants/`` by an earlier run with more plants are removed."""
     written = [folder / "cloud.ply"]
+    stale = folder / "plants"
+    if stale.is_dir():
+        for old in stale.glob("*.ply"):
+            if old.stem.isdigit() and int(old.stem) not in plant_clouds:
+                old.unlink()
     write_bytes_durably(written[0], ply_bytes(cloud))
     for plant, plant_cloud in plant_clouds.items():
         path = folder / "plants" / f"{plant}.ply"

@@ -103,7 +103,7 @@ def icp(
             source,
             tree,
             init_T_target_source=T,
-            registration_type="GICP" if settings.method == "VGICP" else settings.method,
+            registration_type=settings.method,
             max_correspondence_distance=max(
                 settings.max_correspondence_m, settings.correspondence_factor * voxel_m
             ),

@@ -46,7 +46,7 @@ class FilterSettings(_Section):
     sor_neighbors: int = Field(default=35, ge=2)
     sor_std_ratio: float = Field(default=1.5, gt=0.0)
     ror_radius_m: float = Field(default=0.008, gt=0.0)
-    ror_min_points: int = Field(default=2, ge=1)
+    ror_min_points: int = Field(default=1, ge=1)
     voxel_size_m: float = Field(default=0.002, gt=0.0)
 
 
@@ -54,7 +54,7 @@ class RegistrationSettings(_Section):
     """Fine registration by ICP on the overlap of neighbouring stations."""
 
     enabled: bool = True
-    method: Literal["GICP", "VGICP", "PLANE_ICP"] = "GICP"
+    method: Literal["GICP", "PLANE_ICP"] = "GICP"
     voxel_sizes_m: tuple[float, ...] = (0.05, 0.02, 0.008)
     correspondence_factor: float = Field(default=5.0, gt=0.0)
     max_correspondence_m: float = Field(default=0.02, gt=0.0)
