@@ -10,11 +10,12 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
 
-from devices.camera.frames import KINECT_V2_PAPER, Intrinsics
+from devices.camera.frames import KINECT_V2_PAPER, Frame, Intrinsics
 from devices.geometry import (
     Matrix4,
     make_transform,
@@ -193,12 +194,35 @@ def intrinsics_images(
     supersample: int = 3,
 ) -> Iterator[tuple[Matrix4, NDArray[np.uint16]]]:
     """``count`` (``T_camera_board``, IR image (H, W) uint16) pairs of ``board`` held before the
-    camera, rendered with ``supersample`` x ``supersample`` rays per pixel (a real sensor
-    integrates light over each pixel)."""
-    sensor = SensorModel(supersample=supersample, shadows=False)
+    camera. The board's part of the image is rendered with ``supersample`` x ``supersample``
+    rays per pixel (a real sensor integrates light over each pixel), the rest with one."""
+    coarse = SensorModel(color=False)
+    fine = SensorModel(supersample=supersample, color=False)
     for index, T_camera_board in enumerate(intrinsics_poses(board, intrinsics, count, seed)):
-        frame = Renderer(intrinsics_scene(board, T_camera_board), intrinsics, sensor).render(
-            np.eye(4), np.random.default_rng([seed, 31, index])
+        scene = intrinsics_scene(board, T_camera_board)
+        rng = np.random.default_rng([seed, 31, index])
+        ir = _ir(Renderer(scene, intrinsics, coarse).render(np.eye(4), rng))
+        u0, v0, u1, v1 = _sheet_box(board, intrinsics, T_camera_board)
+        crop = replace(
+            intrinsics, width=u1 - u0, height=v1 - v0, cx=intrinsics.cx - u0, cy=intrinsics.cy - v0
         )
-        assert frame.ir is not None
-        yield T_camera_board, frame.ir
+        ir[v0:v1, u0:u1] = _ir(Renderer(scene, crop, fine).render(np.eye(4), rng))
+        yield T_camera_board, ir
+
+
+def _ir(frame: Frame) -> NDArray[np.uint16]:
+    if frame.ir is None:
+        raise ValueError("the renderer gave no IR image")
+    return frame.ir
+
+
+def _sheet_box(
+    board: Checkerboard, intrinsics: Intrinsics, T_camera_board: Matrix4, pad_px: int = 3
+) -> tuple[int, int, int, int]:
+    """Pixel box (u0, v0, u1, v1), end exclusive, holding the board's sheet in the image."""
+    x0, x1, y0, y1 = board.outline_m
+    sheet = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]])
+    pixels = project(intrinsics, transform_points(T_camera_board, sheet))
+    u0, v0 = np.maximum(np.floor(pixels.min(axis=0)).astype(int) - pad_px, 0)
+    u1, v1 = np.ceil(pixels.max(axis=0)).astype(int) + pad_px + 1
+    return int(u0), int(v0), int(min(u1, intrinsics.width)), int(min(v1, intrinsics.height))

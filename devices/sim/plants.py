@@ -149,7 +149,7 @@ def _leaf(k: int, count: int, azimuth: float, p: NDArray[np.float64]) -> Part:
     rank = k / max(count - 1, 1)
     node_z = 0.06 + 0.035 * k
     length = (0.20 + 0.22 * np.sin(np.pi * (0.25 + 0.6 * rank))) * (0.85 + 0.3 * p[0])
-    width = (0.06 + 0.045 * rank) * (0.85 + 0.3 * p[1])
+    width = (0.05 + 0.06 * np.sin(np.pi * min(rank, 0.92))) * (0.85 + 0.3 * p[1])
     rise = np.radians(np.interp(rank, [0, 0.7, 1], [45, 30, 8]) + 10 * (p[2] - 0.5))
     tip = np.radians(np.interp(rank, [0, 0.7, 1], [135, 105, 35]) + 20 * (p[3] - 0.5))
     az = (

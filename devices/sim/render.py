@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from devices.camera.frames import Frame, Intrinsics
 from devices.geometry import Matrix4
 from devices.sim.scene import Body, Scene
+from devices.sim.shadows import ShadowMap
 
 MIN_RANGE_M = 0.5
 MAX_RANGE_M = 4.5
@@ -48,6 +49,8 @@ class SensorModel:
     sun_azimuth_deg: float = 135.0
     sun_elevation_deg: float = 50.0
     sky: float = 0.35
+    color: bool = True
+    """Shade the colour image (off for IR-only calibration images: faster)."""
     shadows: bool = True
     """Cast shadow rays towards the sun for the colour image."""
     supersample: int = 1
@@ -107,7 +110,8 @@ def ray_table(intrinsics: Intrinsics, supersample: int = 1) -> NDArray[np.float3
 class Hits:
     """What the rays hit, flattened, float32: ``t`` (N,) depth along the axis (inf = nothing),
     ``points`` (N, 3) field frame, ``normals`` (N, 3) facing the camera, ``cos_incidence`` (N,),
-    ``range_m`` (N,) distance along the ray, ``rgb`` (N, 3) and ``ir`` (N,) albedo."""
+    ``range_m`` (N,) distance along the ray, ``rgb`` (N, 3) and ``ir`` (N,) albedo, ``body`` (N,)
+    index of the body hit (meaningless where ``t`` is inf)."""
 
     t: NDArray[np.float32]
     points: NDArray[np.float32]
@@ -116,6 +120,7 @@ class Hits:
     range_m: NDArray[np.float32]
     rgb: NDArray[np.float32]
     ir: NDArray[np.float32]
+    body: NDArray[np.int64]
 
 
 class Renderer:
@@ -157,8 +162,10 @@ class Renderer:
             np.radians(self.sensor.sun_elevation_deg),
         )
         self._sun = np.array(
-            [np.cos(sun_el) * np.cos(sun_az), np.cos(sun_el) * np.sin(sun_az), np.sin(sun_el)]
+            [np.cos(sun_el) * np.cos(sun_az), np.cos(sun_el) * np.sin(sun_az), np.sin(sun_el)],
+            np.float32,
         )
+        self._shadow_map = ShadowMap(scene, self._sun)
 
     @property
     def raycaster(self) -> o3d.t.geometry.RaycastingScene:
@@ -170,21 +177,19 @@ class Renderer:
         rng = rng or np.random.default_rng()
         with self._lock:
             hits = self._cast(T_field_camera)
-            rgb = self._shade(hits)
-            lit_ir = self._ir_amplitude(hits)
+            rgb = self._shade(hits) if self.sensor.color else None
         s, h, w = self.sensor.supersample, self.intrinsics.height, self.intrinsics.width
-        depth = _pixels(hits.t.astype(np.float64), h, w, s)
-        ir = _pixels(lit_ir, h, w, s)
-        color = _pixels(rgb, h, w, s)
-        cos_incidence = _pixels(hits.cos_incidence, h, w, s)
+        depth = _pixels(hits.t, h, w, s)
+        ir = _pixels(self._ir_amplitude(hits), h, w, s)
+        color = _pixels(rgb, h, w, s) if rgb is not None else np.zeros((h, w, 3), np.float32)
         if self.sensor.noise:
-            ir = ir * (1.0 + self.sensor.ir_noise * rng.standard_normal(ir.shape))
-            depth = self._sensor_depth(depth, cos_incidence, ir, rng)
+            ir *= 1.0 + self.sensor.ir_noise * rng.standard_normal(ir.shape, np.float32)
+            depth = self._sensor_depth(depth, _pixels(hits.cos_incidence, h, w, s), ir, rng)
         else:
-            depth = np.where(np.isfinite(depth), depth, np.nan)
+            depth[~np.isfinite(depth)] = np.nan
         depth[(depth < MIN_RANGE_M) | (depth > MAX_RANGE_M)] = np.nan
         return Frame(
-            depth_m=depth.astype(np.float32),
+            depth_m=depth,
             color=_to_srgb8(color, rng if self.sensor.noise else None),
             ir=np.clip(ir, 0, 65535).astype(np.uint16),
         )
@@ -206,7 +211,8 @@ class Renderer:
         points = origin + np.where(hit, t, np.float32(0))[:, None] * directions
         rgb, ir = self._albedo(hit, gid, result, points)
         range_m = np.where(hit, t * self._ray_norms, np.float32(np.inf))
-        return Hits(t, points, normals, np.abs(facing), range_m, rgb, ir)
+        body = np.where(hit, gid, 0)
+        return Hits(t, points, normals, np.abs(facing), range_m, rgb, ir, body)
 
     def _albedo(
         self,
@@ -235,54 +241,56 @@ class Renderer:
                 rgb[on_body], ir[on_body] = texture(points[on_body])
         return rgb, ir
 
-    def _shade(self, hits: Hits) -> NDArray[np.float64]:
-        """Linear RGB: albedo x (sky + sun x cos x unshadowed)."""
+    def _shade(self, hits: Hits) -> NDArray[np.float32]:
+        """Linear RGB (N, 3): albedo x (sky + sun x cos x unshadowed)."""
         hit = np.isfinite(hits.t)
         cos_sun = np.clip(hits.normals @ self._sun, 0.0, 1.0)
-        lit = np.zeros(len(hits.t))
-        facing = np.flatnonzero(hit & (cos_sun > 0))
+        lit = np.zeros(len(hits.t), np.float32)
+        lit_side = hit & (cos_sun > 0)
+        if self.sensor.shadows:
+            lit[lit_side] = cos_sun[lit_side]  # unless a shadow ray is blocked, below
+            lit_side &= self._shadow_map.may_be_shadowed(hits.points, hits.body)
+        facing = np.flatnonzero(lit_side)
         if len(facing) and self.sensor.shadows:
-            origins = hits.points[facing] + 0.002 * hits.normals[facing]
-            rays = np.column_stack([origins, np.tile(self._sun, (len(facing), 1))]).astype(
-                np.float32
-            )
+            rays = np.empty((len(facing), 6), np.float32)
+            rays[:, :3] = hits.points[facing] + np.float32(0.002) * hits.normals[facing]
+            rays[:, 3:] = self._sun
             occluded = self._raycaster.test_occlusions(tensor(rays), nthreads=0).numpy()
             lit[facing] = np.where(occluded, 0.0, cos_sun[facing])
         elif len(facing):
             lit[facing] = cos_sun[facing]
-        sky = self.sensor.sky * (0.6 + 0.4 * hits.normals[:, 2])
-        light = np.where(hit, sky + lit, 0.0)
-        background = np.array([0.55, 0.62, 0.70])  # haze beyond the modelled ground
-        return np.where(hit[:, None], hits.rgb * light[:, None], background)
+        light = np.float32(self.sensor.sky) * (0.6 + 0.4 * hits.normals[:, 2]) + lit
+        rgb = hits.rgb * light[:, None]
+        rgb[~hit] = (0.55, 0.62, 0.70)  # haze beyond the modelled ground
+        return rgb
 
-    def _ir_amplitude(self, hits: Hits) -> NDArray[np.float64]:
-        distance = np.where(np.isfinite(hits.range_m), hits.range_m, np.inf)
-        return self.sensor.ir_gain * hits.ir * hits.cos_incidence / np.maximum(distance, 0.2) ** 2  # type: ignore[no-any-return]
+    def _ir_amplitude(self, hits: Hits) -> NDArray[np.float32]:
+        """Returned IR (N,): albedo x cos(incidence) / range^2, 0 where nothing is hit."""
+        near = np.maximum(hits.range_m, np.float32(0.2))
+        amplitude: NDArray[np.float32] = hits.ir * hits.cos_incidence / near**2
+        return amplitude * np.float32(self.sensor.ir_gain)
 
     def _sensor_depth(
         self,
-        depth: NDArray[np.float64],
-        cos_incidence: NDArray[np.float64],
-        ir: NDArray[np.float64],
+        depth: NDArray[np.float32],
+        cos_incidence: NDArray[np.float32],
+        ir: NDArray[np.float32],
         rng: np.random.Generator,
-    ) -> NDArray[np.float64]:
+    ) -> NDArray[np.float32]:
+        """Noisy depth (H, W): axial noise, flying pixels, dropouts; NaN where missing."""
         sensor = self.sensor
         valid = np.isfinite(depth)
-        safe = np.where(valid, depth, 1.0)
+        safe = np.where(valid, depth, np.float32(1.0))
         theta = np.arccos(np.clip(cos_incidence, 0.0, 1.0))
-        sigma = axial_noise_m(safe, theta)
+        sigma = axial_noise_m(safe, theta).astype(np.float32)
         weak = np.sqrt(np.clip(400.0 / np.maximum(ir, 1.0), 1.0, 9.0))  # dim returns are noisier
-        noisy = safe + sigma * weak * rng.standard_normal(depth.shape)
+        noisy = safe + sigma * weak * rng.standard_normal(depth.shape, np.float32)
         noisy = _flying_pixels(noisy, valid, sensor, rng)
-        grazing = np.degrees(theta)
-        p_drop = np.clip(
-            (grazing - sensor.grazing_start_deg)
-            / (sensor.grazing_end_deg - sensor.grazing_start_deg),
-            0,
-            1,
-        )
-        dropped = (rng.random(depth.shape) < p_drop) | (ir < sensor.min_ir)
-        return np.where(valid & ~dropped, noisy, np.nan)
+        span = np.radians(sensor.grazing_end_deg - sensor.grazing_start_deg)
+        p_drop = (theta - np.radians(sensor.grazing_start_deg)) / span
+        dropped = (rng.random(depth.shape, np.float32) < p_drop) | (ir < sensor.min_ir)
+        noisy[~valid | dropped] = np.nan
+        return noisy
 
 
 def _uniform(body: Body) -> bool:
@@ -292,41 +300,49 @@ def _uniform(body: Body) -> bool:
 
 
 def _flying_pixels(
-    depth: NDArray[np.float64],
+    depth: NDArray[np.float32],
     valid: NDArray[np.bool_],
     sensor: SensorModel,
     rng: np.random.Generator,
-) -> NDArray[np.float64]:
+) -> NDArray[np.float32]:
     """Mix the depths of both sides at a share of the pixels on depth edges (mixed pixels)."""
     out = depth.copy()
+    jump = sensor.edge_jump * depth
+    h, w = depth.shape
     for axis in (0, 1):
-        for shift in (1, -1):
-            other = np.roll(depth, shift, axis=axis)
-            other_valid = np.roll(valid, shift, axis=axis)
-            border = [0, -1][shift == -1]  # np.roll wraps around: no edge across the border
-            if axis == 0:
-                other_valid[border, :] = False
-            else:
-                other_valid[:, border] = False
-            edge = valid & other_valid & (np.abs(other - depth) > sensor.edge_jump * depth)
-            chosen = edge & (rng.random(depth.shape) < sensor.flying_fraction / 4)
-            mix = rng.random(depth.shape)
-            out = np.where(chosen, depth + mix * (other - depth), out)
+        # pixel i against its next neighbour i + 1 along the axis (no wrapping around)
+        here = (slice(0, h - 1), slice(None)) if axis == 0 else (slice(None), slice(0, w - 1))
+        ahead = (slice(1, h), slice(None)) if axis == 0 else (slice(None), slice(1, w))
+        step = depth[ahead] - depth[here]
+        edge = valid[here] & valid[ahead] & (np.abs(step) > jump[here])
+        for side, sign in ((here, 1.0), (ahead, -1.0)):
+            chosen = edge & (rng.random(edge.shape, np.float32) < sensor.flying_fraction / 4)
+            mix = rng.random(edge.shape, np.float32)
+            target = out[side]
+            target[chosen] = (depth[side] + sign * mix * step)[chosen]
     return out
 
 
-def _pixels(values: NDArray[np.floating], h: int, w: int, s: int) -> NDArray[np.float64]:
+def _pixels(values: NDArray[np.float32], h: int, w: int, s: int) -> NDArray[np.float32]:
     """Per-ray values (N, ...) to an image (H, W, ...), averaging ``s`` x ``s`` sub-rays."""
-    image = np.asarray(values, np.float64).reshape(h, w, s * s, *values.shape[1:])
+    image = np.asarray(values, np.float32).reshape(h, w, s * s, *values.shape[1:])
     if s == 1:
-        return image[:, :, 0]
+        return image[:, :, 0].copy()
     with np.errstate(invalid="ignore"):
-        return image.mean(axis=2)  # type: ignore[no-any-return]
+        return image.mean(axis=2, dtype=np.float32)  # type: ignore[no-any-return]
 
 
-def _to_srgb8(linear: NDArray[np.float64], rng: np.random.Generator | None) -> NDArray[np.uint8]:
-    """Linear RGB 0-1 to 8-bit sRGB-like (gamma 2.2) with a little sensor noise."""
+_SRGB_LEVELS = 2048
+_SRGB_TABLE = np.clip(
+    (np.arange(_SRGB_LEVELS) / (_SRGB_LEVELS - 1)) ** (1 / 2.2) * 255.0 + 0.5, 0, 255
+).astype(np.uint8)
+
+
+def _to_srgb8(linear: NDArray[np.float32], rng: np.random.Generator | None) -> NDArray[np.uint8]:
+    """Linear RGB 0-1 (H, W, 3) to 8-bit (gamma 2.2, by table) with a little sensor noise."""
     if rng is not None:
-        linear = linear * (1.0 + 0.03 * rng.standard_normal(linear.shape[:2]))[..., None]
-    encoded = np.clip(linear, 0.0, 1.0) ** (1 / 2.2) * 255.0
-    return np.clip(encoded + 0.5, 0, 255).astype(np.uint8)
+        linear = (
+            linear * (1.0 + 0.03 * rng.standard_normal(linear.shape[:2], np.float32))[..., None]
+        )
+    index = np.clip(linear * (_SRGB_LEVELS - 1), 0, _SRGB_LEVELS - 1).astype(np.int32)
+    return _SRGB_TABLE[index]

@@ -22,8 +22,8 @@ SOIL_IR = 0.30
 class SoilSpec:
     """How the soil is drawn. ``relief_m`` is the standard deviation of the large bumps."""
 
-    half_extent_m: float = 6.0
-    spacing_m: float = 0.03
+    half_extent_m: float = 8.0
+    spacing_m: float = 0.04
     relief_m: float = 0.015
     clod_m: float = 0.002
     texture_px: int = 2048
@@ -117,7 +117,6 @@ def _texture(rng: np.random.Generator, size: int) -> NDArray[np.float32]:
     for cells, weight in ((16, 0.10), (96, 0.10), (512, 0.08), (size, 0.10)):
         noise = rng.standard_normal((cells, cells)).astype(np.float32)
         texture += weight * cv2.resize(noise, (size, size), interpolation=cv2.INTER_CUBIC)
-    pebbles = rng.random((size, size)) < 0.002
-    bright = cv2.dilate(pebbles.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-    texture[bright] += 0.35
+    pebbles = (rng.random((size, size)) < 0.003).astype(np.float32)
+    texture += 0.5 * cv2.GaussianBlur(pebbles, (5, 5), 0.8) / 0.2  # small light stones
     return np.clip(texture, 0.45, 1.6)

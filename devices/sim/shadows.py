@@ -1,0 +1,61 @@
+"""Where on the ground a shadow can fall: a coarse map that spares most shadow rays.
+
+Only bodies standing on the soil (plants, spheres, boards) cast shadows worth drawing; a soil
+point farther than their shadows reach is lit (the soil's own few cm of relief cast none at a
+sun 50 degrees up). The map marks the cells under every caster's shadow, so the renderer casts
+shadow rays only for soil points in marked cells and for points on the casters themselves.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.sim.scene import Scene
+
+CELL_M = 0.05
+STEPS = 16
+
+
+class ShadowMap:
+    """A boolean grid over the soil's extent: True where some caster's shadow may fall."""
+
+    def __init__(self, scene: Scene, sun: NDArray[np.float32]) -> None:
+        self._half_m = scene.soil.spec.half_extent_m if scene.soil else 0.0
+        cells = max(1, int(np.ceil(2 * self._half_m / CELL_M)))
+        self._grid = np.zeros((cells, cells), bool)
+        self.is_soil = np.array([body.kind == "soil" for body in scene.bodies], bool)
+        casters = [b.vertices_m for b in scene.bodies if b.kind != "soil"]
+        if scene.soil is None or not casters or sun[2] <= 0:
+            return
+        points = np.concatenate(casters)
+        height = points[:, 2] - scene.soil.height_m(points[:, 0], points[:, 1])
+        reach = np.clip(height, 0.0, None)[:, None] * (-sun[:2] / sun[2])[None, :]
+        for fraction in np.linspace(0.0, 1.05, STEPS):
+            self._mark(points[:, :2] + fraction * reach)
+        grown = self._grid.copy()  # one cell of slack all round
+        for axis in (0, 1):
+            for shift in (1, -1):
+                grown |= np.roll(self._grid, shift, axis=axis)
+        self._grid = grown
+
+    def _mark(self, xy_m: NDArray[np.float64]) -> None:
+        index = self._cell(xy_m)
+        inside = (index >= 0).all(axis=1) & (index < self._grid.shape[0]).all(axis=1)
+        self._grid[index[inside, 1], index[inside, 0]] = True
+
+    def _cell(self, xy_m: NDArray[np.floating]) -> NDArray[np.int64]:
+        return np.floor((np.asarray(xy_m) + self._half_m) / CELL_M).astype(np.int64)
+
+    def may_be_shadowed(
+        self, points_m: NDArray[np.floating], body: NDArray[np.int64]
+    ) -> NDArray[np.bool_]:
+        """For hits at ``points_m`` (N, 3) on bodies ``body`` (N,): whether to cast a shadow
+        ray (always on casters, on soil only where a shadow may fall)."""
+        result = ~self.is_soil[body]
+        on_soil = np.flatnonzero(~result)
+        index = self._cell(points_m[on_soil, :2])
+        n = self._grid.shape[0]
+        inside = (index >= 0).all(axis=1) & (index < n).all(axis=1)
+        result[on_soil[inside]] = self._grid[index[inside, 1], index[inside, 0]]
+        return result
