@@ -18,13 +18,16 @@ STEPS = 16
 
 
 class ShadowMap:
-    """A boolean grid over the soil's extent: True where some caster's shadow may fall."""
+    """A boolean grid over the soil's extent: True where some caster's shadow may fall.
+
+    ``sun``: (3,) unit vector towards the sun, field frame."""
 
     def __init__(self, scene: Scene, sun: NDArray[np.float32]) -> None:
         self._half_m = scene.soil.spec.half_extent_m if scene.soil else 0.0
         cells = max(1, int(np.ceil(2 * self._half_m / CELL_M)))
         self._grid = np.zeros((cells, cells), bool)
         self.is_soil = np.array([body.kind == "soil" for body in scene.bodies], bool)
+        self._mapped = scene.soil is not None and sun[2] > 0
         casters = [b.vertices_m for b in scene.bodies if b.kind != "soil"]
         if scene.soil is None or not casters or sun[2] <= 0:
             return
@@ -51,7 +54,10 @@ class ShadowMap:
         self, points_m: NDArray[np.floating], body: NDArray[np.int64]
     ) -> NDArray[np.bool_]:
         """For hits at ``points_m`` (N, 3) on bodies ``body`` (N,): whether to cast a shadow
-        ray (always on casters, on soil only where a shadow may fall)."""
+        ray (always on casters, on soil only where a shadow may fall; everywhere when the
+        scene has no :class:`~devices.sim.soil.Soil` to map)."""
+        if not self._mapped:
+            return np.ones(len(body), bool)
         result = ~self.is_soil[body]
         on_soil = np.flatnonzero(~result)
         index = self._cell(points_m[on_soil, :2])

@@ -117,3 +117,22 @@ def test_out_of_range_is_missing() -> None:
     scene.add_board(PlacedBoard(board, make_transform(np.eye(3), np.array([-0.2, -0.12, 0.4]))))
     frame = Renderer(scene, KINECT_V2_PAPER, SensorModel(noise=False)).render(np.eye(4))
     assert np.isnan(frame.depth_m).all()  # 0.4 m is closer than the sensor's 0.5 m
+
+
+def test_shadow_map_misses_no_shadow() -> None:
+    """Shadow rays cast only where the map allows give the same image as casting them all."""
+    from devices.sim.scene import plot_scene
+
+    scene = plot_scene(seed=2)
+    scene.add_sphere("ball", 0.0, -0.8, 400)
+    rig = RigGeometry()
+    T = rig.T_field_camera(rig.station_pose(2), 90.0, scene.soil)
+    mapped = Renderer(scene, KINECT_V2_PAPER, SensorModel(noise=False))
+    brute = Renderer(scene, KINECT_V2_PAPER, SensorModel(noise=False))
+    brute._shadow_map._mapped = False
+    a, b = mapped.render(T).color, brute.render(T).color
+    dark = SensorModel(noise=False, shadows=False)
+    unshadowed = Renderer(scene, KINECT_V2_PAPER, dark).render(T).color
+    shadowed = (unshadowed.astype(int).sum(axis=2) - a.astype(int).sum(axis=2)) > 30
+    assert shadowed.mean() > 0.01  # there are shadows in view (plants, the sphere)
+    np.testing.assert_array_equal(a, b)
