@@ -127,3 +127,30 @@ def _sample(gray: NDArray[np.float32], point: NDArray[np.float32]) -> float | No
     if not (1 <= x < gray.shape[1] - 1 and 1 <= y < gray.shape[0] - 1):
         return None
     return float(gray[y - 1 : y + 2, x - 1 : x + 2].mean())
+
+
+def detect_all_corners(
+    image: NDArray[np.generic], board: Board, max_boards: int = 6
+) -> list[NDArray[np.float32]]:
+    """Every visible board's corners: detect one, paint it over, look again."""
+    work = to_gray8(image).copy()
+    found = []
+    for _ in range(max_boards):
+        corners = detect_corners(work, board)
+        if corners is None:
+            break
+        found.append(corners)
+        grid = corners.reshape(board.rows, board.cols, 2)
+        step = 1.5 * max(
+            float(np.linalg.norm(grid[0, 1] - grid[0, 0])),
+            float(np.linalg.norm(grid[1, 0] - grid[0, 0])),
+        )
+        centre = corners.mean(axis=0)
+        hull = cv2.convexHull(corners.reshape(-1, 1, 2))
+        outward = hull.reshape(-1, 2) - centre
+        grown = (
+            hull.reshape(-1, 2)
+            + outward / (np.linalg.norm(outward, axis=1, keepdims=True) + 1e-9) * step
+        )
+        cv2.fillConvexPoly(work, grown.astype(np.int32), int(np.median(work)))
+    return found

@@ -7,9 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from fieldapp.calib.board import Board, corner_zero_is_dark, detect_corners
+from devices.geometry import Matrix4, pose_error
+from fieldapp.calib.board import Board, corner_zero_is_dark, detect_all_corners, detect_corners
 from fieldapp.calib.corners3d import Corners3D, lift_corners
-from fieldapp.io.session import Capture, Session
+from fieldapp.calib.rigid import fit_rigid_weighted
+from fieldapp.errors import FieldappError
+from fieldapp.io.session import Capture, CaptureImages, Session
 
 MIN_LIFTED_FRACTION = 0.8
 
@@ -28,6 +31,11 @@ class Observation:
         return f"station {self.capture.station} view {self.capture.view}{suffix}"
 
     @property
+    def centroid_m(self) -> NDArray[np.float64]:
+        """Mean of the lifted corners (the board's centre)."""
+        return np.asarray(np.nanmean(self.corners.points_m[self.corners.valid], axis=0))
+
+    @property
     def lifted_fraction(self) -> float:
         return float(self.corners.valid.mean())
 
@@ -44,6 +52,25 @@ def observe(session: Session, capture: Capture, board: Board) -> Observation | N
     corners_px = detect_corners(images.color, board)
     if corners_px is None:
         return None
+    return _observation(session, capture, images, corners_px, board)
+
+
+def observe_all(session: Session, capture: Capture, board: Board) -> list[Observation]:
+    """Every board of this kind visible in the capture."""
+    images = session.read_capture(capture)
+    return [
+        _observation(session, capture, images, corners_px, board)
+        for corners_px in detect_all_corners(images.color, board)
+    ]
+
+
+def _observation(
+    session: Session,
+    capture: Capture,
+    images: CaptureImages,
+    corners_px: NDArray[np.float32],
+    board: Board,
+) -> Observation:
     intrinsics = session.calibration.depth_camera.intrinsics()
     return Observation(
         capture,
@@ -72,3 +99,30 @@ def paired_points(
     both = a.corners.valid & b.corners.valid
     wa, wb = a.corners.weights[both], b.corners.weights[both]
     return b.corners.points_m[both], a.corners.points_m[both], wa * wb / (wa + wb)
+
+
+def align_order(
+    a: Observation, b: Observation, board: Board, T_a_b_prior: Matrix4 | None = None
+) -> Observation | None:
+    """``b`` with its corners in ``a``'s order, or None when the order cannot be told.
+
+    A grid of points maps onto itself under a half turn, so the 3D fit alone cannot tell the
+    order: on an asymmetric board the colour of the square outside corner 0 decides; failing
+    that, the order whose transform lies closer to the prior (the calibration in force).
+    """
+    if board.is_symmetric:
+        raise FieldappError(
+            f"a {board.cols} x {board.rows} board looks the same after a half turn, so the "
+            "corner order between views is ambiguous: use a board whose inner corner counts "
+            "differ by an odd number (e.g. 9 x 6)"
+        )
+    if a.corner_zero_dark is not None and b.corner_zero_dark is not None:
+        return b if a.corner_zero_dark == b.corner_zero_dark else b.reversed()
+    if T_a_b_prior is None:
+        return None
+    candidates = [b, b.reversed()]
+    errors = [
+        pose_error(fit_rigid_weighted(*paired_points(a, c)).T_target_source, T_a_b_prior)[1]
+        for c in candidates
+    ]
+    return candidates[int(np.argmin(errors))]

@@ -1,5 +1,12 @@
 """Station-to-station calibration: boards between neighbouring stations, each seen from both,
-give pairwise transforms, composed along a spanning tree into ``stations.to_reference``."""
+give pairwise transforms, composed along a spanning tree into ``stations.to_reference`` and
+then refined jointly over every corner seen from two stations.
+
+Several boards may stand in the plot at once. Each station's sightings are grouped by position
+(in its view-0 frame), and the sightings of two stations are matched through the station
+transforms in force (the nominal ones: a base stops within centimetres of them). Without such a
+prior, captures must show one board each and their ``target`` tags say which.
+"""
 
 from __future__ import annotations
 
@@ -8,26 +15,48 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
-from devices.geometry import Matrix4, invert, transform_points
+from devices.geometry import Matrix4, invert, make_transform, pose_error, transform_points
 from fieldapp.calib.board import Board
-from fieldapp.calib.observe import Observation, depth_problem, observe, paired_points
+from fieldapp.calib.observe import (
+    Observation,
+    align_order,
+    depth_problem,
+    observe_all,
+    paired_points,
+)
 from fieldapp.calib.rigid import RigidFit, fit_rigid_weighted
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import ViewStep
 from fieldapp.io.session import Session
 
-MAX_PAIR_RMSE_M = 0.02
-ORDER_CONFIDENCE = 3.0
+SAME_BOARD_M = 0.15
+"""Sightings of one station closer than this (in its own frame) are the same board."""
+MATCH_M = 0.4
+"""Sightings of two stations closer than this after the prior are the same board: a base stops
+a few cm and 1-2 degrees off, which at 2 m moves a board by up to ~0.3 m."""
+MAX_PAIR_RMSE_M = 0.01
+MAX_PRIOR_DISTANCE_M = 0.4
+MAX_PRIOR_ROTATION_DEG = 10.0
+"""How far a pair may lie from the calibration in force."""
+
+Match = tuple[str, Observation, Observation]
 
 
 @dataclass
 class PairResult:
     station_a: int
     station_b: int
-    targets: list[str]
+    boards: list[str]
     fit: RigidFit
     """``fit.T_target_source`` maps station b's view 0 into station a's view 0."""
+    points_b: NDArray[np.float64]
+    points_a: NDArray[np.float64]
+    weights: NDArray[np.float64]
+    """The corner correspondences behind the fit: (N, 3), (N, 3), (N,)."""
 
 
 @dataclass
@@ -43,64 +72,130 @@ class StationsResult:
 def in_view0(observation: Observation, view_step: ViewStep) -> Observation:
     """The observation's 3D corners moved from its view's frame into view 0's."""
     T = view_step.T_view0_view(observation.capture.view)
-    corners = observation.corners
-    moved = type(corners)(transform_points(T, corners.points_m), corners.weights)
+    corners = type(observation.corners)(
+        transform_points(T, observation.corners.points_m), observation.corners.weights
+    )
     return Observation(
-        observation.capture, observation.corners_px, observation.corner_zero_dark, moved
+        observation.capture, observation.corners_px, observation.corner_zero_dark, corners
     )
 
 
-def best_observations(
-    session: Session, board: Board, view_step: ViewStep
-) -> dict[str, dict[int, Observation]]:
-    """target -> station -> the observation (in view 0's frame) with the most lifted corners."""
-    found: dict[str, dict[int, Observation]] = defaultdict(dict)
+def sightings(
+    session: Session, board: Board, view_step: ViewStep, use_untagged: bool
+) -> dict[int, list[Observation]]:
+    """station -> one observation (view-0 frame) per physical board, averaged over every
+    capture of that station that saw it (noise falls as more views see a board).
+
+    Captures tagged with a ``target`` always count; untagged ones when ``use_untagged``.
+    """
+    groups: dict[int, list[list[Observation]]] = defaultdict(list)
     for capture in session.captures:
-        target = capture.key[2]
-        if target is None:
+        if capture.key[2] is None and not use_untagged:
             continue
-        observation = observe(session, capture, board)
-        if observation is None or depth_problem(observation):
-            continue
-        current = found[target].get(capture.station)
-        if current is None or observation.lifted_fraction > current.lifted_fraction:
-            found[target][capture.station] = in_view0(observation, view_step)
+        for observation in observe_all(session, capture, board):
+            if depth_problem(observation) is None:
+                _group(groups[capture.station], in_view0(observation, view_step), board)
+    return {station: [_average(g) for g in found] for station, found in groups.items()}
+
+
+def _group(groups: list[list[Observation]], new: Observation, board: Board) -> None:
+    for group in groups:
+        if np.linalg.norm(group[0].centroid_m - new.centroid_m) < SAME_BOARD_M:
+            aligned = align_order(group[0], new, board, np.eye(4))  # same frame: no motion
+            if aligned is not None:
+                group.append(aligned)
+            return
+    groups.append([new])
+
+
+def _average(group: list[Observation]) -> Observation:
+    """Weighted mean of a board's corners over several sightings in one frame."""
+    points = np.stack([o.corners.points_m for o in group])
+    weights = np.stack([np.where(o.corners.valid, o.corners.weights, 0.0) for o in group])
+    total = weights.sum(axis=0)
+    mean = (
+        np.einsum("kn,knd->nd", weights, np.nan_to_num(points)) / np.maximum(total, 1e-30)[:, None]
+    )
+    mean[total == 0] = np.nan
+    first = group[0]
+    return Observation(
+        first.capture, first.corners_px, first.corner_zero_dark, type(first.corners)(mean, total)
+    )
+
+
+def matches(
+    seen_a: list[Observation], seen_b: list[Observation], T_prior: Matrix4 | None
+) -> list[Match]:
+    """Pairs of sightings of the same board from two stations."""
+    if T_prior is None:  # tags decide, when a tag names a single sighting on each side
+        tags_a, tags_b = _single_tags(seen_a), _single_tags(seen_b)
+        return [(tag, tags_a[tag], tags_b[tag]) for tag in sorted(tags_a.keys() & tags_b.keys())]
+    found = []
+    for b in seen_b:
+        moved = T_prior[:3, :3] @ b.centroid_m + T_prior[:3, 3]
+        distances = [float(np.linalg.norm(a.centroid_m - moved)) for a in seen_a]
+        if distances and min(distances) < MATCH_M:
+            a = seen_a[int(np.argmin(distances))]
+            label = _tag(a) or "board at " + " ".join(f"{x:+.2f}" for x in a.centroid_m)
+            found.append((label, a, b))
     return found
 
 
-def fit_pair(a: Observation, b: Observation) -> tuple[RigidFit, Observation]:
-    """Fit b -> a, trying b's corner order both ways (a board seen from two stations is often
-    detected half-turned); the better order must win clearly. Returns the fit and b in the
-    order that won."""
-    candidates = [
-        (fit_rigid_weighted(*paired_points(a, order)), order) for order in (b, b.reversed())
-    ]
-    (best, best_b), (other, _) = sorted(candidates, key=lambda c: c[0].rmse_m)
-    if other.rmse_m < ORDER_CONFIDENCE * best.rmse_m:
-        raise FieldappError(
-            f"cannot tell the corner order of the board seen from {a.name} and {b.name}: use "
-            "a board whose inner corner counts differ by an odd number (e.g. 9 x 6)"
-        )
-    return best, best_b
+def _tag(observation: Observation) -> str:
+    return observation.capture.key[2] or ""
 
 
-def pairwise(observations: dict[str, dict[int, Observation]]) -> list[PairResult]:
-    """One fit per pair of stations, over every board both of them saw."""
-    matches: dict[tuple[int, int], list[tuple[str, Observation, Observation]]] = defaultdict(list)
-    for target, by_station in observations.items():
-        stations = sorted(by_station)
-        for i, a in enumerate(stations):
-            for b in stations[i + 1 :]:
-                _, ordered_b = fit_pair(by_station[a], by_station[b])
-                matches[(a, b)].append((target, by_station[a], ordered_b))
-    results = []
-    for (a, b), seen in sorted(matches.items()):
-        sources, targets, weights = zip(
-            *(paired_points(obs_a, obs_b) for _, obs_a, obs_b in seen), strict=True
+def _single_tags(seen: list[Observation]) -> dict[str, Observation]:
+    """tag -> its sighting, for tags whose captures showed exactly one board."""
+    counts: dict[str, list[Observation]] = defaultdict(list)
+    for observation in seen:
+        if _tag(observation):
+            counts[_tag(observation)].append(observation)
+    return {tag: found[0] for tag, found in counts.items() if len(found) == 1}
+
+
+def fit_pair(
+    a: int, b: int, found: list[Match], board: Board, T_prior: Matrix4 | None
+) -> tuple[PairResult | None, list[str]]:
+    """One joint fit over every board both stations saw, or None with the reasons."""
+    used, refused = [], []
+    for label, obs_a, obs_b in found:
+        ordered_b = align_order(obs_a, obs_b, board, T_prior)
+        if ordered_b is None:
+            refused.append(f"stations {a}-{b} via {label}: corner order cannot be told")
+            continue
+        why = _implausible(fit_rigid_weighted(*paired_points(obs_a, ordered_b)), T_prior)
+        if why:
+            refused.append(f"stations {a}-{b} via {label}: {why}")
+            continue
+        used.append((label, obs_a, ordered_b))
+    if not used:
+        return None, refused
+    sources, targets, weights = zip(*(paired_points(oa, ob) for _, oa, ob in used), strict=True)
+    joint = fit_rigid_weighted(np.vstack(sources), np.vstack(targets), np.concatenate(weights))
+    labels = [label for label, _, _ in used]
+    if joint.rmse_m > MAX_PAIR_RMSE_M:
+        refused.append(
+            f"stations {a}-{b}: the boards {', '.join(labels)} disagree (joint RMSE "
+            f"{1000 * joint.rmse_m:.0f} mm): a board moved, or tags name different boards"
         )
-        joint = fit_rigid_weighted(np.vstack(sources), np.vstack(targets), np.concatenate(weights))
-        results.append(PairResult(a, b, [target for target, _, _ in seen], joint))
-    return results
+        return None, refused
+    return PairResult(
+        a, b, labels, joint, np.vstack(sources), np.vstack(targets), np.concatenate(weights)
+    ), refused
+
+
+def _implausible(fit: RigidFit, T_prior: Matrix4 | None) -> str | None:
+    if fit.rmse_m > MAX_PAIR_RMSE_M:
+        return f"RMSE {1000 * fit.rmse_m:.1f} mm (board moved between the captures?)"
+    if T_prior is not None:
+        moved_m, turned_deg = pose_error(fit.T_target_source, T_prior)
+        if moved_m > MAX_PRIOR_DISTANCE_M or turned_deg > MAX_PRIOR_ROTATION_DEG:
+            return (
+                f"{100 * moved_m:.0f} cm and {turned_deg:.1f} degrees from the calibration in "
+                "force (another board matched?)"
+            )
+    return None
 
 
 def spanning_tree(pairs: list[PairResult], reference: int) -> dict[int, tuple[int, Matrix4]]:
@@ -126,32 +221,8 @@ def spanning_tree(pairs: list[PairResult], reference: int) -> dict[int, tuple[in
     return tree
 
 
-def calibrate_stations(
-    session: Session, board: Board, view_step: ViewStep, reference: int = 5
-) -> StationsResult:
-    """``T_reference_station`` for every station linked to ``reference`` through boards."""
-    observations = best_observations(session, board, view_step)
-    if not observations:
-        raise FieldappError(
-            "no capture tagged with a target shows the board: tag the captures of each board "
-            'with "target": "<board name>" in session.json'
-        )
-    pairs = pairwise(observations)
-    stations = {c.station for c in session.captures}
-    if not pairs:
-        raise FieldappError(
-            "no board was seen from two stations: place each board between "
-            "two neighbouring stations where both see it whole"
-        )
-    tree = spanning_tree(pairs, reference)
-    unlinked = sorted(stations - set(tree) - {reference})
-    if reference not in stations and not tree:
-        raise FieldappError(f"the reference station {reference} sees no board")
-    if unlinked:
-        raise FieldappError(
-            f"stations {', '.join(map(str, unlinked))} are not linked to "
-            f"station {reference} by any board seen from both sides"
-        )
+def compose(tree: dict[int, tuple[int, Matrix4]], reference: int) -> dict[int, Matrix4]:
+    """``T_reference_station`` for the reference and every station in the tree."""
     T_reference: dict[int, Matrix4] = {reference: np.eye(4)}
 
     def resolve(station: int) -> Matrix4:
@@ -162,12 +233,88 @@ def calibrate_stations(
 
     for station in tree:
         resolve(station)
-    result = StationsResult(reference, T_reference, pairs, {s: p for s, (p, _) in tree.items()})
-    for pair in pairs:
-        if pair.fit.rmse_m > MAX_PAIR_RMSE_M:
-            result.warnings.append(
-                f"stations {pair.station_a}-{pair.station_b}: residual "
-                f"{1000 * pair.fit.rmse_m:.1f} mm is high: the board may have moved between "
-                "the two stations' captures"
-            )
+    return T_reference
+
+
+def refine_jointly(
+    pairs: list[PairResult], initial: dict[int, Matrix4], reference: int
+) -> dict[int, Matrix4]:
+    """All station poses at once: minimise every corner pair's disagreement in the reference
+    frame (robust loss), starting from the spanning tree. Errors no longer pile up along long
+    chains of the tree."""
+    free = sorted(s for s in initial if s != reference)
+    index = {s: i for i, s in enumerate(free)}
+    scale = float(np.median(np.concatenate([p.weights for p in pairs])))
+
+    def pose(x: NDArray[np.float64], station: int) -> Matrix4:
+        if station == reference:
+            return np.eye(4)
+        i = 6 * index[station]
+        return make_transform(Rotation.from_rotvec(x[i : i + 3]).as_matrix(), x[i + 3 : i + 6])
+
+    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        parts = []
+        for pair in pairs:
+            in_reference_a = transform_points(pose(x, pair.station_a), pair.points_a)
+            in_reference_b = transform_points(pose(x, pair.station_b), pair.points_b)
+            weight = np.sqrt(pair.weights / scale)[:, None]
+            parts.append(((in_reference_a - in_reference_b) * weight).ravel())
+        return np.concatenate(parts)
+
+    x0 = np.concatenate(
+        [
+            np.r_[Rotation.from_matrix(initial[s][:3, :3]).as_rotvec(), initial[s][:3, 3]]
+            for s in free
+        ]
+    )
+    solution = least_squares(residuals, x0, loss="soft_l1", f_scale=0.005, x_scale="jac")
+    refined = {s: pose(solution.x, s) for s in free}
+    refined[reference] = np.eye(4)
+    return refined
+
+
+def calibrate_stations(
+    session: Session,
+    board: Board,
+    view_step: ViewStep,
+    reference: int = 5,
+    prior: dict[int, Matrix4] | None = None,
+) -> StationsResult:
+    """``T_reference_station`` for every station linked to ``reference`` through boards.
+
+    ``prior``: the station transforms in force (e.g. nominal), to match boards between
+    stations, tell the corner order when colours cannot, and drop implausible pairs.
+    """
+    seen = sightings(session, board, view_step, use_untagged=prior is not None)
+    if not seen:
+        raise FieldappError(f"no {board.cols} x {board.rows} board with usable depth was found")
+    pairs, refused = [], []
+    stations = sorted(seen)
+    for i, a in enumerate(stations):
+        for b in stations[i + 1 :]:
+            T_prior = invert(prior[a]) @ prior[b] if prior and a in prior and b in prior else None
+            pair, why = fit_pair(a, b, matches(seen[a], seen[b], T_prior), board, T_prior)
+            refused += why
+            if pair is not None:
+                pairs.append(pair)
+    if not pairs:
+        raise FieldappError(
+            "no board was seen from two stations: place each board between two neighbouring "
+            "stations where both see it whole"
+            + ("; pairs refused:\n  " + "\n  ".join(refused) if refused else "")
+        )
+    tree = spanning_tree(pairs, reference)
+    unlinked = sorted({c.station for c in session.captures} - set(tree) - {reference})
+    if unlinked:
+        raise FieldappError(
+            f"stations {', '.join(map(str, unlinked))} are not linked to station {reference} "
+            "by any board seen from both sides"
+        )
+    result = StationsResult(
+        reference,
+        refine_jointly(pairs, compose(tree, reference), reference),
+        pairs,
+        {s: p for s, (p, _) in tree.items()},
+    )
+    result.warnings = [f"pair not used: {reason}" for reason in refused]
     return result

@@ -6,15 +6,18 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 
-from devices.geometry import Matrix4, rotation_angle_deg
+from devices.geometry import Matrix4, pose_error, rotation_angle_deg
 from fieldapp.calib.board import Board
-from fieldapp.calib.observe import Observation, depth_problem, observe, paired_points
+from fieldapp.calib.observe import align_order, depth_problem, observe, paired_points
 from fieldapp.calib.rigid import fit_rigid_weighted
 from fieldapp.errors import FieldappError
 from fieldapp.io.session import Capture, Session
 
-MAX_ANGLE_DISAGREEMENT_DEG = 5.0
+MAX_PAIR_ROTATION_DEG = 3.0
+"""A pair whose solved turn differs more from the table's nominal step is not the same board."""
+MAX_PAIR_RMSE_M = 0.01
 
 
 @dataclass
@@ -30,6 +33,16 @@ class ViewStepResult:
     warnings: list[str] = field(default_factory=list)
 
 
+@dataclass
+class _Pairs:
+    sources: list[NDArray[np.float64]] = field(default_factory=list)
+    targets: list[NDArray[np.float64]] = field(default_factory=list)
+    weights: list[NDArray[np.float64]] = field(default_factory=list)
+    names: list[str] = field(default_factory=list)
+    seen_once: list[str] = field(default_factory=list)
+    refused: list[str] = field(default_factory=list)
+
+
 def view_pairs(session: Session, station: int | None) -> list[tuple[Capture, Capture]]:
     """(view k, view k+1) capture pairs of one station and one target, tagged ones first."""
     groups: dict[tuple[int, str | None], dict[int, Capture]] = defaultdict(dict)
@@ -42,64 +55,74 @@ def view_pairs(session: Session, station: int | None) -> list[tuple[Capture, Cap
     ]
 
 
-def check_order(a: Observation, b: Observation, board: Board) -> None:
-    """Refuse pairs whose corner order is ambiguous or flipped between the two views."""
-    if board.is_symmetric:
-        raise FieldappError(
-            f"a {board.cols} x {board.rows} board looks the same after a half turn, so the "
-            "corner order between views is ambiguous: use a board whose inner corner counts "
-            "differ by an odd number (e.g. 9 x 6)"
-        )
-    if None not in (a.corner_zero_dark, b.corner_zero_dark) and (
-        a.corner_zero_dark != b.corner_zero_dark
-    ):
-        raise FieldappError(
-            f"the corner order is flipped between {a.name} and {b.name} (the board was "
-            "detected upside down in one of them): keep the board's long side level and "
-            "capture again"
-        )
-
-
-def calibrate_view_step(
-    session: Session, board: Board, station: int | None = None, nominal_deg: float | None = None
-) -> ViewStepResult:
-    """Solve ``view_step`` by weighted SVD on the corners seen at consecutive views."""
-    if nominal_deg is None and session.calibration.view_step is not None:
-        nominal_deg = session.calibration.view_step.angle_deg
-    sources, targets, weights, names = [], [], [], []
-    seen_once: list[str] = []
+def _collect(session: Session, board: Board, station: int | None, prior: Matrix4) -> _Pairs:
+    pairs = _Pairs()
     for first, second in view_pairs(session, station):
         a, b = observe(session, first, board), observe(session, second, board)
         if a is None or b is None:
-            seen_once += [o.name for o in (a, b) if o is not None]
+            pairs.seen_once += [o.name for o in (a, b) if o is not None]
             continue
-        for observation in (a, b):
-            problem = depth_problem(observation)
-            if problem:
-                raise FieldappError(problem)
-        check_order(a, b, board)
-        source, target, weight = paired_points(a, b)
-        sources.append(source)
-        targets.append(target)
-        weights.append(weight)
-        names.append(f"{a.name} -> {b.name}")
-    if not names:
-        if seen_once:
-            raise FieldappError(
-                f"the board was seen in only one view of a pair ({', '.join(seen_once)}): "
-                "place it where views k and k+1 both see it whole"
+        problems = [p for p in (depth_problem(a), depth_problem(b)) if p]
+        ordered_b = align_order(a, b, board, prior)
+        if ordered_b is None:
+            problems.append(f"{a.name} -> {b.name}: corner order cannot be told")
+        if problems:
+            pairs.refused += problems
+            continue
+        assert ordered_b is not None
+        source, target, weight = paired_points(a, ordered_b)
+        fit = fit_rigid_weighted(source, target, weight)
+        rotation_off = pose_error(fit.T_target_source, prior)[1]
+        if rotation_off > MAX_PAIR_ROTATION_DEG or fit.rmse_m > MAX_PAIR_RMSE_M:
+            pairs.refused.append(
+                f"{a.name} -> {b.name}: turn {rotation_angle_deg(fit.T_target_source[:3, :3]):.1f}"
+                f" degrees, RMSE {1000 * fit.rmse_m:.1f} mm (board moved, or another board "
+                "detected in one view)"
             )
-        raise FieldappError(
-            f"no {board.cols} x {board.rows} board found in any pair of consecutive views"
-            + (f" of station {station}" if station is not None else "")
-        )
-    fit = fit_rigid_weighted(np.vstack(sources), np.vstack(targets), np.concatenate(weights))
-    angle = rotation_angle_deg(fit.T_target_source[:3, :3])
-    if nominal_deg is not None and abs(angle - abs(nominal_deg)) > MAX_ANGLE_DISAGREEMENT_DEG:
-        raise FieldappError(
-            f"the solved turn is {angle:.1f} degrees but the table steps {abs(nominal_deg):g}: "
-            "the board moved between the views, or the views are not consecutive"
-        )
-    return ViewStepResult(
-        fit.T_target_source, angle, fit.rmse_m, names, sum(len(s) for s in sources)
+            continue
+        pairs.sources.append(source)
+        pairs.targets.append(target)
+        pairs.weights.append(weight)
+        pairs.names.append(f"{a.name} -> {b.name}")
+    return pairs
+
+
+def calibrate_view_step(
+    session: Session, board: Board, station: int | None = None
+) -> ViewStepResult:
+    """Solve ``view_step`` by weighted SVD on the corners seen at consecutive views; the
+    session's own (nominal) ``view_step`` is the prior that tells a wrong pair."""
+    assert session.calibration.view_step is not None  # load_session guarantees it
+    prior = session.calibration.view_step.matrix
+    pairs = _collect(session, board, station, prior)
+    if not pairs.names:
+        raise FieldappError(_nothing_usable(pairs, board, station))
+    fit = fit_rigid_weighted(
+        np.vstack(pairs.sources), np.vstack(pairs.targets), np.concatenate(pairs.weights)
     )
+    result = ViewStepResult(
+        fit.T_target_source,
+        rotation_angle_deg(fit.T_target_source[:3, :3]),
+        fit.rmse_m,
+        pairs.names,
+        sum(len(s) for s in pairs.sources),
+    )
+    result.warnings = [f"pair not used: {reason}" for reason in pairs.refused]
+    if len(pairs.names) == 1:
+        result.warnings.append(
+            "only one pair of views used: capture the board at another "
+            "station or height too, to check the result"
+        )
+    return result
+
+
+def _nothing_usable(pairs: _Pairs, board: Board, station: int | None) -> str:
+    if pairs.refused:
+        return "no usable pair of views:\n  " + "\n  ".join(pairs.refused)
+    if pairs.seen_once:
+        return (
+            f"the board was seen in only one view of a pair ({', '.join(pairs.seen_once)}): "
+            "place it where views k and k+1 both see it whole"
+        )
+    where = f" of station {station}" if station is not None else ""
+    return f"no {board.cols} x {board.rows} board found in any pair of consecutive views{where}"

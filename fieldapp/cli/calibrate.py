@@ -115,16 +115,16 @@ def _load(path: Path) -> Any:
 
 def run_views(args: argparse.Namespace) -> int:
     from fieldapp.calib.board import Board
-    from fieldapp.calib.store import provenance, save_keeping_previous, with_depth_camera
+    from fieldapp.calib.store import provenance, save_keeping_previous
     from fieldapp.calib.views import calibrate_view_step
-    from fieldapp.io.calibration import ViewStep
+    from fieldapp.io.calibration import ViewStep, load_calibration
 
     session = _load(args.session)
     board = Board.parse(args.board, args.square_mm)
     result = calibrate_view_step(session, board, args.station)
     nominal = session.calibration.view_step
-    angle = nominal.angle_deg if nominal is not None else round(result.angle_deg, 1)
-    view_step = ViewStep(angle_deg=angle, matrix=result.T_view_k_view_k1)
+    assert nominal is not None  # a loaded session always has one
+    view_step = ViewStep(angle_deg=nominal.angle_deg, matrix=result.T_view_k_view_k1)
     view_step.calibrated = provenance(  # type: ignore[attr-defined]
         args.serial,
         method="weighted SVD of checkerboard corners",
@@ -133,8 +133,8 @@ def run_views(args: argparse.Namespace) -> int:
         points=result.points,
         pairs=result.pairs,
     )
-    calibration = with_depth_camera(args.out, session.calibration.depth_camera)
-    calibration = calibration.model_copy(update={"view_step": view_step})
+    base = load_calibration(args.out) if args.out.exists() else session.calibration
+    calibration = base.model_copy(update={"view_step": view_step})
     previous = save_keeping_previous(args.out, calibration)
     print(
         f"view_step: turn {result.angle_deg:.4f} degrees, translation "
@@ -162,7 +162,9 @@ def run_stations(args: argparse.Namespace) -> int:
     if calibration.view_step is None:
         raise FieldappError(f"{args.calibration}: view_step is missing: calibrate views first")
     board = Board.parse(args.board, args.square_mm)
-    result = calibrate_stations(session, board, calibration.view_step, args.reference)
+    in_force = calibration.stations or session.calibration.stations
+    prior = in_force.to_reference if in_force else None
+    result = calibrate_stations(session, board, calibration.view_step, args.reference, prior)
     stations = Stations(reference=args.reference, to_reference=result.T_reference_station)
     stations.calibrated = provenance(  # type: ignore[attr-defined]
         args.serial,
@@ -175,7 +177,7 @@ def run_stations(args: argparse.Namespace) -> int:
     )
     for pair in result.pairs:
         print(
-            f"stations {pair.station_a}-{pair.station_b} via {', '.join(pair.targets)}: "
+            f"stations {pair.station_a}-{pair.station_b} via {', '.join(pair.boards)}: "
             f"RMSE {1000 * pair.fit.rmse_m:.2f} mm"
         )
     for station, parent in sorted(result.tree.items()):

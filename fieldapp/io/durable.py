@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +16,9 @@ from typing import Any
 def write_bytes_durably(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically and durably (creating parent folders)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    tmp_name = str(path.parent / f".{path.name}.{uuid.uuid4().hex}.tmp")
+    # os.open with 0o666 honours the umask (mkstemp would make every file private)
+    fd = os.open(tmp_name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
         with os.fdopen(fd, "wb") as tmp:
             tmp.write(data)

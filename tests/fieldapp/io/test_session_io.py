@@ -163,3 +163,12 @@ def test_a_session_needs_view_step_and_stations(make_spec_session, edit_json):
         load_session(folder)
     assert [p.field for p in error.value.problems] == ["view_step", "stations"]
     assert "needed to join the views" in str(error.value)
+
+
+def test_durable_files_honour_the_umask(tmp_path):
+    old = os.umask(0o022)
+    try:
+        durable.write_json_durably(tmp_path / "shared.json", {"v": 1})
+    finally:
+        os.umask(old)
+    assert (tmp_path / "shared.json").stat().st_mode & 0o777 == 0o644
