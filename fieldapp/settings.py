@@ -11,7 +11,7 @@ import logging
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import platformdirs
 import yaml
@@ -19,6 +19,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from fieldapp.io.jsonfile import field_path
 from fieldapp.recon.settings import ReconstructionSettings
+from fieldapp.results.settings import ResultsSettings
+
+if TYPE_CHECKING:
+    from devices.camera.quality import QualityThresholds
 
 log = logging.getLogger(__name__)
 
@@ -50,10 +54,29 @@ class PathSettings(Section):
     )
 
 
+class CameraQualitySettings(Section):
+    """Go/no-go limits of a frame before a view is captured (``devices.camera.quality``)."""
+
+    crop_radius_m: float = Field(default=2.25, gt=0)
+    min_fill_rate: float = Field(default=0.85, ge=0, le=1)
+    min_crop_fraction: float = Field(default=0.2, ge=0, le=1)
+    max_flying_ratio: float = Field(default=0.03, ge=0, le=1)
+    max_overexposed: float = Field(default=0.05, ge=0, le=1)
+    max_underexposed: float = Field(default=0.20, ge=0, le=1)
+    max_age_s: float = Field(default=0.5, gt=0)
+
+    def thresholds(self) -> QualityThresholds:
+        from devices.camera.quality import QualityThresholds
+
+        return QualityThresholds(**self.model_dump())
+
+
 class Settings(Section):
     devices: DeviceSettings = Field(default_factory=DeviceSettings)
     paths: PathSettings = Field(default_factory=PathSettings)
     reconstruction: ReconstructionSettings = Field(default_factory=ReconstructionSettings)
+    camera_quality: CameraQualitySettings = Field(default_factory=CameraQualitySettings)
+    results: ResultsSettings = Field(default_factory=ResultsSettings)
 
 
 def default_settings_path() -> Path:

@@ -81,3 +81,11 @@ def test_settings_file_from_environment(tmp_path, monkeypatch):
     monkeypatch.setenv("FIELDAPP_SETTINGS", str(path))
     assert load_settings().devices.base_endpoint == "tcp://127.0.0.1:6000"
     assert isinstance(Path(load_settings().paths.results_db), Path)
+
+
+def test_camera_quality_settings_build_the_devices_thresholds(tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text("camera_quality:\n  min_fill_rate: 0.6\n")
+    thresholds = load_settings(path, environ={}).camera_quality.thresholds()
+    assert thresholds.min_fill_rate == 0.6
+    assert thresholds.crop_radius_m == 2.25
