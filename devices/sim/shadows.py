@@ -28,7 +28,9 @@ class ShadowMap:
         self._grid = np.zeros((cells, cells), bool)
         self.is_soil = np.array([body.kind == "soil" for body in scene.bodies], bool)
         self._mapped = scene.soil is not None and sun[2] > 0
-        casters = [b.vertices_m for b in scene.bodies if b.kind != "soil"]
+        casters = [
+            _surface_points(b.vertices_m, b.triangles) for b in scene.bodies if b.kind != "soil"
+        ]
         if scene.soil is None or not casters or sun[2] <= 0:
             return
         points = np.concatenate(casters)
@@ -65,3 +67,22 @@ class ShadowMap:
         inside = (index >= 0).all(axis=1) & (index < n).all(axis=1)
         result[on_soil[inside]] = self._grid[index[inside, 1], index[inside, 0]]
         return result
+
+
+def _surface_points(
+    vertices_m: NDArray[np.float64], triangles: NDArray[np.int32]
+) -> NDArray[np.float64]:
+    """(N, 3) the vertices plus points spread over every triangle larger than a cell, so a big
+    flat caster (a board) marks all of its shadow, not only its corners' lines."""
+    corners = vertices_m[triangles]
+    edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    points = [vertices_m]
+    for n in np.unique(np.ceil(edges / (CELL_M / 2)).astype(int)):
+        if n <= 1:
+            continue
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1))
+        keep = i + j <= n
+        weights = np.stack([i[keep], j[keep], n - i[keep] - j[keep]], axis=1) / n
+        for triangle in corners[np.ceil(edges / (CELL_M / 2)).astype(int) == n]:
+            points.append(weights @ triangle)
+    return np.concatenate(points)

@@ -125,6 +125,9 @@ def test_shadow_map_misses_no_shadow() -> None:
 
     scene = plot_scene(seed=2)
     scene.add_sphere("ball", 0.0, -0.8, 400)
+    board = Checkerboard("standing", square_m=0.06)
+    centre = np.array([0.5, -0.6, 0.5])
+    scene.add_board(PlacedBoard(board, board_facing(board, centre, np.array([0.0, -1.6, 1.3]))))
     rig = RigGeometry()
     T = rig.T_field_camera(rig.station_pose(2), 90.0, scene.soil)
     mapped = Renderer(scene, KINECT_V2_PAPER, SensorModel(noise=False))
@@ -134,5 +137,5 @@ def test_shadow_map_misses_no_shadow() -> None:
     dark = SensorModel(noise=False, shadows=False)
     unshadowed = Renderer(scene, KINECT_V2_PAPER, dark).render(T).color
     shadowed = (unshadowed.astype(int).sum(axis=2) - a.astype(int).sum(axis=2)) > 30
-    assert shadowed.mean() > 0.01  # there are shadows in view (plants, the sphere)
+    assert shadowed.mean() > 0.01  # there are shadows in view (plants, the sphere, the board)
     np.testing.assert_array_equal(a, b)
