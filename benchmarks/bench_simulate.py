@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import tempfile
 import time
@@ -24,20 +25,30 @@ from devices.sim.world import SimWorld
 from fieldapp.cli import main as fieldapp_main
 
 
+def cpu_s() -> float:
+    """User + system CPU time of this process (all its threads) so far."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
 def time_sessions(scene: str, repeats: int) -> list[float]:
     times = []
     for index in range(repeats):
         with tempfile.TemporaryDirectory() as folder:
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), cpu_s()
             code = fieldapp_main(
                 ["simulate", "--out", f"{folder}/s", "--scene", scene, "--seed", str(index)]
             )
             times.append(time.perf_counter() - start)
+            cpu = cpu_s() - start_cpu
             if code != 0:
                 raise SystemExit(f"fieldapp simulate failed with exit code {code}")
             frames = len(list(Path(folder, "s", "frames").rglob("depth.png")))
             size_mb = sum(p.stat().st_size for p in Path(folder, "s").rglob("*")) / 1e6
-            print(f"  session {index}: {times[-1]:.2f} s, {frames} captures, {size_mb:.0f} MB")
+            print(
+                f"  session {index}: {times[-1]:.2f} s wall, {cpu:.2f} s CPU, {frames} captures, "
+                f"{size_mb:.0f} MB"
+            )
     return times
 
 
