@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.geometry import Matrix4, invert, make_transform, transform_points
+from devices.sim.linalg import apply
 
 PAPER_RGB = np.array([0.92, 0.92, 0.90], dtype=np.float32)
 TONER_RGB = np.array([0.04, 0.04, 0.04], dtype=np.float32)
@@ -100,10 +101,10 @@ class PlacedBoard:
     T_field_board: Matrix4
 
     def albedo(
-        self, points_field_m: NDArray[np.float64]
+        self, points_field_m: NDArray[np.floating]
     ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         """Colour (N, 3) 0-1 and NIR albedo (N,) at points on the board's printed face."""
-        local = transform_points(invert(self.T_field_board), points_field_m)
+        local = apply(invert(self.T_field_board), points_field_m)  # many points: no BLAS
         black = self.board.is_black(local[:, :2])
         rgb = np.where(black[:, None], TONER_RGB[None, :], PAPER_RGB[None, :])
         ir = np.where(black, TONER_IR, PAPER_IR).astype(np.float32)

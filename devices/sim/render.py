@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from devices.camera.frames import Frame, Intrinsics
 from devices.geometry import Matrix4
+from devices.sim.linalg import rotate_t
 from devices.sim.scene import Body, Scene
 from devices.sim.shadows import ShadowMap
 
@@ -136,9 +137,9 @@ class Renderer:
         self.scene = scene
         self.intrinsics = intrinsics
         self.sensor = sensor or SensorModel()
-        # a writeable copy: numpy's matmul takes a slow path on read-only arrays
-        self._rays_camera = ray_table(intrinsics, self.sensor.supersample).copy()
-        self._ray_norms = np.linalg.norm(self._rays_camera, axis=1)
+        rays_camera = ray_table(intrinsics, self.sensor.supersample)
+        self._rays_camera_t = np.ascontiguousarray(rays_camera.T)  # (3, N) for rotate_t
+        self._ray_norms = np.linalg.norm(rays_camera, axis=1)
         self._lock = threading.Lock()
         self._raycaster = scene_raycaster(scene)
         triangles: list[NDArray[np.int64]] = []
@@ -197,7 +198,7 @@ class Renderer:
     def _cast(self, T_field_camera: Matrix4) -> Hits:
         R = T_field_camera[:3, :3].astype(np.float32)
         origin = T_field_camera[:3, 3].astype(np.float32)
-        directions = self._rays_camera @ R.T
+        directions = rotate_t(R, self._rays_camera_t)
         rays = np.empty((len(directions), 6), np.float32)
         rays[:, :3] = origin
         rays[:, 3:] = directions
@@ -208,7 +209,7 @@ class Renderer:
         normals = result["primitive_normals"].numpy()
         facing = np.einsum("ij,ij->i", normals, directions) / -self._ray_norms
         normals *= np.where(facing < 0, np.float32(-1), np.float32(1))[:, None]  # two-sided
-        points = origin + np.where(hit, t, np.float32(0))[:, None] * directions
+        points = (origin + np.where(hit, t, np.float32(0))[:, None] * directions).astype(np.float32)
         rgb, ir = self._albedo(hit, gid, result, points)
         range_m = np.where(hit, t * self._ray_norms, np.float32(np.inf))
         body = np.where(hit, gid, 0)
@@ -219,7 +220,7 @@ class Renderer:
         hit: NDArray[np.bool_],
         gid: NDArray[np.int64],
         result: dict[str, o3d.core.Tensor],
-        points: NDArray[np.float64],
+        points: NDArray[np.floating],
     ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         n = len(hit)
         rgb, ir = np.zeros((n, 3), np.float32), np.zeros(n, np.float32)
@@ -244,7 +245,8 @@ class Renderer:
     def _shade(self, hits: Hits) -> NDArray[np.float32]:
         """Linear RGB (N, 3): albedo x (sky + sun x cos x unshadowed)."""
         hit = np.isfinite(hits.t)
-        cos_sun = np.clip(hits.normals @ self._sun, 0.0, 1.0)
+        n, sun = hits.normals, self._sun
+        cos_sun = np.clip(n[:, 0] * sun[0] + n[:, 1] * sun[1] + n[:, 2] * sun[2], 0.0, 1.0)
         lit = np.zeros(len(hits.t), np.float32)
         lit_side = hit & (cos_sun > 0)
         if self.sensor.shadows:

@@ -24,7 +24,7 @@ FOAM_RGB = np.array([0.93, 0.93, 0.90], dtype=np.float32)
 FOAM_IR = 0.80
 
 BodyKind = Literal["soil", "plant", "sphere", "board", "board_back", "wall"]
-Texture = Callable[[NDArray[np.float64]], tuple[NDArray[np.float32], NDArray[np.float32]]]
+Texture = Callable[[NDArray[np.floating]], tuple[NDArray[np.float32], NDArray[np.float32]]]
 """Procedural albedo: points (N, 3) -> colour (N, 3) float32 0-1, NIR albedo (N,) float32."""
 
 

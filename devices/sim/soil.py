@@ -81,7 +81,7 @@ class Soil:
         return vertices, triangles.astype(np.int32)
 
     def albedo(
-        self, points_m: NDArray[np.float64]
+        self, points_m: NDArray[np.floating]
     ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         """Colour (N, 3) float32 0-1 and NIR albedo (N,) of the soil at ``points_m`` (N, 3)."""
         size = self.spec.texture_px
