@@ -135,6 +135,7 @@ def reconstruct(
         kept={"measured_pixels": measured_pixels} | _sum_kept(filtered) | kept | outlier_counts,
         exg_thresholds=exg_thresholds,
         timings_s=dict(timer.seconds),
+        cpu_s=dict(timer.cpu_seconds),
         warnings=warnings,
     )
 

@@ -29,6 +29,7 @@ class Reconstruction:
     kept: dict[str, int]
     exg_thresholds: dict[int, float]
     timings_s: dict[str, float]
+    cpu_s: dict[str, float]
     warnings: list[str]
 
     def rows(self) -> list[PlantRow]:
@@ -60,6 +61,7 @@ class Reconstruction:
             "points_kept": self.kept,
             "exg_thresholds": {str(s): round(t, 4) for s, t in sorted(self.exg_thresholds.items())},
             "timings_s": {name: round(t, 4) for name, t in self.timings_s.items()},
+            "cpu_s": {name: round(t, 4) for name, t in self.cpu_s.items()},
             "warnings": self.warnings,
         }
 

@@ -19,6 +19,8 @@ from fieldapp.recon.settings import ReconstructionSettings
 
 from .conftest import Simulated
 
+pytestmark = pytest.mark.slow  # one simulated session for the module, a few full runs
+
 MATCH_RADIUS_M = 0.12
 """A plant is matched to the truth within this distance: the field frame rests on the nominal
 ground matrix, and the real reference station stood a few cm and about a degree off it."""
@@ -192,3 +194,28 @@ def test_nothing_usable_is_one_clear_line(
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("fieldapp reconstruct: ") and "no capture could be read" in err[-1]
     assert not (tmp_path / "out").exists()
+
+
+def test_without_a_ground_matrix_the_reference_camera_defines_the_field(
+    plot_session: Simulated, tmp_path: Path
+) -> None:
+    folder = tmp_path / "no-ground"
+    shutil.copytree(plot_session.folder, folder)
+    calibration = json.loads((folder / "calibration.json").read_text())
+    del calibration["ground"]
+    (folder / "calibration.json").write_text(json.dumps(calibration))
+    result = run_reconstruction(load_session(folder), ReconstructionSettings())
+    # the truth in that frame: origin below the reference camera, x along its forward view
+    T_field_camera = np.array(plot_session.truth["T_field_camera"]["5"])
+    forward = T_field_camera[:3, 2].copy()
+    forward[2] = 0.0
+    x_axis = forward / np.linalg.norm(forward)
+    y_axis = np.cross([0.0, 0.0, 1.0], x_axis)
+    truth = json.loads(json.dumps(plot_session.truth))
+    for plant in truth["plants"]:
+        offset = np.array([plant["x_m"], plant["y_m"], 0.0]) - T_field_camera[:3, 3]
+        plant["x_m"], plant["y_m"] = float(offset @ x_axis), float(offset @ y_axis)
+    e = matched_errors(result, truth)
+    assert len(result.plants) == 16
+    assert np.sqrt(np.mean(e["dh_cm"] ** 2)) <= 1.0
+    assert np.sqrt(np.mean(e["dw_cm"] ** 2)) <= 1.2
