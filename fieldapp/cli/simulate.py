@@ -88,9 +88,14 @@ def run(args: argparse.Namespace) -> int:
         raise FieldappError(f"--out: {args.out} exists and is not a folder")
     world = build_world(args.scene, seed, day, rig, args.plants)
     about = {"scene": args.scene, "seed": seed, "day": day}
-    count = write_session(args.out, world, stations, views, seed, about)
-    if args.scene == "checkerboard" and shots:
-        write_intrinsics_images(args.out, seed, shots)
+    try:
+        count = write_session(args.out, world, stations, views, seed, about)
+        if args.scene == "checkerboard" and shots:
+            write_intrinsics_images(args.out, seed, shots)
+    except OSError as error:
+        raise FieldappError(
+            f"--out: cannot write {error.filename or args.out}: {error.strerror}"
+        ) from None
     print(f"{args.out}: {count} captures of the {args.scene} scene (truth in truth.json)")
     return 0
 

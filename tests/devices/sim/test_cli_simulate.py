@@ -64,3 +64,15 @@ def test_refuses_to_overwrite_a_session(tmp_path: Path, capsys: pytest.CaptureFi
     assert main(["simulate", "--out", str(out), "--stations", "5", "--views", "0"]) == 0
     assert main(["simulate", "--out", str(out), "--stations", "5", "--views", "0"]) == 1
     assert "already exists" in capsys.readouterr().err
+
+
+def test_unwritable_output_is_a_one_line_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    assert main(["simulate", "--out", str(blocker / "s"), "--stations", "5", "--views", "0"]) == 1
+    error = capsys.readouterr().err.strip()
+    assert error.startswith("fieldapp simulate: --out: cannot write") and "\n" not in error
+    assert main(["simulate", "--out", str(blocker)]) == 1
+    assert "not a folder" in capsys.readouterr().err
