@@ -29,7 +29,6 @@ def peak_memory_mb() -> float:
 
 
 def run_fieldapp(folder: Path) -> dict[str, Any]:
-    from devices.geometry import invert, pose_error
     from fieldapp.io.session import load_session
     from fieldapp.recon.pipeline import run_reconstruction
     from fieldapp.recon.settings import ReconstructionSettings
@@ -37,24 +36,14 @@ def run_fieldapp(folder: Path) -> dict[str, Any]:
     start, start_cpu = time.perf_counter(), time.process_time()
     result = run_reconstruction(load_session(folder), ReconstructionSettings())
     wall, cpu = time.perf_counter() - start, time.process_time() - start_cpu
-    figures: dict[str, Any] = {
+    poses = {s: result.T_reference_station(s) for s in result.registrations}
+    return {
         "wall_s": wall,
         "cpu_s": cpu,
         "stages_s": result.timings_s,
         "stages_cpu_s": result.cpu_s,
         "plants": len(result.plants),
-    }
-    truth_file = folder / "truth.json"
-    if truth_file.exists():
-        truth = json.loads(truth_file.read_text())
-        T = {int(s): np.array(m) for s, m in truth["T_field_camera"].items()}
-        errors = [
-            pose_error(result.T_reference_station(s), invert(T[result.reference]) @ T[s])
-            for s in result.registrations
-        ]
-        figures["max_station_error_mm"] = max(e[0] for e in errors) * 1000
-        figures["max_station_error_deg"] = max(e[1] for e in errors)
-    return figures
+    } | station_errors(folder, result.reference, poses)
 
 
 def run_open3d(folder: Path) -> dict[str, Any]:
@@ -108,6 +97,7 @@ def run_open3d(folder: Path) -> dict[str, Any]:
     target = stations[reference]
     target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.05, max_nn=30))
     target = target.voxel_down_sample(0.02)
+    T_reference_station = {reference: np.eye(4)}
     for station, cloud in stations.items():
         if station == reference:
             continue
@@ -119,6 +109,9 @@ def run_open3d(folder: Path) -> dict[str, Any]:
             o3d.pipelines.registration.TransformationEstimationPointToPlane(),
         )
         cloud.transform(result.transformation)
+        T_reference_station[station] = (
+            result.transformation @ calibration.stations.to_reference[station]
+        )
     t = timed("ICP point-to-plane (2 cm) onto the reference", t)
     merged = o3d.geometry.PointCloud()
     for cloud in stations.values():
@@ -141,6 +134,26 @@ def run_open3d(folder: Path) -> dict[str, Any]:
         "stages_s": stages,
         "stages_cpu_s": stages_cpu,
         "plants": int(labels.max() + 1),
+    } | station_errors(folder, reference, T_reference_station)
+
+
+def station_errors(
+    folder: Path, reference: int, T_reference_station: dict[int, Any]
+) -> dict[str, float]:
+    """Worst station pose error (relative to the reference) against ``truth.json``, if any."""
+    from devices.geometry import invert, pose_error
+
+    truth_file = folder / "truth.json"
+    if not truth_file.exists():
+        return {}
+    truth = json.loads(truth_file.read_text())
+    T = {int(s): np.array(m) for s, m in truth["T_field_camera"].items()}
+    errors = [
+        pose_error(T_est, invert(T[reference]) @ T[s]) for s, T_est in T_reference_station.items()
+    ]
+    return {
+        "max_station_error_mm": max(e[0] for e in errors) * 1000,
+        "max_station_error_deg": max(e[1] for e in errors),
     }
 
 
