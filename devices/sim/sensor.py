@@ -1,0 +1,102 @@
+"""The Kinect v2 sensor model (``shared/KINECT-V2.md``): range, axial noise by distance and
+incidence angle (Fankhauser et al. 2015), flying pixels on depth edges, dropouts at grazing
+angles and on surfaces too dark in IR."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+MIN_RANGE_M = 0.5
+MAX_RANGE_M = 4.5
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """Noise and artefacts. Set ``noise=False`` for exact depth (tests of geometry)."""
+
+    noise: bool = True
+    flying_fraction: float = 0.5
+    """Share of depth-edge pixels that return a mixture of the two surfaces."""
+    edge_jump: float = 0.04
+    """Relative depth jump between neighbours that makes an edge."""
+    grazing_start_deg: float = 75.0
+    grazing_end_deg: float = 88.0
+    """Dropout probability rises from 0 to 1 between these incidence angles."""
+    min_ir: float = 60.0
+    """IR amplitude below which there is no depth (too little returned light)."""
+    ir_gain: float = 24000.0
+    """IR amplitude of a white (albedo 1) surface facing the camera at 1 m."""
+    ir_noise: float = 0.02
+    sun_azimuth_deg: float = 135.0
+    sun_elevation_deg: float = 50.0
+    sky: float = 0.35
+    color: bool = True
+    """Shade the colour image (off for IR-only calibration images: faster)."""
+    shadows: bool = True
+    """Cast shadow rays towards the sun for the colour image."""
+    supersample: int = 1
+    """Rays per pixel side (IR and colour are averaged; 3 for calibration images)."""
+
+
+def axial_noise_m(
+    depth_m: NDArray[np.floating], incidence_rad: NDArray[np.floating]
+) -> NDArray[np.float64]:
+    """Standard deviation (m) of Kinect v2 depth at ``depth_m`` and incidence angle (rad).
+
+    sigma_z [mm] = 1.5 - 0.5 z + 0.3 z^2 + 0.1 z^1.5 theta^2 / (pi/2 - theta)^2.
+    """
+    z = np.asarray(depth_m, np.float64)
+    theta = np.minimum(np.asarray(incidence_rad, np.float64), np.radians(89.0))
+    sigma_mm = 1.5 - 0.5 * z + 0.3 * z**2 + 0.1 * z**1.5 * theta**2 / (np.pi / 2 - theta) ** 2
+    return sigma_mm / 1000.0  # type: ignore[no-any-return]
+
+
+def sensor_depth(
+    sensor: SensorModel,
+    depth: NDArray[np.float32],
+    cos_incidence: NDArray[np.float32],
+    ir: NDArray[np.float32],
+    rng: np.random.Generator,
+) -> NDArray[np.float32]:
+    """Noisy depth (H, W) float32 from exact ``depth`` (H, W, inf = nothing hit),
+    ``cos_incidence`` and ``ir`` amplitude (H, W): axial noise, flying pixels, dropouts;
+    NaN where missing."""
+    valid = np.isfinite(depth)
+    safe = np.where(valid, depth, np.float32(1.0))
+    theta = np.arccos(np.clip(cos_incidence, 0.0, 1.0))
+    sigma = axial_noise_m(safe, theta).astype(np.float32)
+    weak = np.sqrt(np.clip(400.0 / np.maximum(ir, 1.0), 1.0, 9.0))  # dim returns are noisier
+    noisy = safe + sigma * weak * rng.standard_normal(depth.shape, np.float32)
+    noisy = flying_pixels(noisy, valid, sensor, rng)
+    span = np.radians(sensor.grazing_end_deg - sensor.grazing_start_deg)
+    p_drop = (theta - np.radians(sensor.grazing_start_deg)) / span
+    dropped = (rng.random(depth.shape, np.float32) < p_drop) | (ir < sensor.min_ir)
+    noisy[~valid | dropped] = np.nan
+    return noisy
+
+
+def flying_pixels(
+    depth: NDArray[np.float32],
+    valid: NDArray[np.bool_],
+    sensor: SensorModel,
+    rng: np.random.Generator,
+) -> NDArray[np.float32]:
+    """Mix the depths of both sides at a share of the pixels on depth edges (mixed pixels)."""
+    out = depth.copy()
+    jump = sensor.edge_jump * depth
+    h, w = depth.shape
+    for axis in (0, 1):
+        # pixel i against its next neighbour i + 1 along the axis (no wrapping around)
+        here = (slice(0, h - 1), slice(None)) if axis == 0 else (slice(None), slice(0, w - 1))
+        ahead = (slice(1, h), slice(None)) if axis == 0 else (slice(None), slice(1, w))
+        step = depth[ahead] - depth[here]
+        edge = valid[here] & valid[ahead] & (np.abs(step) > jump[here])
+        for side, sign in ((here, 1.0), (ahead, -1.0)):
+            chosen = edge & (rng.random(edge.shape, np.float32) < sensor.flying_fraction / 4)
+            mix = rng.random(edge.shape, np.float32)
+            target = out[side]
+            target[chosen] = (depth[side] + sign * mix * step)[chosen]
+    return out
