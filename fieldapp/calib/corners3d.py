@@ -12,12 +12,15 @@ from numpy.typing import NDArray
 from devices.camera.frames import Intrinsics
 
 MIN_PLANE_PIXELS = 12
+CORNER_SIGMA_PX = 0.25
+"""Typical sub-pixel corner error: laterally it weighs z * sigma / f, more than depth far away."""
 
 
 @dataclass
 class Corners3D:
     """``points_m``: (N, 3) camera-frame corners (NaN where depth was missing);
-    ``weights``: (N,) inverse variance of each corner's depth, 0 where missing."""
+    ``weights``: (N,) inverse variance of each corner's position (depth from the local plane
+    fit, lateral from the corner's pixel error at its distance), 0 where missing."""
 
     points_m: NDArray[np.float64]
     weights: NDArray[np.float64]
@@ -70,7 +73,8 @@ def lift_corners(
         if abs(denominator) < 1e-6:
             continue
         points[i] = corner_rays[i] * (offset / denominator)
-        weights[i] = 1.0 / (sigma_m**2 / good.sum() + 1e-10)
+        lateral_m = points[i, 2] * CORNER_SIGMA_PX / min(intrinsics.fx, intrinsics.fy)
+        weights[i] = 1.0 / (sigma_m**2 / good.sum() + 2.0 * lateral_m**2)
     return Corners3D(points, weights)
 
 

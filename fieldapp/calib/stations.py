@@ -1,9 +1,9 @@
 """Station-to-station calibration: boards between neighbouring stations, each seen from both,
-give pairwise transforms, composed along a spanning tree into ``stations.to_reference`` and
-then refined jointly over every corner seen from two stations.
+give pairwise transforms, composed along a spanning tree into ``stations.to_reference``, then
+refined jointly with the view step over every sighting (:mod:`fieldapp.calib.bundle`).
 
 Several boards may stand in the plot at once. Each station's sightings are grouped by position
-(in its view-0 frame), and the sightings of two stations are matched through the station
+(:mod:`fieldapp.calib.sightings`), and two stations' boards are matched through the station
 transforms in force (the nominal ones: a base stops within centimetres of them). Without such a
 prior, captures must show one board each and their ``target`` tags say which.
 """
@@ -15,35 +15,27 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
-from devices.geometry import Matrix4, invert, make_transform, pose_error, transform_points
+from devices.geometry import Matrix4, invert, pose_error
 from fieldapp.calib.board import Board
-from fieldapp.calib.observe import (
-    Observation,
-    align_order,
-    depth_problem,
-    observe_all,
-    paired_points,
-)
+from fieldapp.calib.bundle import BundleResult, bundle_adjust
+from fieldapp.calib.observe import align_order, match_by_prior, paired_points
 from fieldapp.calib.rigid import RigidFit, fit_rigid_weighted
+from fieldapp.calib.sightings import BoardGroup, board_groups
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import ViewStep
 from fieldapp.io.session import Session
 
-SAME_BOARD_M = 0.15
-"""Sightings of one station closer than this (in its own frame) are the same board."""
 MATCH_M = 0.4
-"""Sightings of two stations closer than this after the prior are the same board: a base stops
+"""Boards of two stations closer than this after the prior are the same board: a base stops
 a few cm and 1-2 degrees off, which at 2 m moves a board by up to ~0.3 m."""
 MAX_PAIR_RMSE_M = 0.01
 MAX_PRIOR_DISTANCE_M = 0.4
 MAX_PRIOR_ROTATION_DEG = 10.0
 """How far a pair may lie from the calibration in force."""
 
-Match = tuple[str, Observation, Observation]
+Link = tuple[BoardGroup, BoardGroup, bool]
+"""Two stations' sightings of one board; True when the second's corner order is reversed."""
 
 
 @dataclass
@@ -53,136 +45,84 @@ class PairResult:
     boards: list[str]
     fit: RigidFit
     """``fit.T_target_source`` maps station b's view 0 into station a's view 0."""
-    points_b: NDArray[np.float64]
-    points_a: NDArray[np.float64]
-    weights: NDArray[np.float64]
-    """The corner correspondences behind the fit: (N, 3), (N, 3), (N,)."""
+    links: list[Link]
 
 
 @dataclass
 class StationsResult:
     reference: int
     T_reference_station: dict[int, Matrix4]
+    T_view_k_view_k1: Matrix4
+    """The view step refined with the stations."""
     pairs: list[PairResult]
     tree: dict[int, int]
-    """Each station's parent on the way to the reference."""
+    """Each station's parent on the way to the reference (the starting point)."""
+    bundle: BundleResult
     warnings: list[str] = field(default_factory=list)
 
 
-def in_view0(observation: Observation, view_step: ViewStep) -> Observation:
-    """The observation's 3D corners moved from its view's frame into view 0's."""
-    T = view_step.T_view0_view(observation.capture.view)
-    corners = type(observation.corners)(
-        transform_points(T, observation.corners.points_m), observation.corners.weights
-    )
-    return Observation(
-        observation.capture, observation.corners_px, observation.corner_zero_dark, corners
-    )
-
-
-def sightings(
-    session: Session, board: Board, view_step: ViewStep, use_untagged: bool
-) -> dict[int, list[Observation]]:
-    """station -> one observation (view-0 frame) per physical board, averaged over every
-    capture of that station that saw it (noise falls as more views see a board).
-
-    Captures tagged with a ``target`` always count; untagged ones when ``use_untagged``.
-    """
-    groups: dict[int, list[list[Observation]]] = defaultdict(list)
-    for capture in session.captures:
-        if capture.key[2] is None and not use_untagged:
-            continue
-        for observation in observe_all(session, capture, board):
-            if depth_problem(observation) is None:
-                _group(groups[capture.station], in_view0(observation, view_step), board)
-    return {station: [_average(g) for g in found] for station, found in groups.items()}
-
-
-def _group(groups: list[list[Observation]], new: Observation, board: Board) -> None:
-    for group in groups:
-        if np.linalg.norm(group[0].centroid_m - new.centroid_m) < SAME_BOARD_M:
-            aligned = align_order(group[0], new, board, np.eye(4))  # same frame: no motion
-            if aligned is not None:
-                group.append(aligned)
-            return
-    groups.append([new])
-
-
-def _average(group: list[Observation]) -> Observation:
-    """Weighted mean of a board's corners over several sightings in one frame."""
-    points = np.stack([o.corners.points_m for o in group])
-    weights = np.stack([np.where(o.corners.valid, o.corners.weights, 0.0) for o in group])
-    total = weights.sum(axis=0)
-    mean = (
-        np.einsum("kn,knd->nd", weights, np.nan_to_num(points)) / np.maximum(total, 1e-30)[:, None]
-    )
-    mean[total == 0] = np.nan
-    first = group[0]
-    return Observation(
-        first.capture, first.corners_px, first.corner_zero_dark, type(first.corners)(mean, total)
-    )
-
-
 def matches(
-    seen_a: list[Observation], seen_b: list[Observation], T_prior: Matrix4 | None
-) -> list[Match]:
-    """Pairs of sightings of the same board from two stations."""
-    if T_prior is None:  # tags decide, when a tag names a single sighting on each side
+    seen_a: list[BoardGroup], seen_b: list[BoardGroup], T_prior: Matrix4 | None
+) -> list[tuple[str, BoardGroup, BoardGroup]]:
+    """Pairs of two stations' sightings of the same board."""
+    if T_prior is None:  # tags decide, when a tag names a single board on each side
         tags_a, tags_b = _single_tags(seen_a), _single_tags(seen_b)
         return [(tag, tags_a[tag], tags_b[tag]) for tag in sorted(tags_a.keys() & tags_b.keys())]
-    found = []
-    for b in seen_b:
-        moved = T_prior[:3, :3] @ b.centroid_m + T_prior[:3, 3]
-        distances = [float(np.linalg.norm(a.centroid_m - moved)) for a in seen_a]
-        if distances and min(distances) < MATCH_M:
-            a = seen_a[int(np.argmin(distances))]
-            label = _tag(a) or "board at " + " ".join(f"{x:+.2f}" for x in a.centroid_m)
-            found.append((label, a, b))
-    return found
+    return [
+        (_label(a), a, b)
+        for a, b in match_by_prior(seen_a, seen_b, T_prior, MATCH_M, lambda g: g.mean.centroid_m)
+    ]
 
 
-def _tag(observation: Observation) -> str:
-    return observation.capture.key[2] or ""
+def _label(group: BoardGroup) -> str:
+    tags = sorted({m.capture.key[2] for m in group.members if m.capture.key[2]})
+    return tags[0] if tags else "board at " + " ".join(f"{x:+.2f}" for x in group.mean.centroid_m)
 
 
-def _single_tags(seen: list[Observation]) -> dict[str, Observation]:
-    """tag -> its sighting, for tags whose captures showed exactly one board."""
-    counts: dict[str, list[Observation]] = defaultdict(list)
-    for observation in seen:
-        if _tag(observation):
-            counts[_tag(observation)].append(observation)
-    return {tag: found[0] for tag, found in counts.items() if len(found) == 1}
+def _single_tags(groups: list[BoardGroup]) -> dict[str, BoardGroup]:
+    """tag -> its board, for tags that name exactly one board of the station."""
+    found: dict[str, list[BoardGroup]] = defaultdict(list)
+    for group in groups:
+        for tag in {m.capture.key[2] for m in group.members if m.capture.key[2]}:
+            found[tag].append(group)
+    return {tag: groups[0] for tag, groups in found.items() if len(groups) == 1}
 
 
 def fit_pair(
-    a: int, b: int, found: list[Match], board: Board, T_prior: Matrix4 | None
+    a: int,
+    b: int,
+    found: list[tuple[str, BoardGroup, BoardGroup]],
+    board: Board,
+    T_prior: Matrix4 | None,
 ) -> tuple[PairResult | None, list[str]]:
     """One joint fit over every board both stations saw, or None with the reasons."""
     used, refused = [], []
-    for label, obs_a, obs_b in found:
-        ordered_b = align_order(obs_a, obs_b, board, T_prior)
+    for label, group_a, group_b in found:
+        mean_b = group_b.mean
+        ordered_b = align_order(group_a.mean, mean_b, board, T_prior)
         if ordered_b is None:
             refused.append(f"stations {a}-{b} via {label}: corner order cannot be told")
             continue
-        why = _implausible(fit_rigid_weighted(*paired_points(obs_a, ordered_b)), T_prior)
+        why = _implausible(fit_rigid_weighted(*paired_points(group_a.mean, ordered_b)), T_prior)
         if why:
             refused.append(f"stations {a}-{b} via {label}: {why}")
             continue
-        used.append((label, obs_a, ordered_b))
+        used.append((label, group_a, group_b, ordered_b))
     if not used:
         return None, refused
-    sources, targets, weights = zip(*(paired_points(oa, ob) for _, oa, ob in used), strict=True)
+    sources, targets, weights = zip(
+        *(paired_points(ga.mean, ob) for _, ga, _, ob in used), strict=True
+    )
     joint = fit_rigid_weighted(np.vstack(sources), np.vstack(targets), np.concatenate(weights))
-    labels = [label for label, _, _ in used]
+    labels = [label for label, _, _, _ in used]
     if joint.rmse_m > MAX_PAIR_RMSE_M:
         refused.append(
             f"stations {a}-{b}: the boards {', '.join(labels)} disagree (joint RMSE "
             f"{1000 * joint.rmse_m:.0f} mm): a board moved, or tags name different boards"
         )
         return None, refused
-    return PairResult(
-        a, b, labels, joint, np.vstack(sources), np.vstack(targets), np.concatenate(weights)
-    ), refused
+    links = [(ga, gb, ob is not gb.mean) for _, ga, gb, ob in used]
+    return PairResult(a, b, labels, joint, links), refused
 
 
 def _implausible(fit: RigidFit, T_prior: Matrix4 | None) -> str | None:
@@ -236,43 +176,6 @@ def compose(tree: dict[int, tuple[int, Matrix4]], reference: int) -> dict[int, M
     return T_reference
 
 
-def refine_jointly(
-    pairs: list[PairResult], initial: dict[int, Matrix4], reference: int
-) -> dict[int, Matrix4]:
-    """All station poses at once: minimise every corner pair's disagreement in the reference
-    frame (robust loss), starting from the spanning tree. Errors no longer pile up along long
-    chains of the tree."""
-    free = sorted(s for s in initial if s != reference)
-    index = {s: i for i, s in enumerate(free)}
-    scale = float(np.median(np.concatenate([p.weights for p in pairs])))
-
-    def pose(x: NDArray[np.float64], station: int) -> Matrix4:
-        if station == reference:
-            return np.eye(4)
-        i = 6 * index[station]
-        return make_transform(Rotation.from_rotvec(x[i : i + 3]).as_matrix(), x[i + 3 : i + 6])
-
-    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        parts = []
-        for pair in pairs:
-            in_reference_a = transform_points(pose(x, pair.station_a), pair.points_a)
-            in_reference_b = transform_points(pose(x, pair.station_b), pair.points_b)
-            weight = np.sqrt(pair.weights / scale)[:, None]
-            parts.append(((in_reference_a - in_reference_b) * weight).ravel())
-        return np.concatenate(parts)
-
-    x0 = np.concatenate(
-        [
-            np.r_[Rotation.from_matrix(initial[s][:3, :3]).as_rotvec(), initial[s][:3, 3]]
-            for s in free
-        ]
-    )
-    solution = least_squares(residuals, x0, loss="soft_l1", f_scale=0.005, x_scale="jac")
-    refined = {s: pose(solution.x, s) for s in free}
-    refined[reference] = np.eye(4)
-    return refined
-
-
 def calibrate_stations(
     session: Session,
     board: Board,
@@ -285,7 +188,7 @@ def calibrate_stations(
     ``prior``: the station transforms in force (e.g. nominal), to match boards between
     stations, tell the corner order when colours cannot, and drop implausible pairs.
     """
-    seen = sightings(session, board, view_step, use_untagged=prior is not None)
+    seen = board_groups(session, board, view_step, use_untagged=prior is not None)
     if not seen:
         raise FieldappError(f"no {board.cols} x {board.rows} board with usable depth was found")
     pairs, refused = [], []
@@ -310,11 +213,16 @@ def calibrate_stations(
             f"stations {', '.join(map(str, unlinked))} are not linked to station {reference} "
             "by any board seen from both sides"
         )
+    groups = [g for found in seen.values() for g in found]
+    links = [link for pair in pairs for link in pair.links]
+    bundle = bundle_adjust(groups, links, compose(tree, reference), view_step.matrix, reference)
     result = StationsResult(
         reference,
-        refine_jointly(pairs, compose(tree, reference), reference),
+        bundle.T_reference_station,
+        bundle.T_view_k_view_k1,
         pairs,
         {s: p for s, (p, _) in tree.items()},
+        bundle,
     )
     result.warnings = [f"pair not used: {reason}" for reason in refused]
     return result

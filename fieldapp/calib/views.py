@@ -10,7 +10,14 @@ from numpy.typing import NDArray
 
 from devices.geometry import Matrix4, pose_error, rotation_angle_deg
 from fieldapp.calib.board import Board
-from fieldapp.calib.observe import align_order, depth_problem, observe, paired_points
+from fieldapp.calib.observe import (
+    Observation,
+    align_order,
+    depth_problem,
+    match_by_prior,
+    observe_all,
+    paired_points,
+)
 from fieldapp.calib.rigid import fit_rigid_weighted
 from fieldapp.errors import FieldappError
 from fieldapp.io.session import Capture, Session
@@ -18,6 +25,8 @@ from fieldapp.io.session import Capture, Session
 MAX_PAIR_ROTATION_DEG = 3.0
 """A pair whose solved turn differs more from the table's nominal step is not the same board."""
 MAX_PAIR_RMSE_M = 0.01
+SAME_BOARD_M = 0.3
+"""A board seen at views k and k+1 lands within this of itself through the nominal step."""
 
 
 @dataclass
@@ -58,33 +67,43 @@ def view_pairs(session: Session, station: int | None) -> list[tuple[Capture, Cap
 def _collect(session: Session, board: Board, station: int | None, prior: Matrix4) -> _Pairs:
     pairs = _Pairs()
     for first, second in view_pairs(session, station):
-        a, b = observe(session, first, board), observe(session, second, board)
-        if a is None or b is None:
-            pairs.seen_once += [o.name for o in (a, b) if o is not None]
+        seen_a, seen_b = observe_all(session, first, board), observe_all(session, second, board)
+        matched = match_by_prior(seen_a, seen_b, prior, SAME_BOARD_M, _centroid)
+        if not matched:
+            pairs.seen_once += [o.name for o in seen_a[:1] + seen_b[:1]]
             continue
-        problems = [p for p in (depth_problem(a), depth_problem(b)) if p]
-        ordered_b = align_order(a, b, board, prior)
-        if ordered_b is None:
-            problems.append(f"{a.name} -> {b.name}: corner order cannot be told")
-        if problems:
-            pairs.refused += problems
-            continue
-        assert ordered_b is not None
-        source, target, weight = paired_points(a, ordered_b)
-        fit = fit_rigid_weighted(source, target, weight)
-        rotation_off = pose_error(fit.T_target_source, prior)[1]
-        if rotation_off > MAX_PAIR_ROTATION_DEG or fit.rmse_m > MAX_PAIR_RMSE_M:
-            pairs.refused.append(
-                f"{a.name} -> {b.name}: turn {rotation_angle_deg(fit.T_target_source[:3, :3]):.1f}"
-                f" degrees, RMSE {1000 * fit.rmse_m:.1f} mm (board moved, or another board "
-                "detected in one view)"
-            )
-            continue
-        pairs.sources.append(source)
-        pairs.targets.append(target)
-        pairs.weights.append(weight)
-        pairs.names.append(f"{a.name} -> {b.name}")
+        for a, b in matched:
+            _add_pair(pairs, a, b, board, prior)
     return pairs
+
+
+def _centroid(observation: Observation) -> NDArray[np.float64]:
+    return observation.centroid_m
+
+
+def _add_pair(pairs: _Pairs, a: Observation, b: Observation, board: Board, prior: Matrix4) -> None:
+    """Check one board seen at views k and k+1 and keep its corners, or say why not."""
+    problems = [p for p in (depth_problem(a), depth_problem(b)) if p]
+    ordered_b = align_order(a, b, board, prior)
+    if ordered_b is None:
+        problems.append(f"{a.name} -> {b.name}: corner order cannot be told")
+    if problems or ordered_b is None:
+        pairs.refused += problems
+        return
+    source, target, weight = paired_points(a, ordered_b)
+    fit = fit_rigid_weighted(source, target, weight)
+    rotation_off = pose_error(fit.T_target_source, prior)[1]
+    if rotation_off > MAX_PAIR_ROTATION_DEG or fit.rmse_m > MAX_PAIR_RMSE_M:
+        pairs.refused.append(
+            f"{a.name} -> {b.name}: turn {rotation_angle_deg(fit.T_target_source[:3, :3]):.1f}"
+            f" degrees, RMSE {1000 * fit.rmse_m:.1f} mm (board moved, or another board "
+            "detected in one view)"
+        )
+        return
+    pairs.sources.append(source)
+    pairs.targets.append(target)
+    pairs.weights.append(weight)
+    pairs.names.append(f"{a.name} -> {b.name}")
 
 
 def calibrate_view_step(

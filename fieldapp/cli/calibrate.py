@@ -151,6 +151,7 @@ def run_views(args: argparse.Namespace) -> int:
 
 
 def run_stations(args: argparse.Namespace) -> int:
+    from devices.geometry import rotation_angle_deg
     from fieldapp.calib.board import Board
     from fieldapp.calib.stations import calibrate_stations
     from fieldapp.calib.store import provenance, save_keeping_previous
@@ -168,12 +169,19 @@ def run_stations(args: argparse.Namespace) -> int:
     stations = Stations(reference=args.reference, to_reference=result.T_reference_station)
     stations.calibrated = provenance(  # type: ignore[attr-defined]
         args.serial,
-        method="checkerboards between neighbouring stations, spanning tree",
+        method="checkerboards between stations: spanning tree, then joint refinement",
         pairs={f"{p.station_a}-{p.station_b}": round(1000 * p.fit.rmse_m, 3) for p in result.pairs},
         tree={str(s): parent for s, parent in sorted(result.tree.items())},
+        joint_rmse_mm=round(1000 * result.bundle.rmse_m, 3),
+        boards=result.bundle.boards,
+        sightings=result.bundle.sightings,
+    )
+    view_step = calibration.view_step.model_copy(update={"matrix": result.T_view_k_view_k1})
+    view_step.refined_with_stations = provenance(  # type: ignore[attr-defined]
+        args.serial, solved_angle_deg=round(rotation_angle_deg(result.T_view_k_view_k1[:3, :3]), 4)
     )
     previous = save_keeping_previous(
-        args.out, calibration.model_copy(update={"stations": stations})
+        args.out, calibration.model_copy(update={"stations": stations, "view_step": view_step})
     )
     for pair in result.pairs:
         print(
@@ -183,6 +191,11 @@ def run_stations(args: argparse.Namespace) -> int:
     for station, parent in sorted(result.tree.items()):
         t = result.T_reference_station[station][:3, 3]
         print(f"station {station} (via {parent}): " + " ".join(f"{x:+.4f}" for x in t) + " m")
+    print(
+        f"joint refinement over {result.bundle.sightings} sightings of "
+        f"{result.bundle.boards} boards: RMSE {1000 * result.bundle.rmse_m:.2f} mm "
+        "(view_step refined too)"
+    )
     for warning in result.warnings:
         print(f"warning: {warning}")
     print(f"written to {args.out}" + (f" (previous kept as {previous})" if previous else ""))
