@@ -96,7 +96,7 @@ def _subpix_half_window(corners: NDArray[np.float32], board: Board) -> int:
         float(np.linalg.norm(np.diff(grid, axis=1), axis=2).min()),
         float(np.linalg.norm(np.diff(grid, axis=0), axis=2).min()),
     )
-    return int(np.clip(np.floor(spacing) - 2, 2, 11))
+    return int(np.clip(round(spacing / 2), 2, 11))
 
 
 def corner_zero_is_dark(
