@@ -1,6 +1,9 @@
 """The ``fieldapp`` command. Each subcommand is a module of this package with a ``register``
 function; modules are found by name, so adding a subcommand touches no other file.
 
+Layers above the core add their subcommands through the ``fieldapp.commands`` entry-point
+group (``pyproject.toml``): the core never imports them, yet ``fieldapp gui`` works.
+
 Subcommand modules import their heavy dependencies inside their handlers, so ``--help`` stays
 fast.
 """
@@ -13,11 +16,14 @@ import logging
 import pkgutil
 import sys
 from collections.abc import Callable, Sequence
+from importlib.metadata import entry_points
 
 from fieldapp import __version__
 from fieldapp.errors import FieldappError
 
 Handler = Callable[[argparse.Namespace], int]
+
+PLUGIN_GROUP = "fieldapp.commands"
 
 log = logging.getLogger("fieldapp")
 
@@ -35,6 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         module = importlib.import_module(f"{__name__}.{info.name}")
         module.register(subparsers)
+    for entry in sorted(entry_points(group=PLUGIN_GROUP), key=lambda e: e.name):
+        entry.load()(subparsers)
     return parser
 
 
