@@ -67,7 +67,8 @@ def view_pairs(session: Session, station: int | None) -> list[tuple[Capture, Cap
 def _collect(session: Session, board: Board, station: int | None, prior: Matrix4) -> _Pairs:
     pairs = _Pairs()
     for first, second in view_pairs(session, station):
-        seen_a, seen_b = observe_all(session, first, board), observe_all(session, second, board)
+        seen_a = _with_depth(observe_all(session, first, board), pairs)
+        seen_b = _with_depth(observe_all(session, second, board), pairs)
         matched = match_by_prior(seen_a, seen_b, prior, SAME_BOARD_M, _centroid)
         if not matched:
             pairs.seen_once += [o.name for o in seen_a[:1] + seen_b[:1]]
@@ -77,18 +78,27 @@ def _collect(session: Session, board: Board, station: int | None, prior: Matrix4
     return pairs
 
 
+def _with_depth(sightings: list[Observation], pairs: _Pairs) -> list[Observation]:
+    """The sightings whose corners have depth; the others are reported."""
+    usable = []
+    for sighting in sightings:
+        problem = depth_problem(sighting)
+        if problem:
+            pairs.refused.append(problem)
+        else:
+            usable.append(sighting)
+    return usable
+
+
 def _centroid(observation: Observation) -> NDArray[np.float64]:
     return observation.centroid_m
 
 
 def _add_pair(pairs: _Pairs, a: Observation, b: Observation, board: Board, prior: Matrix4) -> None:
     """Check one board seen at views k and k+1 and keep its corners, or say why not."""
-    problems = [p for p in (depth_problem(a), depth_problem(b)) if p]
     ordered_b = align_order(a, b, board, prior)
     if ordered_b is None:
-        problems.append(f"{a.name} -> {b.name}: corner order cannot be told")
-    if problems or ordered_b is None:
-        pairs.refused += problems
+        pairs.refused.append(f"{a.name} -> {b.name}: corner order cannot be told")
         return
     source, target, weight = paired_points(a, ordered_b)
     fit = fit_rigid_weighted(source, target, weight)

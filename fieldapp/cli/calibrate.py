@@ -60,6 +60,21 @@ def register(subparsers: Any) -> None:
     stations.add_argument("--out", type=Path, required=True, help="calibration file to write")
     stations.set_defaults(handler=run_stations)
 
+    ground = kinds.add_parser(
+        "ground",
+        help="the ground plane of the reference station (ground.matrix)",
+        description="Fit the ground plane (RANSAC) of the reference station, all its views "
+        "joined, and write ground.matrix: the reference frame into the field frame (z up, 0 "
+        "on the ground, origin below the camera, x along its forward direction).",
+    )
+    ground.add_argument("session", type=Path, help="session with the reference station's views")
+    ground.add_argument(
+        "--calibration", type=Path, required=True, help="calibration with view_step and stations"
+    )
+    ground.add_argument("--serial", help="the rig's serial number, recorded")
+    ground.add_argument("--out", type=Path, required=True, help="calibration file to write")
+    ground.set_defaults(handler=run_ground)
+
 
 def _board_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--board", required=True, help="inner corners COLSxROWS, e.g. 9x6")
@@ -195,6 +210,39 @@ def run_stations(args: argparse.Namespace) -> int:
         f"joint refinement over {result.bundle.sightings} sightings of "
         f"{result.bundle.boards} boards: RMSE {1000 * result.bundle.rmse_m:.2f} mm "
         "(view_step refined too)"
+    )
+    for warning in result.warnings:
+        print(f"warning: {warning}")
+    print(f"written to {args.out}" + (f" (previous kept as {previous})" if previous else ""))
+    return 0
+
+
+def run_ground(args: argparse.Namespace) -> int:
+    from fieldapp.calib.ground import calibrate_ground
+    from fieldapp.calib.store import provenance, save_keeping_previous
+    from fieldapp.io.calibration import Ground, load_calibration
+    from fieldapp.settings import load_settings
+
+    session = _load(args.session)
+    calibration = load_calibration(args.calibration)
+    result = calibrate_ground(session, calibration, load_settings().reconstruction)
+    ground = Ground(matrix=result.T_field_reference)
+    ground.calibrated = provenance(  # type: ignore[attr-defined]
+        args.serial,
+        method="RANSAC plane of the reference station",
+        camera_height_m=round(result.camera_height_m, 4),
+        camera_pitch_deg=round(result.camera_pitch_deg, 3),
+        inlier_fraction=round(result.inlier_fraction, 3),
+        rms_mm=round(1000 * result.rms_m, 2),
+    )
+    previous = save_keeping_previous(args.out, calibration.model_copy(update={"ground": ground}))
+    print(
+        f"camera {result.camera_height_m:.3f} m above the ground, pitched "
+        f"{result.camera_pitch_deg:.2f} degrees down"
+    )
+    print(
+        f"ground plane: {100 * result.inlier_fraction:.0f} % of {result.points} soil points "
+        f"within 10 cm, RMS {1000 * result.rms_m:.1f} mm"
     )
     for warning in result.warnings:
         print(f"warning: {warning}")
