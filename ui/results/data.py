@@ -1,0 +1,94 @@
+"""What the results panel shows, from a reconstruction just run or a results folder on disk:
+the plants' traits, the global cloud and each plant's cloud (field frame), ``report.json``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fieldapp.errors import FormatError, Problem
+from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.outputs import read_ply
+from fieldapp.results.files import PlantRecord, read_plants_csv, read_report
+from ui.results.runner import Outcome
+
+
+@dataclass
+class PlotResults:
+    """One reconstructed plot. ``cloud``: the plants' points (field frame, metres)."""
+
+    session_id: str
+    results_dir: Path
+    plants: list[PlantRecord]
+    cloud: Cloud
+    plant_clouds: dict[int, Cloud]
+    report: dict[str, Any]
+    session_folder: Path | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    def plant(self, plant_id: int) -> PlantRecord:
+        for record in self.plants:
+            if record.plant == plant_id:
+                return record
+        raise KeyError(plant_id)
+
+    def top_m(self, plant_id: int) -> NDArray[np.float64]:
+        """(3,) the point above the plant's base at the height of its highest point."""
+        record = self.plant(plant_id)
+        cloud = self.plant_clouds.get(plant_id)
+        z = float(cloud.points[:, 2].max()) if cloud is not None and len(cloud) else 0.0
+        return np.array([record.x_m, record.y_m, z])
+
+
+def from_outcome(outcome: Outcome) -> PlotResults:
+    result = outcome.result
+    plants = [
+        PlantRecord(r.plant, r.x_m, r.y_m, r.height_cm, r.width_cm, r.points) for r in result.rows()
+    ]
+    return PlotResults(
+        session_id=result.session_id,
+        results_dir=outcome.results_dir,
+        plants=plants,
+        cloud=result.cloud,
+        plant_clouds={p.id: p.cloud for p in result.plants},
+        report=result.report(),
+        session_folder=outcome.session.folder,
+        warnings=list(result.warnings),
+    )
+
+
+def load_results_dir(folder: Path) -> PlotResults:
+    """A results folder written by ``fieldapp reconstruct``; raises :class:`FormatError`."""
+    if not (folder / "plants.csv").is_file():
+        raise FormatError([Problem(str(folder), "", "no plants.csv: not a results folder")])
+    plants = read_plants_csv(folder / "plants.csv")
+    report = read_report(folder / "report.json")
+    cloud = _read_cloud(folder / "cloud.ply")
+    plant_clouds = {}
+    for record in plants:
+        path = folder / "plants" / f"{record.plant}.ply"
+        if path.is_file():
+            plant_clouds[record.plant] = _read_cloud(path)
+    warnings = [str(w) for w in report.get("warnings", []) or []]
+    return PlotResults(
+        str(report.get("session", folder.name)),
+        folder,
+        plants,
+        cloud,
+        plant_clouds,
+        report,
+        warnings=warnings,
+    )
+
+
+def _read_cloud(path: Path) -> Cloud:
+    try:
+        return read_ply(path)
+    except FileNotFoundError:
+        raise FormatError([Problem(str(path), "", "file is missing")]) from None
+    except (ValueError, OSError) as error:
+        raise FormatError([Problem(str(path), "", f"not a fieldapp PLY ({error})")]) from None

@@ -1,0 +1,281 @@
+"""The Results page: open a session (or the one just captured) or a results folder,
+reconstruct in a worker with stage-by-stage progress and cancel, then inspect the plot."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from PySide6 import QtCore, QtWidgets
+
+from fieldapp.errors import FieldappError
+from fieldapp.io.session import Session, load_session
+from fieldapp.recon.progress import Progress
+from fieldapp.settings import Settings
+from ui.results.data import PlotResults, from_outcome, load_results_dir
+from ui.results.export import export_results
+from ui.results.history import HistoryPanel
+from ui.results.manual import ManualPanel
+from ui.results.runner import Outcome, ReconstructionRunner, default_results_dir
+from ui.results.scene import build_scene
+from ui.results.tables import PlantTableModel, station_model
+from ui.results.topmap import TopMap
+from ui.results.view3d import CloudView
+
+log = logging.getLogger(__name__)
+
+
+class ResultsPanel(QtWidgets.QWidget):
+    """``results_shown(PlotResults)`` once a plot is on screen; ``error(str)`` for the sink."""
+
+    results_shown = QtCore.Signal(object)
+    error = QtCore.Signal(str)
+
+    def __init__(self, settings: Settings | None = None, parent: QtWidgets.QWidget | None = None):
+        super().__init__(parent)
+        self.settings = settings or Settings()
+        self.session: Session | None = None
+        self.results: PlotResults | None = None
+        self.selected: int | None = None
+        self.runner = ReconstructionRunner(self)
+        self.runner.progressed.connect(self._progressed)
+        self.runner.succeeded.connect(self._succeeded)
+        self.runner.failed.connect(self._failed)
+        self.runner.cancelled.connect(self._cancelled)
+        self._build()
+        self._set_running(False)
+
+    # --- public API --------------------------------------------------------------------
+
+    def open_session(self, folder: Path) -> None:
+        """Load ``folder`` as the session to reconstruct; a bad folder raises FieldappError."""
+        self.session = load_session(folder)
+        self.results_dir.setText(str(default_results_dir(folder)))
+        missing = len(self.session.missing())
+        self.session_label.setText(
+            f"session {self.session.id}: {len(self.session.captures)} captures, "
+            f"stations {', '.join(map(str, self.session.stations()))}"
+            + (f" ({missing} captures missing)" if missing else "")
+        )
+        self._set_running(False)
+
+    def open_results(self, folder: Path) -> None:
+        """Show a results folder written earlier (no reconstruction)."""
+        self.show_results(load_results_dir(folder))
+
+    def reconstruct(self) -> None:
+        """Start reconstructing the open session in a worker."""
+        if self.session is None:
+            raise FieldappError("open a session first")
+        folder = Path(self.results_dir.text().strip() or default_results_dir(self.session.folder))
+        self.runner.start(self.session, self.settings.reconstruction, folder)
+        self.stage.setText("starting…")
+        self.progress.setValue(0)
+        self._set_running(True)
+
+    def cancel(self) -> None:
+        self.runner.cancel()
+        self.stage.setText("cancelling at the next step…")
+
+    def show_results(self, results: PlotResults) -> None:
+        self.results, self.selected = results, None
+        scene = build_scene(results)
+        self.view3d.show_scene(scene)
+        self.map.show_scene(scene)
+        self.plant_model.set_plants(results.plants)
+        reference = results.report.get("reference_station")
+        self.stations.setModel(station_model(results.report, reference))
+        self.warnings.clear()
+        self.warnings.addItems(results.warnings or ["no warnings"])
+        self.tabs.setTabText(
+            self.tabs.indexOf(self.warnings), f"Warnings ({len(results.warnings)})"
+        )
+        self.manual.set_plants(results.plants)
+        self.summary.setText(
+            f"{results.session_id}: {len(results.plants)} plants, {len(results.cloud)} points "
+            f"→ {results.results_dir}"
+        )
+        self.export_button.setEnabled(True)
+        self.history.record_button.setEnabled(True)
+        self.results_shown.emit(results)
+
+    def select_plant(self, plant: int | None) -> None:
+        """Select ``plant`` everywhere: table row, 3D view and map."""
+        if self.results is None or plant == self.selected:
+            return
+        self.selected = plant
+        self.view3d.select(plant)
+        self.map.select(plant)
+        row = None if plant is None else self.plant_model.row_of(plant)
+        if row is None:
+            self.table.clearSelection()
+        else:
+            index = self.proxy.mapFromSource(self.plant_model.index(row, 0))
+            self.table.selectRow(index.row())
+            self.table.scrollTo(index)
+
+    def export_to(self, folder: Path) -> list[Path]:
+        """Export the plot shown into ``folder`` (blocking; the button runs it in a worker)."""
+        if self.results is None:
+            raise FieldappError("nothing to export: reconstruct or open results first")
+        growth = {t: self._growth(t) for t in ("height", "width")}
+        calibration = self.session.calibration.to_document() if self.session else None
+        return export_results(self.results, folder, self.manual.evaluation, growth, calibration)
+
+    # --- building ----------------------------------------------------------------------
+
+    def _build(self) -> None:
+        open_session = QtWidgets.QPushButton("Open session…")
+        open_session.clicked.connect(self._ask_session)
+        open_results = QtWidgets.QPushButton("Open results…")
+        open_results.clicked.connect(self._ask_results)
+        self.session_label = QtWidgets.QLabel("No session open.")
+        self.results_dir = QtWidgets.QLineEdit()
+        self.results_dir.setPlaceholderText("results folder (default: <session>-results)")
+        self.run_button = QtWidgets.QPushButton("Reconstruct")
+        self.run_button.clicked.connect(self._run_clicked)
+        self.cancel_button = QtWidgets.QPushButton("Cancel")
+        self.cancel_button.clicked.connect(self.cancel)
+        self.export_button = QtWidgets.QPushButton("Export…")
+        self.export_button.clicked.connect(self._ask_export)
+        self.progress = QtWidgets.QProgressBar()
+        self.progress.setRange(0, 1000)
+        self.stage = QtWidgets.QLabel("")
+        self.summary = QtWidgets.QLabel("")
+        row1 = QtWidgets.QHBoxLayout()
+        for widget in (open_session, open_results, self.session_label):
+            row1.addWidget(widget)
+        row1.addStretch(1)
+        row2 = QtWidgets.QHBoxLayout()
+        for widget in (
+            self.results_dir,
+            self.run_button,
+            self.cancel_button,
+            self.progress,
+            self.stage,
+            self.export_button,
+        ):
+            row2.addWidget(widget)
+        self.plant_model = PlantTableModel(self)
+        self.proxy = QtCore.QSortFilterProxyModel(self)
+        self.proxy.setSourceModel(self.plant_model)
+        self.proxy.setSortRole(QtCore.Qt.ItemDataRole.UserRole)
+        self.table = QtWidgets.QTableView()
+        self.table.setModel(self.proxy)
+        self.table.setSortingEnabled(True)
+        self.table.sortByColumn(0, QtCore.Qt.SortOrder.AscendingOrder)
+        self.table.setSelectionBehavior(QtWidgets.QAbstractItemView.SelectionBehavior.SelectRows)
+        self.table.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.SingleSelection)
+        self.table.verticalHeader().hide()
+        self.table.selectionModel().selectionChanged.connect(self._table_selected)
+        self.view3d = CloudView()
+        self.view3d.plant_clicked.connect(self.select_plant)
+        self.map = TopMap()
+        self.map.plant_clicked.connect(self.select_plant)
+        self.stations = QtWidgets.QTableView()
+        self.warnings = QtWidgets.QListWidget()
+        self.manual = ManualPanel()
+        self.history = HistoryPanel(self.settings.paths.results_db)
+        self.history.record_button.clicked.connect(self._record_clicked)
+        self.tabs = QtWidgets.QTabWidget()
+        pages = (
+            (self.view3d, "3D"),
+            (self.map, "Map"),
+            (self.stations, "Registration"),
+            (self.warnings, "Warnings"),
+            (self.manual, "Manual measurements"),
+            (self.history, "History"),
+        )
+        for widget, name in pages:
+            self.tabs.addTab(widget, name)
+        splitter = QtWidgets.QSplitter()
+        splitter.addWidget(self.table)
+        splitter.addWidget(self.tabs)
+        splitter.setStretchFactor(1, 3)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addLayout(row1)
+        layout.addLayout(row2)
+        layout.addWidget(self.summary)
+        layout.addWidget(splitter, 1)
+        self.export_button.setEnabled(False)
+        self.history.record_button.setEnabled(False)
+
+    # --- slots -------------------------------------------------------------------------
+
+    def _set_running(self, running: bool) -> None:
+        self.run_button.setEnabled(not running and self.session is not None)
+        self.cancel_button.setEnabled(running)
+
+    def _progressed(self, event: Progress) -> None:
+        self.progress.setValue(round(1000 * event.fraction))
+        self.stage.setText(f"{event.stage}: {event.message}")
+
+    def _succeeded(self, outcome: Outcome) -> None:
+        self._set_running(False)
+        self.progress.setValue(1000)
+        self.stage.setText(f"done: {len(outcome.result.plants)} plants")
+        self.show_results(from_outcome(outcome))
+
+    def _failed(self, message: str) -> None:
+        self._set_running(False)
+        self.stage.setText(f"⚠ failed: {message.splitlines()[0]}")
+        self.error.emit(message)
+
+    def _cancelled(self) -> None:
+        self._set_running(False)
+        self.progress.setValue(0)
+        self.stage.setText("cancelled")
+
+    def _table_selected(self) -> None:
+        rows = self.table.selectionModel().selectedRows()
+        if rows:
+            source = self.proxy.mapToSource(rows[0])
+            self.select_plant(self.plant_model.plants[source.row()].plant)
+
+    def _growth(self, trait: str) -> dict:  # type: ignore[type-arg]
+        from fieldapp.results.history import growth_series
+
+        return growth_series(self.history.observations, trait) if self.history.observations else {}
+
+    def _report(self, action: str, call: object) -> None:
+        try:
+            call()  # type: ignore[operator]
+        except FieldappError as error:
+            self.stage.setText(f"⚠ {action}: {str(error).splitlines()[0]}")
+            self.error.emit(f"{action}: {error}")
+
+    def _ask_session(self) -> None:
+        name = QtWidgets.QFileDialog.getExistingDirectory(self, "Session folder")
+        if name:
+            self._report("open session", lambda: self.open_session(Path(name)))
+
+    def _ask_results(self) -> None:
+        name = QtWidgets.QFileDialog.getExistingDirectory(self, "Results folder")
+        if name:
+            self._report("open results", lambda: self.open_results(Path(name)))
+
+    def _run_clicked(self) -> None:
+        self._report("reconstruct", self.reconstruct)
+
+    def _record_clicked(self) -> None:
+        if self.results is None:
+            return
+        plot = self.history.plot_name.text().strip()
+        results = self.results
+        self._report(
+            "record", lambda: self.history.record(plot, results.session_folder, results.results_dir)
+        )
+
+    def _ask_export(self) -> None:
+        name = QtWidgets.QFileDialog.getExistingDirectory(self, "Export into folder")
+        if not name:
+            return
+        from superqt.utils import create_worker
+
+        worker = create_worker(self.export_to, Path(name), _start_thread=False)
+        worker.returned.connect(
+            lambda paths: self.stage.setText(f"exported {len(paths)} files to {name}")
+        )
+        worker.errored.connect(lambda e: self.error.emit(f"export: {e}"))
+        self.stage.setText("exporting…")
+        worker.start()

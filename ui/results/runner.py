@@ -1,0 +1,141 @@
+"""The reconstruction on a worker thread: ``reconstruct()`` is driven by a superqt generator
+worker, every :class:`Progress` reaches the GUI thread as a signal, and cancelling stops the
+work at the next step boundary (the generator is closed there)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Generator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from PySide6 import QtCore
+from superqt.utils import GeneratorWorker, create_worker
+
+from fieldapp.errors import FieldappError
+from fieldapp.io.session import Session
+from fieldapp.recon.outputs import write_outputs
+from fieldapp.recon.pipeline import reconstruct
+from fieldapp.recon.progress import Progress
+from fieldapp.recon.result import Reconstruction
+from fieldapp.recon.settings import ReconstructionSettings
+
+log = logging.getLogger(__name__)
+
+
+class WorkerCrashed(Exception):
+    """A RuntimeError inside the reconstruction, passed on as an ordinary error."""
+
+
+@dataclass
+class Outcome:
+    """A finished reconstruction and the folder its files were written to."""
+
+    session: Session
+    result: Reconstruction
+    results_dir: Path
+
+
+def default_results_dir(session_folder: Path) -> Path:
+    """``<session>-results`` beside the session folder (the session itself is left as it is)."""
+    return session_folder.with_name(f"{session_folder.name}-results")
+
+
+def reconstruction_steps(
+    session: Session, settings: ReconstructionSettings, results_dir: Path
+) -> Generator[Progress, None, Outcome]:
+    """:func:`reconstruct`, then its files written into ``results_dir``. Closing this
+    generator closes the reconstruction's."""
+    steps = reconstruct(session, settings)
+    try:
+        while True:
+            try:
+                event = next(steps)
+            except StopIteration as done:
+                result: Reconstruction = done.value
+                break
+            yield event
+    finally:
+        steps.close()
+    plant_clouds = {p.id: p.cloud for p in result.plants}
+    write_outputs(results_dir, result.rows(), result.cloud, plant_clouds, result.report())
+    return Outcome(session, result, results_dir)
+
+
+class ReconstructionRunner(QtCore.QObject):
+    """Runs one reconstruction at a time; its signals arrive on the GUI thread."""
+
+    progressed = QtCore.Signal(object)
+    """A :class:`Progress`."""
+    succeeded = QtCore.Signal(object)
+    """An :class:`Outcome`."""
+    failed = QtCore.Signal(str)
+    cancelled = QtCore.Signal()
+
+    def __init__(self, parent: QtCore.QObject | None = None) -> None:
+        super().__init__(parent)
+        self._worker: GeneratorWorker[Progress, None, Outcome] | None = None
+        self._steps: Generator[Progress, None, Outcome] | None = None
+
+    @property
+    def running(self) -> bool:
+        return self._worker is not None
+
+    def start(self, session: Session, settings: ReconstructionSettings, results_dir: Path) -> None:
+        """Reconstruct ``session`` into ``results_dir``; refused while one is running."""
+        if self._worker is not None:
+            raise FieldappError("a reconstruction is already running")
+        self._steps = reconstruction_steps(session, settings, results_dir)
+        steps = self._steps
+
+        def work() -> Generator[Progress, None, Outcome]:
+            try:
+                return (yield from steps)
+            except RuntimeError as error:  # superqt would take it for a deleted worker
+                raise WorkerCrashed(f"{type(error).__name__}: {error}") from error
+
+        worker: Any = create_worker(work, _start_thread=False, _ignore_errors=True)
+        worker.yielded.connect(self.progressed.emit)
+        worker.returned.connect(self._on_returned)
+        worker.errored.connect(self._on_errored)
+        worker.aborted.connect(self._on_aborted)
+        worker.finished.connect(self._on_finished)
+        self._worker = worker
+        worker.start()
+
+    def cancel(self) -> None:
+        """Ask the work to stop at its next step boundary (``cancelled`` follows)."""
+        if self._worker is not None:
+            self._worker.quit()
+
+    def wait(self, timeout_s: float = 30.0) -> bool:
+        """Process events until the run has ended; False on timeout."""
+        deadline = QtCore.QDeadlineTimer(int(timeout_s * 1000))
+        while self._worker is not None and not deadline.hasExpired():
+            QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
+            QtCore.QThread.msleep(2)
+        return self._worker is None
+
+    def _on_returned(self, outcome: Outcome) -> None:
+        self.succeeded.emit(outcome)
+
+    def _on_errored(self, error: BaseException) -> None:
+        if isinstance(error, FieldappError):
+            message = str(error)
+        else:
+            log.error("reconstruction failed", exc_info=error)
+            message = f"unexpected error ({type(error).__name__}): {error}"
+        self.failed.emit(message)
+
+    def _on_aborted(self) -> None:
+        if self._steps is not None:
+            try:
+                self._steps.close()
+            except ValueError:  # still executing: it is closed when the worker lets go of it
+                log.debug("reconstruction generator still running at cancel")
+        self.cancelled.emit()
+
+    def _on_finished(self) -> None:
+        self._worker = None
+        self._steps = None

@@ -1,0 +1,78 @@
+"""The top-down map of the plot: the cloud from above, each plant's base, id and width (the
+circle enclosing its projection). Clicking a plant selects it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6 import QtCore, QtWidgets
+
+from ui.results.scene import CloudScene, nearest_plant
+
+MAP_POINTS = 40_000
+NORMAL_PEN = pg.mkPen((230, 60, 40), width=1.5)
+SELECTED_PEN = pg.mkPen((255, 200, 0), width=3.5)
+
+
+class TopMap(pg.PlotWidget):  # type: ignore[misc]
+    """``plant_clicked(id)`` when a click lands on (or near) a plant."""
+
+    plant_clicked = QtCore.Signal(int)
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setAspectLocked(True)
+        self.setLabel("bottom", "x (m, field frame)")
+        self.setLabel("left", "y (m, field frame)")
+        self.showGrid(x=True, y=True, alpha=0.25)
+        self.points = pg.ScatterPlotItem(size=2, pen=None)
+        self.addItem(self.points)
+        self.circles: dict[int, QtWidgets.QGraphicsEllipseItem] = {}
+        self.texts: list[pg.TextItem] = []
+        self.scene_data: CloudScene | None = None
+        self.selected: int | None = None
+        self.scene().sigMouseClicked.connect(self._clicked)
+
+    def show_scene(self, scene: CloudScene | None) -> None:
+        for item in [*self.circles.values(), *self.texts]:
+            self.removeItem(item)
+        self.circles, self.texts, self.selected = {}, [], None
+        self.scene_data = scene
+        if scene is None:
+            self.points.clear()
+            return
+        step = max(1, len(scene.points_m) // MAP_POINTS)
+        colors = (scene.colors[::step] * 255).astype(np.uint8)
+        self.points.setData(
+            x=scene.points_m[::step, 0],
+            y=scene.points_m[::step, 1],
+            brush=[pg.mkBrush(*c) for c in colors],
+        )
+        for label in scene.labels:
+            x, y, r = float(label.position_m[0]), float(label.position_m[1]), label.radius_m
+            circle = QtWidgets.QGraphicsEllipseItem(x - r, y - r, 2 * r, 2 * r)
+            circle.setPen(NORMAL_PEN)
+            self.addItem(circle)
+            self.circles[label.plant] = circle
+            text = pg.TextItem(str(label.plant), color=(255, 90, 60), anchor=(0, 1))
+            text.setPos(x + r * 0.7, y + r * 0.7)
+            self.addItem(text)
+            self.texts.append(text)
+        self.autoRange()
+
+    def select(self, plant: int | None) -> None:
+        if plant == self.selected:
+            return
+        if self.selected in self.circles:
+            self.circles[self.selected].setPen(NORMAL_PEN)
+        self.selected = plant
+        if plant in self.circles:
+            self.circles[plant].setPen(SELECTED_PEN)
+
+    def _clicked(self, event: object) -> None:
+        if self.scene_data is None:
+            return
+        position = self.plotItem.vb.mapSceneToView(event.scenePos())  # type: ignore[attr-defined]
+        plant = nearest_plant((position.x(), position.y()), self.scene_data.labels, 0.1)
+        if plant is not None:
+            self.plant_clicked.emit(plant)

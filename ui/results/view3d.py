@@ -1,0 +1,206 @@
+"""The 3D view of the plot: the global cloud, each plant's id at its top and the ground grid
+(``pyqtgraph.opengl``). Clicking near a plant's label selects it.
+
+OpenGL is not available everywhere (Qt's offscreen platform has none): :func:`gl_available`
+tells, and :class:`CloudView` then shows a side view (x against height) drawn with pyqtgraph's
+2D plots instead, with the same labels and selection.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+
+import numpy as np
+import pyqtgraph as pg
+import pyqtgraph.opengl as gl
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from ui.results.scene import CloudScene, nearest_on_screen, project
+
+log = logging.getLogger(__name__)
+
+GRID_SPACING_M = 0.1
+
+
+@functools.cache
+def gl_available() -> bool:
+    """Whether an OpenGL context can be made (False on the offscreen platform)."""
+    context = QtGui.QOpenGLContext()
+    available = bool(context.create())
+    if not available:
+        log.info(
+            "no OpenGL on platform %s: the 3D view falls back to a side view",
+            QtGui.QGuiApplication.platformName(),
+        )
+    return available
+
+
+class CloudView(QtWidgets.QWidget):
+    """The plot in 3D (or from the side without OpenGL). ``plant_clicked(id)`` on a click."""
+
+    plant_clicked = QtCore.Signal(int)
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        self.is_3d = gl_available()
+        self.view: _GLView | _SideView = _GLView(self) if self.is_3d else _SideView(self)
+        self.view.clicked_plant.connect(self.plant_clicked.emit)
+        if not self.is_3d:
+            note = QtWidgets.QLabel("No OpenGL here: side view (x against height).")
+            note.setObjectName("fallbackNote")
+            layout.addWidget(note)
+        layout.addWidget(self.view)
+        self.scene: CloudScene | None = None
+        self.selected: int | None = None
+
+    def show_scene(self, scene: CloudScene | None) -> None:
+        self.scene, self.selected = scene, None
+        self.view.show_scene(scene)
+
+    def select(self, plant: int | None) -> None:
+        """Highlight ``plant`` (None: none) and turn the view towards it."""
+        if self.scene is None or plant == self.selected:
+            return
+        self.selected = plant
+        self.view.select(self.scene, plant)
+
+
+class _GLView(QtWidgets.QWidget):
+    clicked_plant = QtCore.Signal(int)
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        self.widget = _ClickableGL(self)
+        self.widget.setBackgroundColor((20, 22, 26))
+        self.widget.clicked.connect(self._clicked)
+        layout.addWidget(self.widget)
+        self.cloud = gl.GLScatterPlotItem(pxMode=True, size=2.0)
+        self.widget.addItem(self.cloud)
+        self.grid = gl.GLGridItem(color=(255, 255, 255, 60))
+        self.widget.addItem(self.grid)
+        self.texts: list[object] = []
+        self.scene: CloudScene | None = None
+
+    def show_scene(self, scene: CloudScene | None) -> None:
+        self.scene = scene
+        for text in self.texts:
+            self.widget.removeItem(text)
+        self.texts = []
+        if scene is None:
+            self.cloud.setData(pos=np.zeros((0, 3)), color=np.zeros((0, 4)))
+            return
+        self.cloud.setData(pos=scene.points_m, color=scene.colors)
+        x0, x1, y0, y1 = scene.extent_m
+        self.grid.setSize(x=x1 - x0, y=y1 - y0)
+        self.grid.setSpacing(x=GRID_SPACING_M, y=GRID_SPACING_M)
+        self.grid.resetTransform()
+        self.grid.translate((x0 + x1) / 2, (y0 + y1) / 2, 0.0)
+        for label in scene.labels:
+            text = gl.GLTextItem(
+                pos=label.position_m + np.array([0.0, 0.0, 0.03]),
+                text=str(label.plant),
+                color=(255, 230, 80),
+            )
+            self.widget.addItem(text)
+            self.texts.append(text)
+        centre = QtGui.QVector3D((x0 + x1) / 2, (y0 + y1) / 2, 0.0)
+        self.widget.setCameraPosition(
+            pos=centre, distance=1.4 * max(x1 - x0, y1 - y0), elevation=35, azimuth=-60
+        )
+
+    def select(self, scene: CloudScene, plant: int | None) -> None:
+        self.cloud.setData(color=scene.colors_for(plant))
+        if plant is not None:
+            label = scene.label(plant)
+            self.widget.setCameraPosition(pos=QtGui.QVector3D(*label.position_m), distance=0.9)
+
+    def _clicked(self, x: float, y: float) -> None:
+        if self.scene is None or not self.scene.labels:
+            return
+        mvp = np.array(
+            (self.widget.projectionMatrix() * self.widget.viewMatrix()).copyDataTo()
+        ).reshape(4, 4)
+        positions = np.array([label.position_m for label in self.scene.labels])
+        pixels = project(positions, mvp, self.widget.width(), self.widget.height())
+        projected = [
+            (label.plant, float(px), float(py))
+            for label, (px, py) in zip(self.scene.labels, pixels, strict=True)
+            if np.isfinite(px)
+        ]
+        plant = nearest_on_screen((x, y), projected)
+        if plant is not None:
+            self.clicked_plant.emit(plant)
+
+
+class _ClickableGL(gl.GLViewWidget):  # type: ignore[misc]
+    """A GLViewWidget that reports a click (press and release without a drag)."""
+
+    clicked = QtCore.Signal(float, float)
+
+    def mousePressEvent(self, event: QtGui.QMouseEvent) -> None:
+        self._pressed_at = event.position()
+        super().mousePressEvent(event)
+
+    def mouseReleaseEvent(self, event: QtGui.QMouseEvent) -> None:
+        pressed = getattr(self, "_pressed_at", None)
+        if pressed is not None and (event.position() - pressed).manhattanLength() < 4:
+            self.clicked.emit(event.position().x(), event.position().y())
+        super().mouseReleaseEvent(event)
+
+
+class _SideView(pg.PlotWidget):  # type: ignore[misc]
+    clicked_plant = QtCore.Signal(int)
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setLabel("bottom", "x (m, field frame)")
+        self.setLabel("left", "height (m)")
+        self.setAspectLocked(True)
+        self.scatter = pg.ScatterPlotItem(size=2, pen=None)
+        self.addItem(self.scatter)
+        self.ground = pg.InfiniteLine(pos=0.0, angle=0, pen=pg.mkPen((120, 120, 120), width=1))
+        self.addItem(self.ground)
+        self.texts: list[pg.TextItem] = []
+        self.scene_data: CloudScene | None = None
+        self.scene().sigMouseClicked.connect(self._clicked)
+
+    def show_scene(self, scene: CloudScene | None) -> None:
+        self.scene_data = scene
+        for text in self.texts:
+            self.removeItem(text)
+        self.texts = []
+        if scene is None:
+            self.scatter.clear()
+            return
+        self._draw_points(scene, None)
+        for label in scene.labels:
+            text = pg.TextItem(str(label.plant), color=(200, 150, 0), anchor=(0.5, 1.0))
+            text.setPos(float(label.position_m[0]), float(label.position_m[2]))
+            self.addItem(text)
+            self.texts.append(text)
+
+    def select(self, scene: CloudScene, plant: int | None) -> None:
+        self._draw_points(scene, plant)
+
+    def _draw_points(self, scene: CloudScene, plant: int | None) -> None:
+        colors = (scene.colors_for(plant) * 255).astype(np.uint8)
+        brushes = [pg.mkBrush(*c) for c in colors[:: max(1, len(colors) // 20000)]]
+        points = scene.points_m[:: max(1, len(colors) // 20000)]
+        self.scatter.setData(x=points[:, 0], y=points[:, 2], brush=brushes)
+
+    def _clicked(self, event: object) -> None:
+        if self.scene_data is None:
+            return
+        position = self.plotItem.vb.mapSceneToView(event.scenePos())  # type: ignore[attr-defined]
+        best = None
+        for label in self.scene_data.labels:
+            distance = abs(float(label.position_m[0]) - position.x())
+            if distance <= max(label.radius_m, 0.05) and (best is None or distance < best[0]):
+                best = (distance, label.plant)
+        if best is not None:
+            self.clicked_plant.emit(best[1])
