@@ -69,8 +69,8 @@ class DeviceSummary:
 class Rig:
     """The open devices of one rig. Close it (or use it as a context manager) when done.
 
-    ``world``, ``sim_table`` and ``sim_base`` are the simulators behind simulated devices
-    (``None`` for real ones), for demos and fault injection.
+    ``world``, ``sim_table`` (with ``table_server``, its pty) and ``sim_base`` are the
+    simulators behind simulated devices (``None`` for real ones), for demos and fault injection.
     """
 
     camera: DepthCamera
@@ -81,6 +81,7 @@ class Rig:
     base_where: str
     world: SimWorld | None = None
     sim_table: GrblSimulator | None = None
+    table_server: PtyGrblServer | None = None
     sim_base: SimulatedBase | None = None
     realtime: bool = False
     _closers: ExitStack = field(default_factory=ExitStack, repr=False)
@@ -129,12 +130,13 @@ def open_rig(
     realtime: bool | None = None,
     world: SimWorld | None = None,
     seed: int = 0,
+    day: int = 0,
 ) -> Rig:
     """Open the camera, table and base ``devices`` names (defaults: all simulated).
 
-    ``world``: the simulated world (default: the embedded plot of ``seed``), made only when a
-    device is simulated. Raises :class:`RigError` when a device cannot be opened; whatever was
-    already open is closed again.
+    ``world``: the simulated world (default: the embedded plot of ``seed`` on ``day``), made
+    only when a device is simulated. Raises :class:`RigError` when a device cannot be opened;
+    whatever was already open is closed again.
     """
     devices = devices or DeviceSettings()
     realtime = devices.realtime_simulation if realtime is None else realtime
@@ -144,9 +146,9 @@ def open_rig(
     if world is None and needs_world:
         from devices.sim.world import SimWorld
 
-        world = SimWorld.default(seed=seed)
+        world = SimWorld.default(seed=seed, day=day)
     with ExitStack() as stack:
-        sim_table, table, table_where = _open_table(devices, world, realtime, stack)
+        table_server, table, table_where = _open_table(devices, world, realtime, stack)
         sim_base, base, base_where = _open_base(devices, world, realtime, stack)
         camera = _open_camera(devices, world, realtime, stack)
         rig = Rig(
@@ -157,7 +159,8 @@ def open_rig(
             table_where=table_where,
             base_where=base_where,
             world=world,
-            sim_table=sim_table,
+            sim_table=None if table_server is None else table_server.simulator,
+            table_server=table_server,
             sim_base=sim_base,
             realtime=realtime,
             _closers=stack.pop_all(),
@@ -169,10 +172,10 @@ def open_rig(
 
 def _open_table(
     devices: DeviceSettings, world: SimWorld | None, realtime: bool, stack: ExitStack
-) -> tuple[GrblSimulator | None, GrblTable, str]:
+) -> tuple[PtyGrblServer | None, GrblTable, str]:
     from devices.table import GrblSimulator, PtyGrblServer, TableException, open_table
 
-    simulator: GrblSimulator | None = None
+    server: PtyGrblServer | None = None
     port = devices.table_port
     if port is None:
         if world is None:
@@ -180,7 +183,7 @@ def _open_table(
         simulator = GrblSimulator(
             off_target_deg=SIM_TABLE_OFF_TARGET_DEG, on_angle=world.set_table_angle_deg
         )
-        server: PtyGrblServer = PtyGrblServer(simulator, time_scale=1.0 if realtime else 0.0)
+        server = PtyGrblServer(simulator, time_scale=1.0 if realtime else 0.0)
         server.start()
         stack.callback(server.close)
         port = server.device_path
@@ -192,8 +195,8 @@ def _open_table(
             f"and that devices.table_port is right (try `fieldapp table --port {port} status`)"
         ) from error
     stack.callback(table.close)
-    where = f"Grbl on {port}" if simulator is None else f"simulated Grbl on {port}"
-    return simulator, table, where
+    where = f"Grbl on {port}" if server is None else f"simulated Grbl on {port}"
+    return server, table, where
 
 
 def _open_base(

@@ -1,0 +1,47 @@
+"""Mission fixtures: small plans on the simulated rig moving at once."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from fieldapp.mission import MissionPlan, MissionSetup, new_mission
+from fieldapp.mission.plan import RetryLimits, ViewPlan, grid_stations
+from fieldapp.settings import DeviceSettings
+
+
+def small_plan(
+    stations: tuple[int, ...] = (5, 4), views: int | ViewPlan = 2, **fields: Any
+) -> MissionPlan:
+    """Stations of the 3 x 3 grid in the given order, ``views`` views, one frame per capture,
+    no settling, short retry waits, simulated devices moving at once."""
+    grid = {s.number: s for s in grid_stations()}
+    values: dict[str, Any] = {
+        "stations": [grid[n] for n in stations],
+        "reference_station": 5 if 5 in stations else stations[0],
+        "views": views if isinstance(views, ViewPlan) else ViewPlan(count=views),
+        "frames_per_capture": 1,
+        "settle_s": 0.0,
+        "retries": RetryLimits(base_link_wait_s=0.1),
+        "devices": DeviceSettings(realtime_simulation=False),
+    }
+    values.update(fields)
+    return MissionPlan(**values)
+
+
+@pytest.fixture
+def open_mission(tmp_path: Path) -> Iterator[Callable[..., MissionSetup]]:
+    """``open_mission(plan, realtime=False)``: a new mission in ``tmp_path/S``; closed after."""
+    setups: list[MissionSetup] = []
+
+    def make(plan: MissionPlan, realtime: bool = False) -> MissionSetup:
+        setup = new_mission(plan, tmp_path / "S", realtime=realtime)
+        setups.append(setup)
+        return setup
+
+    yield make
+    for setup in setups:
+        setup.close()
