@@ -37,11 +37,15 @@ def with_depth_camera(path: Path, camera: DepthCamera) -> Calibration:
 
 def save_keeping_previous(path: Path, calibration: Calibration) -> Path | None:
     """Write ``calibration`` to ``path`` durably; an existing file is first copied to
-    ``<stem>.previous-<time>.json`` beside it. Returns that copy's path, if any."""
+    ``<stem>.previous-<time>-<nn>.json`` beside it. Returns that copy's path, if any."""
     previous = None
     if path.exists():
         stamp = datetime.now().strftime("%Y%m%dT%H%M%S")
-        previous = path.with_name(f"{path.stem}.previous-{stamp}.json")
+        count = 1
+        previous = path.with_name(f"{path.stem}.previous-{stamp}-01.json")
+        while previous.exists():  # never overwrite a kept calibration; names sort by time
+            count += 1
+            previous = path.with_name(f"{path.stem}.previous-{stamp}-{count:02d}.json")
         shutil.copy2(path, previous)
         fsync_folder(path.parent)
     _save(path, calibration)

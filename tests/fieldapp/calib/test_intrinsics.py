@@ -153,3 +153,16 @@ def test_corner_order_check_tells_a_half_turn_on_an_asymmetric_board():
 def test_sixteen_bit_ir_is_detected():
     image = board_image(BOARD, 20, False).astype(np.uint16) * 40 + 500
     assert detect_corners(image, BOARD) is not None
+
+
+def test_saving_twice_in_one_second_keeps_both_previous_files(tmp_path):
+    from fieldapp.calib.store import save_keeping_previous
+    from fieldapp.io.calibration import CALIBRATION_FORMAT, Calibration, DepthCamera
+
+    camera = DepthCamera(width=4, height=3, fx=1.0, fy=1.0, cx=2.0, cy=1.5)
+    path = tmp_path / "rig.json"
+    for fx in (1.0, 2.0, 3.0):
+        camera.fx = fx
+        save_keeping_previous(path, Calibration(format=CALIBRATION_FORMAT, depth_camera=camera))
+    kept = sorted(tmp_path.glob("rig.previous-*.json"))
+    assert [load_calibration(p).depth_camera.fx for p in kept] == [1.0, 2.0]
