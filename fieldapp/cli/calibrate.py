@@ -10,7 +10,7 @@ from typing import Any
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "calibrate",
-        help="calibrate the rig (intrinsics, ...)",
+        help="calibrate the rig: intrinsics, view step, stations, ground",
         description="Calibrate the rig. Each solver prints its quality figures and says what "
         "to redo when they are poor; results are written into a calibration file, the "
         "previous file kept beside it.",
