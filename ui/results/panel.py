@@ -272,7 +272,7 @@ class ResultsPanel(QtWidgets.QWidget):
             return
         from superqt.utils import create_worker
 
-        worker = create_worker(self.export_to, Path(name), _start_thread=False)
+        worker = create_worker(self.export_to, Path(name), _start_thread=False, _ignore_errors=True)
         worker.returned.connect(
             lambda paths: self.stage.setText(f"exported {len(paths)} files to {name}")
         )

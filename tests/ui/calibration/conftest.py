@@ -1,0 +1,36 @@
+"""Small simulated sessions, and the check that no test leaves a thread or a window behind."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from PySide6 import QtCore, QtWidgets
+
+from fieldapp.cli import main
+
+
+@pytest.fixture(scope="session")
+def plot_session_unused(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("results") / "plot"
+    assert main(["simulate", "--out", str(folder), "--stations", "4,5", "--views", "0-3"]) == 0
+    return folder
+
+
+@pytest.fixture(autouse=True)
+def no_leaks(qapp: QtWidgets.QApplication) -> Iterator[None]:
+    yield
+    pool = QtCore.QThreadPool.globalInstance()
+    assert pool.waitForDone(20_000), "a worker thread is still running"
+    QtWidgets.QApplication.processEvents()
+    open_windows = [w for w in QtWidgets.QApplication.topLevelWidgets() if w.isVisible()]
+    assert not open_windows, f"windows left open: {open_windows}"
+
+
+@pytest.fixture(scope="session")
+def boards_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("calibration") / "boards"
+    args = ["simulate", "--out", str(folder), "--scene", "checkerboard", "--stations", "4,5"]
+    assert main([*args, "--views", "0-7", "--intrinsics-images", "12"]) == 0
+    return folder

@@ -1,0 +1,98 @@
+"""The Calibrate page: the rig's calibration file, what it holds, and the four wizards."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from pathlib import Path
+
+from PySide6 import QtWidgets
+
+from devices.camera.stream import FrameStream
+from fieldapp.errors import FieldappError
+from fieldapp.io.calibration import load_calibration
+from ui.calibration.intrinsics_wizard import IntrinsicsWizard
+from ui.calibration.session_wizards import GroundWizard, StationsWizard, ViewsWizard
+
+log = logging.getLogger(__name__)
+
+WIZARDS: list[tuple[str, str, Callable[..., QtWidgets.QWizard]]] = [
+    ("intrinsics", "1. Camera intrinsics (IR checkerboard)", IntrinsicsWizard),
+    ("views", "2. View to view (turntable step)", ViewsWizard),
+    ("stations", "3. Station to station (boards between stations)", StationsWizard),
+    ("ground", "4. Ground plane (field frame)", GroundWizard),
+]
+
+
+def summary(path: Path) -> str:
+    """One line per section of the calibration file: present, and when it was calibrated."""
+    if not path.exists():
+        return f"{path}: no calibration yet (start with the intrinsics)"
+    try:
+        calibration = load_calibration(path)
+    except FieldappError as error:
+        return f"{path}: not usable:\n{error}"
+    lines = [str(path)]
+    for name in ("depth_camera", "view_step", "stations", "ground"):
+        section = getattr(calibration, name)
+        when = getattr(section, "calibrated", None) if section is not None else None
+        state = (
+            "missing"
+            if section is None
+            else (f"calibrated {when.get('date', '')}" if isinstance(when, dict) else "nominal")
+        )
+        lines.append(f"  {name}: {state}")
+    return "\n".join(lines)
+
+
+class CalibratePage(QtWidgets.QWidget):
+    """Launches each wizard on the calibration file; ``stream`` feeds their live previews."""
+
+    def __init__(
+        self,
+        calibration_path: Path,
+        stream: FrameStream | None = None,
+        serial: str | None = None,
+        parent: QtWidgets.QWidget | None = None,
+    ) -> None:
+        super().__init__(parent)
+        self.stream, self.serial = stream, serial
+        self.wizard: QtWidgets.QWizard | None = None
+        self.path = QtWidgets.QLineEdit(str(calibration_path))
+        self.path.editingFinished.connect(self.refresh)
+        self.state = QtWidgets.QLabel("")
+        self.state.setWordWrap(True)
+        layout = QtWidgets.QVBoxLayout(self)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(QtWidgets.QLabel("Rig calibration file"))
+        row.addWidget(self.path, 1)
+        layout.addLayout(row)
+        layout.addWidget(self.state)
+        self.buttons: dict[str, QtWidgets.QPushButton] = {}
+        for key, label, _ in WIZARDS:
+            button = QtWidgets.QPushButton(label)
+            button.clicked.connect(lambda _=False, k=key: self.open_wizard(k))
+            layout.addWidget(button)
+            self.buttons[key] = button
+        layout.addStretch(1)
+        self.refresh()
+
+    def refresh(self) -> None:
+        self.state.setText(summary(Path(self.path.text().strip())))
+
+    def open_wizard(self, key: str) -> QtWidgets.QWizard:
+        """Open the wizard ``key`` (intrinsics, views, stations, ground), non-modal."""
+        factory = {k: f for k, _, f in WIZARDS}[key]
+        wizard = factory(
+            Path(self.path.text().strip()), stream=self.stream, serial=self.serial, parent=self
+        )
+        wizard.finished.connect(lambda _: self._closed(wizard))
+        self.wizard = wizard
+        wizard.show()
+        return wizard
+
+    def _closed(self, wizard: QtWidgets.QWizard) -> None:
+        self.refresh()
+        if self.wizard is wizard:
+            self.wizard = None
+        wizard.deleteLater()

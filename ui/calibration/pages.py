@@ -1,0 +1,176 @@
+"""Wizard pages every calibration shares: what to prepare, the solve on a worker with its
+quality figures and verdict, and saving into the rig's calibration with the previous kept."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from PySide6 import QtCore, QtWidgets
+from superqt.utils import create_worker
+
+from fieldapp.calib.store import save_keeping_previous
+from fieldapp.errors import FieldappError
+from fieldapp.io.calibration import Calibration
+from ui.calibration.verdict import Level, Verdict
+
+log = logging.getLogger(__name__)
+
+VERDICT_STYLE = {
+    Level.GOOD: "background:#2e7d32;color:white;padding:6px;font-weight:bold",
+    Level.USABLE: "background:#f9a825;color:black;padding:6px;font-weight:bold",
+    Level.REDO: "background:#c62828;color:white;padding:6px;font-weight:bold",
+}
+ERROR_STYLE = "color:#c62828;font-weight:bold"
+
+
+class PreparePage(QtWidgets.QWizardPage):
+    """What to prepare, as rich text, and optional extra widgets below it."""
+
+    def __init__(self, title: str, html: str, extra: QtWidgets.QWidget | None = None) -> None:
+        super().__init__()
+        self.setTitle(title)
+        text = QtWidgets.QLabel(html)
+        text.setWordWrap(True)
+        text.setTextFormat(QtCore.Qt.TextFormat.RichText)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addWidget(text)
+        if extra is not None:
+            layout.addWidget(extra)
+        layout.addStretch(1)
+
+
+class SolvePage(QtWidgets.QWizardPage):
+    """Runs ``solve()`` on a worker when shown; ``describe(result)`` gives the figures' lines
+    and the verdict. The wizard moves on only after a successful solve."""
+
+    def __init__(
+        self,
+        solve: Callable[[], Any],
+        describe: Callable[[Any], tuple[list[str], Verdict]],
+    ) -> None:
+        super().__init__()
+        self.setTitle("Solve and check the quality")
+        self.solve, self.describe = solve, describe
+        self.result: Any = None
+        self.error: str | None = None
+        self.worker: Any = None
+        self.progress = QtWidgets.QProgressBar()
+        self.progress.setRange(0, 0)
+        self.status = QtWidgets.QLabel("")
+        self.status.setWordWrap(True)
+        self.figures = QtWidgets.QPlainTextEdit()
+        self.figures.setReadOnly(True)
+        self.verdict = QtWidgets.QLabel("")
+        self.verdict.setWordWrap(True)
+        self.verdict.setObjectName("verdict")
+        layout = QtWidgets.QVBoxLayout(self)
+        for widget in (self.progress, self.status, self.verdict, self.figures):
+            layout.addWidget(widget)
+
+    @property
+    def running(self) -> bool:
+        return self.worker is not None
+
+    def initializePage(self) -> None:
+        self.result, self.error = None, None
+        self.figures.clear()
+        self.verdict.clear()
+        self.verdict.setStyleSheet("")
+        self.status.setStyleSheet("")
+        self.status.setText("solving…")
+        self.progress.show()
+        worker: Any = create_worker(self.solve, _start_thread=False, _ignore_errors=True)
+        worker.returned.connect(self._solved)
+        worker.errored.connect(self._failed)
+        worker.finished.connect(self._finished)
+        self.worker = worker
+        self.completeChanged.emit()
+        worker.start()
+
+    def isComplete(self) -> bool:
+        return self.result is not None and not self.running
+
+    def wait(self, timeout_s: float = 60.0) -> bool:
+        deadline = QtCore.QDeadlineTimer(int(timeout_s * 1000))
+        while self.worker is not None and not deadline.hasExpired():
+            QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
+            QtCore.QThread.msleep(2)
+        return self.worker is None
+
+    def _solved(self, result: Any) -> None:
+        lines, verdict = self.describe(result)
+        self.result = result
+        self.status.setText("solved")
+        self.figures.setPlainText("\n".join(lines))
+        self.verdict.setText(verdict.text())
+        self.verdict.setStyleSheet(VERDICT_STYLE[verdict.level])
+
+    def _failed(self, error: BaseException) -> None:
+        if not isinstance(error, FieldappError):
+            log.error("calibration solve failed", exc_info=error)
+        self.error = str(error)
+        self.status.setText(f"Cannot calibrate: {error}")
+        self.status.setStyleSheet(ERROR_STYLE)
+        self.verdict.setText("Redo: go back and fix what is said above")
+        self.verdict.setStyleSheet(VERDICT_STYLE[Level.REDO])
+
+    def _finished(self) -> None:
+        self.worker = None
+        self.progress.hide()
+        self.completeChanged.emit()
+
+
+class SavePage(QtWidgets.QWizardPage):
+    """Writes ``update(calibration in force or None)`` to the rig's calibration file, the
+    previous file kept beside it."""
+
+    def __init__(self, path: Path, update: Callable[[Calibration | None], Calibration]) -> None:
+        super().__init__()
+        self.setTitle("Save into the rig's calibration")
+        self.update_calibration = update
+        self.saved: Path | None = None
+        self.previous: Path | None = None
+        self.path = QtWidgets.QLineEdit(str(path))
+        self.save_button = QtWidgets.QPushButton("Save")
+        self.save_button.clicked.connect(self._save_clicked)
+        self.status = QtWidgets.QLabel("The previous file is kept beside it, dated.")
+        self.status.setWordWrap(True)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(QtWidgets.QLabel("Calibration file"))
+        row.addWidget(self.path, 1)
+        row.addWidget(self.save_button)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addLayout(row)
+        layout.addWidget(self.status)
+        layout.addStretch(1)
+
+    def save(self) -> Path:
+        """Write the calibration; raises FieldappError (bad existing file, unwritable)."""
+        from fieldapp.io.calibration import load_calibration
+
+        path = Path(self.path.text().strip())
+        current = load_calibration(path) if path.exists() else None
+        try:
+            self.previous = save_keeping_previous(path, self.update_calibration(current))
+        except OSError as error:
+            raise FieldappError(f"{path}: cannot write ({error.strerror})") from None
+        self.saved = path
+        self.status.setText(
+            f"Saved to {path}"
+            + (f"; previous kept as {self.previous.name}" if self.previous else "")
+        )
+        self.completeChanged.emit()
+        return path
+
+    def isComplete(self) -> bool:
+        return self.saved is not None
+
+    def _save_clicked(self) -> None:
+        try:
+            self.save()
+        except FieldappError as error:
+            self.status.setText(f"Not saved: {error}")
+            self.status.setStyleSheet(ERROR_STYLE)

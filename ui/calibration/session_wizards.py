@@ -1,0 +1,264 @@
+"""The view-to-view, station-to-station and ground wizards: each solves from a session and
+saves its part of the rig's calibration (``view_step``, ``stations``, ``ground``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6 import QtWidgets
+
+from devices.camera.stream import FrameStream
+from devices.geometry import rotation_angle_deg
+from fieldapp.calib.board import Board
+from fieldapp.calib.ground import GroundResult, calibrate_ground
+from fieldapp.calib.stations import StationsResult, calibrate_stations
+from fieldapp.calib.store import provenance
+from fieldapp.calib.views import ViewStepResult, calibrate_view_step
+from fieldapp.errors import FieldappError
+from fieldapp.io.calibration import Calibration, Ground, Stations, ViewStep, load_calibration
+from fieldapp.io.session import Session
+from ui.calibration.board_form import BoardForm
+from ui.calibration.pages import PreparePage, SavePage, SolvePage
+from ui.calibration.session_page import SessionPage
+from ui.calibration.verdict import (
+    Verdict,
+    ground_verdict,
+    stations_verdict,
+    views_verdict,
+)
+
+VIEWS_TEXT = """<p>Solves the turntable's view step (view k+1 into view k, the paper's Eq. 9)
+from a checkerboard seen whole at two consecutive views.</p><ul>
+<li>Stand a rigid board (default 9 x 6 inner corners, 50 mm squares) about 1.1 m from the
+camera, between the directions of views 0 and 1, facing the camera.</li>
+<li>Capture views 0 and 1 (or the whole turn) without touching the board; a session of the
+reference station is enough. Several boards or heights give a cross-check.</li></ul>"""
+STATIONS_TEXT = """<p>Solves where each station stands relative to the reference station, from
+boards seen by two neighbouring stations.</p><ul>
+<li>Lay one board (default 9 x 6 inner corners, 40 mm squares) flat on the soil midway between
+each pair of neighbouring stations, a little to the side, where both see it whole.</li>
+<li>Capture every station's full turn without moving the boards. Needs the view step first.</li>
+</ul>"""
+GROUND_TEXT = """<p>Finds the ground plane seen from the reference station (all its views
+joined) and sets the field frame: z up, 0 on the ground, origin below the camera.</p><ul>
+<li>Clear the soil around the reference station of boards, tools and people.</li>
+<li>Capture the reference station's full turn. Needs the view step and the stations first.</li>
+</ul>"""
+
+
+class _SessionWizard(QtWidgets.QWizard):
+    def __init__(
+        self,
+        title: str,
+        calibration_path: Path,
+        board: Board | None,
+        stream: FrameStream | None,
+        serial: str | None,
+        parent: QtWidgets.QWidget | None,
+    ) -> None:
+        super().__init__(parent)
+        self.setWindowTitle(title)
+        self.calibration_path, self.serial = calibration_path, serial
+        self.board_form = BoardForm(board or Board(9, 6, 40.0))
+        self.session_page = SessionPage(self.board_form.board, stream, self.in_force)
+
+    def in_force(self) -> Calibration | None:
+        """The rig's calibration file as it is now (None when absent)."""
+        path = (
+            Path(self.save.path.text().strip()) if hasattr(self, "save") else self.calibration_path
+        )
+        return load_calibration(path) if path.exists() else None
+
+    @property
+    def session(self) -> Session:
+        if self.session_page.session is None:
+            raise FieldappError("choose a session first")
+        return self.session_page.session
+
+    def base(self, current: Calibration | None) -> Calibration:
+        return current if current is not None else self.session.calibration
+
+    def done(self, result: int) -> None:
+        self.session_page.preview.stop()
+        self.solve.wait()
+        super().done(result)
+
+
+class ViewsWizard(_SessionWizard):
+    def __init__(
+        self,
+        calibration_path: Path,
+        stream: FrameStream | None = None,
+        serial: str | None = None,
+        parent: QtWidgets.QWidget | None = None,
+    ) -> None:
+        super().__init__(
+            "Calibrate view to view", calibration_path, Board(9, 6, 50.0), stream, serial, parent
+        )
+        self.solve = SolvePage(
+            lambda: calibrate_view_step(self.session, self.board_form.board()), self._describe
+        )
+        self.save = SavePage(calibration_path, self._update)
+        for page in (
+            PreparePage("What to prepare", VIEWS_TEXT, self.board_form),
+            self.session_page,
+            self.solve,
+            self.save,
+        ):
+            self.addPage(page)
+
+    def _nominal_deg(self) -> float:
+        step = self.session.calibration.view_step
+        return step.angle_deg if step is not None else 45.0
+
+    def _describe(self, result: ViewStepResult) -> tuple[list[str], Verdict]:
+        t = result.T_view_k_view_k1[:3, 3]
+        lines = [
+            f"turn {result.angle_deg:.4f} degrees, translation "
+            + " ".join(f"{x:+.4f}" for x in t)
+            + " m",
+            f"feature point RMSE {1000 * result.rmse_m:.2f} mm over {result.points} corners",
+            *[f"  {pair}" for pair in result.pairs],
+            *[f"warning: {w}" for w in result.warnings],
+        ]
+        return lines, views_verdict(result, self._nominal_deg())
+
+    def _update(self, current: Calibration | None) -> Calibration:
+        result: ViewStepResult = self.solve.result
+        step = ViewStep(angle_deg=self._nominal_deg(), matrix=result.T_view_k_view_k1)
+        step.calibrated = provenance(  # type: ignore[attr-defined]
+            self.serial,
+            method="weighted SVD of checkerboard corners",
+            rmse_mm=round(1000 * result.rmse_m, 3),
+            pairs=result.pairs,
+        )
+        return self.base(current).model_copy(update={"view_step": step})
+
+
+class StationsWizard(_SessionWizard):
+    def __init__(
+        self,
+        calibration_path: Path,
+        stream: FrameStream | None = None,
+        serial: str | None = None,
+        reference: int = 5,
+        parent: QtWidgets.QWidget | None = None,
+    ) -> None:
+        super().__init__(
+            "Calibrate station to station",
+            calibration_path,
+            Board(9, 6, 40.0),
+            stream,
+            serial,
+            parent,
+        )
+        self.reference = reference
+        self.solve = SolvePage(self._solve, self._describe)
+        self.save = SavePage(calibration_path, self._update)
+        for page in (
+            PreparePage("What to prepare", STATIONS_TEXT, self.board_form),
+            self.session_page,
+            self.solve,
+            self.save,
+        ):
+            self.addPage(page)
+
+    def _solve(self) -> StationsResult:
+        calibration = self.base(self.in_force())
+        if calibration.view_step is None:
+            raise FieldappError(
+                "the calibration has no view_step: run the view-to-view wizard first"
+            )
+        in_force = calibration.stations or self.session.calibration.stations
+        prior = in_force.to_reference if in_force else None
+        return calibrate_stations(
+            self.session, self.board_form.board(), calibration.view_step, self.reference, prior
+        )
+
+    def _describe(self, result: StationsResult) -> tuple[list[str], Verdict]:
+        lines = [
+            *[
+                f"stations {p.station_a}-{p.station_b} via {', '.join(p.boards)}: RMSE "
+                f"{1000 * p.fit.rmse_m:.2f} mm"
+                for p in result.pairs
+            ],
+            *[
+                f"station {s} (via {parent}): "
+                + " ".join(f"{x:+.3f}" for x in result.T_reference_station[s][:3, 3])
+                + " m"
+                for s, parent in sorted(result.tree.items())
+            ],
+            f"joint refinement: RMSE {1000 * result.bundle.rmse_m:.2f} mm over "
+            f"{result.bundle.sightings} sightings",
+            *[f"warning: {w}" for w in result.warnings],
+        ]
+        return lines, stations_verdict(result)
+
+    def _update(self, current: Calibration | None) -> Calibration:
+        result: StationsResult = self.solve.result
+        calibration = self.base(current)
+        stations = Stations(reference=result.reference, to_reference=result.T_reference_station)
+        stations.calibrated = provenance(  # type: ignore[attr-defined]
+            self.serial,
+            method="checkerboards between stations: spanning tree, then joint refinement",
+            joint_rmse_mm=round(1000 * result.bundle.rmse_m, 3),
+        )
+        update: dict[str, object] = {"stations": stations}
+        if calibration.view_step is not None:
+            update["view_step"] = calibration.view_step.model_copy(
+                update={"matrix": result.T_view_k_view_k1}
+            )
+            update["view_step"].refined_with_stations = provenance(  # type: ignore[attr-defined]
+                self.serial,
+                solved_angle_deg=round(rotation_angle_deg(result.T_view_k_view_k1[:3, :3]), 4),
+            )
+        return calibration.model_copy(update=update)
+
+
+class GroundWizard(_SessionWizard):
+    def __init__(
+        self,
+        calibration_path: Path,
+        stream: FrameStream | None = None,
+        serial: str | None = None,
+        parent: QtWidgets.QWidget | None = None,
+    ) -> None:
+        super().__init__("Calibrate the ground", calibration_path, None, stream, serial, parent)
+        self.solve = SolvePage(self._solve, self._describe)
+        self.save = SavePage(calibration_path, self._update)
+        for page in (
+            PreparePage("What to prepare", GROUND_TEXT),
+            self.session_page,
+            self.solve,
+            self.save,
+        ):
+            self.addPage(page)
+
+    def _solve(self) -> GroundResult:
+        return calibrate_ground(self.session, self.base(self.in_force()))
+
+    def _describe(self, result: GroundResult) -> tuple[list[str], Verdict]:
+        lines = [
+            f"station {result.station}: camera {result.camera_height_m:.3f} m above the ground, "
+            f"pitched {result.camera_pitch_deg:.1f} degrees down",
+            f"ground plane: {100 * result.inlier_fraction:.0f} % of {result.points} points, "
+            f"RMS {1000 * result.rms_m:.1f} mm",
+            *[f"warning: {w}" for w in result.warnings],
+        ]
+        if result.change_from_previous is not None:
+            moved, tilt = result.change_from_previous
+            lines.append(
+                f"change from the ground in force: {100 * moved:.1f} cm, {tilt:.2f} degrees"
+            )
+        return lines, ground_verdict(result)
+
+    def _update(self, current: Calibration | None) -> Calibration:
+        result: GroundResult = self.solve.result
+        ground = Ground(matrix=result.T_field_reference)
+        ground.calibrated = provenance(  # type: ignore[attr-defined]
+            self.serial,
+            method="RANSAC plane of the reference station",
+            camera_height_m=round(result.camera_height_m, 4),
+            rms_mm=round(1000 * result.rms_m, 2),
+        )
+        return self.base(current).model_copy(update={"ground": ground})
