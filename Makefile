@@ -2,7 +2,7 @@
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
-RUN_ARGS ?= --help
+RUN_ARGS ?= gui
 
 .PHONY: run test lint typecheck layers pytest sysdeps bench clean
 .DEFAULT_GOAL := run

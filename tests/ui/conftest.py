@@ -1,0 +1,107 @@
+"""Fixtures for the GUI tests: a window on simulated devices (moving instantly), and a check
+that a test leaves no thread and no top-level widget behind."""
+
+from __future__ import annotations
+
+import gc
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from PySide6 import QtCore, QtWidgets
+
+from fieldapp.settings import Settings
+
+LEAK_GRACE_S = 5.0
+
+
+def _python_threads() -> set[threading.Thread]:
+    """Live Python threads, without the placeholders Python makes for Qt's pool threads."""
+    return {
+        t
+        for t in threading.enumerate()
+        if t.is_alive() and not isinstance(t, threading._DummyThread)
+    }
+
+
+def _flush_deletes() -> None:
+    gc.collect()  # pyqtgraph's menus are parentless, owned by Python objects in cycles
+    for _ in range(3):
+        QtCore.QCoreApplication.sendPostedEvents(None, QtCore.QEvent.Type.DeferredDelete)
+        QtCore.QCoreApplication.processEvents()
+
+
+@pytest.fixture
+def no_leaks(qapp: QtWidgets.QApplication) -> Iterator[None]:
+    """Fail when the test leaves a thread running or a top-level widget alive."""
+    threads_before = _python_threads()
+    widgets_before = set(qapp.topLevelWidgets())
+    yield
+    pool = QtCore.QThreadPool.globalInstance()
+    assert pool.waitForDone(int(LEAK_GRACE_S * 1000)), "a worker is still running"
+    deadline = time.monotonic() + LEAK_GRACE_S
+    while _python_threads() - threads_before and time.monotonic() < deadline:
+        time.sleep(0.05)
+    leaked = sorted(t.name for t in _python_threads() - threads_before)
+    assert not leaked, f"threads left running: {leaked}"
+    _flush_deletes()
+    extra = [w for w in qapp.topLevelWidgets() if w not in widgets_before]
+    assert not extra, f"top-level widgets left: {[type(w).__name__ for w in extra]}"
+
+
+@pytest.fixture
+def settings(tmp_path: Path) -> Settings:
+    """Default settings (every device simulated), instant simulators, files under tmp."""
+    settings = Settings()
+    settings.paths.sessions_dir = tmp_path / "sessions"
+    settings.devices.realtime_simulation = False
+    return settings
+
+
+def _wait_until(condition: Callable[[], bool], timeout_s: float = 20.0) -> bool:
+    """Process Qt events until ``condition()`` holds; False on timeout."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
+        if condition():
+            return True
+        time.sleep(0.005)
+    return condition()
+
+
+WaitUntil = Callable[..., bool]
+
+
+@pytest.fixture
+def wait_until() -> WaitUntil:
+    """``wait_until(condition, timeout_s=20)``: process events until the condition holds."""
+    return _wait_until
+
+
+@pytest.fixture
+def make_window(
+    no_leaks: None, settings: Settings, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> Iterator[Callable[..., QtWidgets.QMainWindow]]:
+    """Builds main windows on ``settings``; each is closed (devices stopped) and deleted."""
+    from ui.app import build_window
+    from ui.state import UiState
+
+    monkeypatch.setattr("ui.mission.page.ask", lambda *args: True)
+    windows: list[QtWidgets.QMainWindow] = []
+
+    def make(**kwargs: object) -> QtWidgets.QMainWindow:
+        kwargs.setdefault("ui_state", UiState(tmp_path / "ui.ini"))
+        kwargs.setdefault("settings_path", tmp_path / "settings.yaml")
+        window = build_window(settings, **kwargs)  # type: ignore[arg-type]
+        window.show()
+        windows.append(window)
+        return window
+
+    yield make
+    for window in windows:
+        window.close()
+        window.deleteLater()
+    windows.clear()
+    _flush_deletes()

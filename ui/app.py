@@ -1,0 +1,80 @@
+"""Build and run the field GUI: settings, device hub, notifier, main window."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from PySide6 import QtWidgets
+
+from fieldapp.settings import Settings, load_settings
+from ui.context import AppContext
+from ui.devices.hub import DeviceHub, RigOpener, default_opener
+from ui.main_window import MainWindow
+from ui.notifications import Level, Notice, Notifier
+from ui.pages import PageSpec, default_pages
+from ui.state import UiState
+
+log = logging.getLogger(__name__)
+
+
+class _NoticeHandler(logging.Handler):
+    """Warnings logged while the settings load (bad fields) become notices."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
+def load_settings_with_notices(path: Path | None) -> tuple[Settings, list[Notice]]:
+    """The settings, and a warning notice for every field the loader had to drop."""
+    handler = _NoticeHandler()
+    logger = logging.getLogger("fieldapp.settings")
+    logger.addHandler(handler)
+    try:
+        settings = load_settings(path)
+    finally:
+        logger.removeHandler(handler)
+    notices = [
+        Notice(Level.WARNING, "Settings", record.getMessage(), "Fix the field or remove it.")
+        for record in handler.records
+    ]
+    return settings, notices
+
+
+def build_window(
+    settings: Settings,
+    *,
+    settings_path: Path | None = None,
+    ui_state: UiState | None = None,
+    opener: RigOpener = default_opener,
+    pages: Sequence[PageSpec] | None = None,
+) -> MainWindow:
+    """The main window around a new hub and notifier (a QApplication must exist)."""
+    notifier = Notifier()
+    hub = DeviceHub(opener)
+    context = AppContext(settings, hub, notifier, ui_state or UiState(), settings_path)
+    window = MainWindow(context, default_pages() if pages is None else pages)
+    notifier.setParent(window)
+    hub.setParent(window)
+    return window
+
+
+def run_gui(settings_path: Path | None = None, connect: bool = True) -> int:
+    """Open the window (connecting the configured devices, simulated by default); returns the
+    exit code once it closes."""
+    app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
+    app.setApplicationName("fieldapp")
+    settings, notices = load_settings_with_notices(settings_path)
+    window = build_window(settings, settings_path=settings_path)
+    for notice in notices:
+        window.context.notifier.post(notice)
+    window.show()
+    if connect:
+        window.context.hub.connect_devices(settings.devices)
+    return int(app.exec())

@@ -1,0 +1,113 @@
+"""Plain numpy for the preview (no Qt): the 3D point under a pixel, the frame's cloud for the
+3D view, IR scaled for display, and saving the current frame.
+
+Camera frame: OpenCV (x right, y down, z forward), metres.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.camera.frames import Frame, Intrinsics
+
+DEPTH_SCALE = 1000.0
+"""Depth PNG units per metre (millimetres), as in session folders."""
+
+
+@dataclass(frozen=True)
+class PixelReading:
+    """What lies under pixel (``u``, ``v``): its depth and 3D point (camera frame, metres),
+    ``None`` where the depth is missing."""
+
+    u: int
+    v: int
+    depth_m: float | None
+    point_m: tuple[float, float, float] | None
+
+
+def read_pixel(
+    depth_m: NDArray[np.float32], intrinsics: Intrinsics, u: int, v: int
+) -> PixelReading | None:
+    """The reading at column ``u``, row ``v``; ``None`` outside the image."""
+    height, width = depth_m.shape
+    if not (0 <= u < width and 0 <= v < height):
+        return None
+    z = float(depth_m[v, u])
+    if not np.isfinite(z):
+        return PixelReading(u, v, None, None)
+    x = (u - intrinsics.cx) / intrinsics.fx * z
+    y = (v - intrinsics.cy) / intrinsics.fy * z
+    return PixelReading(u, v, z, (x, y, z))
+
+
+def cloud_points(
+    frame: Frame, intrinsics: Intrinsics, step: int = 4, max_range_m: float = 4.5
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Every ``step``-th pixel's point with valid depth up to ``max_range_m``.
+
+    Returns (points (N, 3) float32 in a viewing frame: x right, y forward, z up, i.e. the
+    camera's (x, z, -y)), colours (N, 4) float32 RGBA in 0..1)."""
+    depth = frame.depth_m[::step, ::step]
+    v, u = np.mgrid[0 : frame.depth_m.shape[0] : step, 0 : frame.depth_m.shape[1] : step]
+    with np.errstate(invalid="ignore"):
+        keep = np.isfinite(depth) & (depth > 0) & (depth <= max_range_m)
+    z = depth[keep]
+    x = (u[keep] - intrinsics.cx) / intrinsics.fx * z
+    y = (v[keep] - intrinsics.cy) / intrinsics.fy * z
+    points = np.stack([x, z, -y], axis=1).astype(np.float32)
+    rgb = frame.color[::step, ::step][keep].astype(np.float32) / 255.0
+    colours = np.concatenate([rgb, np.ones((len(rgb), 1), np.float32)], axis=1)
+    return points, colours
+
+
+def ir_for_display(
+    ir: NDArray[np.uint16], low_pct: float = 1.0, high_pct: float = 99.0
+) -> NDArray[np.uint8]:
+    """(H, W) uint8: IR amplitude stretched between its percentiles (the raw range is wide)."""
+    low, high = np.percentile(ir, [low_pct, high_pct])
+    span = max(float(high - low), 1.0)
+    scaled = np.clip((ir.astype(np.float32) - float(low)) / span, 0.0, 1.0)
+    shown: NDArray[np.uint8] = (scaled * 255.0).astype(np.uint8)
+    return shown
+
+
+def save_frame(
+    folder: Path, frame: Frame, intrinsics: Intrinsics, stem: str | None = None
+) -> list[Path]:
+    """Write ``frame`` into ``folder``: 16-bit depth PNG (mm), colour PNG, IR PNG (when
+    present) and a JSON of the intrinsics and frame metadata. Returns the paths written."""
+    from fieldapp.io.durable import write_bytes_durably
+    from fieldapp.io.images import depth_m_to_units, encode_png
+
+    stem = stem or time.strftime("frame-%Y%m%d-%H%M%S")
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    images: list[tuple[str, NDArray[np.generic], bool]] = [
+        ("depth", depth_m_to_units(frame.depth_m, DEPTH_SCALE), False),
+        ("color", frame.color, True),
+    ]
+    if frame.ir is not None:
+        images.append(("ir", frame.ir, False))
+    for kind, image, rgb in images:
+        path = folder / f"{stem}-{kind}.png"
+        write_bytes_durably(path, encode_png(image, rgb=rgb))
+        written.append(path)
+    about = {
+        "depth_scale": DEPTH_SCALE,
+        "intrinsics": {
+            "width": intrinsics.width, "height": intrinsics.height,
+            "fx": intrinsics.fx, "fy": intrinsics.fy, "cx": intrinsics.cx, "cy": intrinsics.cy,
+        },
+        "timestamp_s": frame.timestamp_s,
+        "meta": {k: v for k, v in frame.meta.items() if isinstance(v, int | float | str)},
+    }  # fmt: skip
+    meta_path = folder / f"{stem}.json"
+    write_bytes_durably(meta_path, (json.dumps(about, indent=2) + "\n").encode("utf-8"))
+    written.append(meta_path)
+    return written

@@ -1,0 +1,139 @@
+"""The mission's progress: a bar with captures done, elapsed and remaining time and the
+current step; a station x view grid filled with each capture's thumbnail and quality; the log
+of warnings and retries."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from numpy.typing import NDArray
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from fieldapp.mission.events import MissionProgress, MissionWarning, StationReached, ViewCaptured
+from fieldapp.mission.plan import MissionPlan
+
+THUMB_W, THUMB_H = 64, 53
+OK_COLOUR = QtGui.QColor("#c8e6c9")
+LOW_COLOUR = QtGui.QColor("#ffe0b2")
+
+
+def format_duration(seconds: float | None) -> str:
+    """``1 h 02 min``, ``3 min 05 s``, ``42 s``; ``-`` when unknown."""
+    if seconds is None:
+        return "-"
+    total = round(seconds)
+    hours, rest = divmod(total, 3600)
+    minutes, secs = divmod(rest, 60)
+    if hours:
+        return f"{hours} h {minutes:02d} min"
+    if minutes:
+        return f"{minutes} min {secs:02d} s"
+    return f"{secs} s"
+
+
+def thumbnail_icon(rgb: NDArray[np.uint8]) -> QtGui.QIcon:
+    """An icon of an (h, w, 3) uint8 RGB thumbnail."""
+    image = np.ascontiguousarray(rgb)
+    height, width = image.shape[:2]
+    qimage = QtGui.QImage(image.data, width, height, 3 * width, QtGui.QImage.Format.Format_RGB888)
+    return QtGui.QIcon(QtGui.QPixmap.fromImage(qimage.copy()))
+
+
+class ProgressPanel(QtWidgets.QWidget):
+    """Fed by the mission controller's signals (GUI thread)."""
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.bar = QtWidgets.QProgressBar()
+        self.bar.setFormat("%v of %m captures")
+        self.times = QtWidgets.QLabel("No mission yet.")
+        self.step = QtWidgets.QLabel("")
+        self.grid = QtWidgets.QTableWidget(0, 0)
+        self.grid.setIconSize(QtCore.QSize(THUMB_W, THUMB_H))
+        self.grid.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.grid.horizontalHeader().setDefaultSectionSize(THUMB_W + 10)
+        self.grid.verticalHeader().setDefaultSectionSize(THUMB_H + 8)
+        self.log = QtWidgets.QListWidget()
+        self.log.setMaximumHeight(110)
+        self.rows: dict[int, int] = {}
+        self.captured = 0
+        self._started_s = time.monotonic()
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(self.bar)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.times, 1)
+        row.addWidget(self.step, 1)
+        layout.addLayout(row)
+        layout.addWidget(self.grid, 1)
+        layout.addWidget(QtWidgets.QLabel("Warnings and retries:"))
+        layout.addWidget(self.log)
+
+    def show_plan(self, plan: MissionPlan, done: list[tuple[int, int]] | None = None) -> None:
+        """An empty grid for ``plan`` (``done``: captures a resumed session already has)."""
+        stations = plan.station_numbers()
+        self.rows = {station: row for row, station in enumerate(stations)}
+        self.grid.clear()
+        self.grid.setRowCount(len(stations))
+        self.grid.setColumnCount(plan.views.count)
+        self.grid.setVerticalHeaderLabels([f"station {s}" for s in stations])
+        self.grid.setHorizontalHeaderLabels([f"view {v}" for v in range(plan.views.count)])
+        for station, view in done or []:
+            self._cell(station, view, "captured earlier", OK_COLOUR)
+        self.captured = 0
+        total = len(plan.capture_keys())
+        self.bar.setRange(0, total)
+        self.bar.setValue(len(done or []))
+        self.times.setText(f"{total} captures planned")
+        self.step.clear()
+        self._started_s = time.monotonic()
+
+    def add_view(self, event: ViewCaptured) -> None:
+        self.captured += 1
+        q = event.quality
+        tip = (
+            f"station {event.station}, view {event.view} at {event.angle_deg:.2f} deg\n"
+            f"fill {q.fill_rate:.1%}, flying {q.flying_ratio:.2%}, over {q.overexposed:.1%}, "
+            f"under {q.underexposed:.1%}; attempts {event.attempts}"
+        )
+        item = self._cell(
+            event.station, event.view, tip, OK_COLOUR if event.quality_ok else LOW_COLOUR
+        )
+        if item is not None:
+            item.setIcon(thumbnail_icon(event.thumbnail))
+            item.setText(f"{q.fill_rate:.0%}")
+
+    def _cell(
+        self, station: int, view: int, tip: str, colour: QtGui.QColor
+    ) -> QtWidgets.QTableWidgetItem | None:
+        row = self.rows.get(station)
+        if row is None or view >= self.grid.columnCount():
+            return None
+        item = QtWidgets.QTableWidgetItem()
+        item.setToolTip(tip)
+        item.setBackground(colour)
+        self.grid.setItem(row, view, item)
+        return item
+
+    def set_progress(self, progress: MissionProgress) -> None:
+        self.bar.setRange(0, progress.total)
+        self.bar.setValue(progress.done)
+        self.times.setText(
+            f"elapsed {format_duration(progress.elapsed_s)} · "
+            f"remaining {format_duration(progress.remaining_s)}"
+        )
+        self.step.setText(progress.step)
+
+    def add_station(self, event: StationReached) -> None:
+        self.step.setText(
+            f"at station {event.station} (x {event.x_m:.2f} m, y {event.y_m:.2f} m, "
+            f"yaw {event.yaw_deg:.0f} deg)"
+        )
+
+    def add_warning(self, event: MissionWarning) -> None:
+        stamp = time.strftime("%H:%M:%S")
+        self.log.insertItem(0, f"{stamp} {event.text}")
+
+    def add_line(self, text: str) -> None:
+        self.log.insertItem(0, f"{time.strftime('%H:%M:%S')} {text}")
