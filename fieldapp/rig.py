@@ -183,6 +183,7 @@ def _open_table(
         simulator = GrblSimulator(
             off_target_deg=SIM_TABLE_OFF_TARGET_DEG, on_angle=world.set_table_angle_deg
         )
+        world.set_table_angle_deg(simulator.angle_deg)  # the world follows from the start
         server = PtyGrblServer(simulator, time_scale=1.0 if realtime else 0.0)
         server.start()
         stack.callback(server.close)

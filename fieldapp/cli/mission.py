@@ -117,7 +117,7 @@ def _quiet_logs(args: argparse.Namespace) -> None:
 def _run(setup: MissionSetup) -> int:
     from rich.console import Console
 
-    console = Console(stderr=True)
+    console = Console(stderr=True, soft_wrap=True)
     with setup:
         for device in setup.rig.devices():
             console.print(f"{device}")

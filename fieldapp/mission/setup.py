@@ -7,6 +7,7 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
+from typing import TYPE_CHECKING
 
 from fieldapp.io.session import SESSION_FILE
 from fieldapp.io.writer import SessionWriter
@@ -15,6 +16,9 @@ from fieldapp.mission.folder import missing_keys, read_plan, reopen_session, sta
 from fieldapp.mission.plan import MissionPlan
 from fieldapp.mission.runner import MissionRunner
 from fieldapp.rig import Rig, open_rig
+
+if TYPE_CHECKING:
+    from devices.sim.world import SimWorld
 
 log = logging.getLogger(__name__)
 
@@ -52,9 +56,13 @@ class MissionSetup:
         self.close()
 
 
-def new_mission(plan: MissionPlan, folder: Path, realtime: bool | None = None) -> MissionSetup:
-    """Open the rig and start a new session in ``folder`` with the plan and its calibration."""
-    rig = _open(plan, realtime)
+def new_mission(
+    plan: MissionPlan, folder: Path, realtime: bool | None = None, world: SimWorld | None = None
+) -> MissionSetup:
+    """Open the rig and start a new session in ``folder`` with the plan and its calibration.
+
+    ``world``: the simulated world to use (default: the plan's ``simulation`` seed and day)."""
+    rig = _open(plan, realtime, world)
     try:
         calibration = calibration_in_force(plan, rig.world)
         writer = start_session(folder, plan, calibration)
@@ -64,12 +72,14 @@ def new_mission(plan: MissionPlan, folder: Path, realtime: bool | None = None) -
     return MissionSetup(plan, rig, writer)
 
 
-def resume_mission(folder: Path, realtime: bool | None = None) -> MissionSetup:
+def resume_mission(
+    folder: Path, realtime: bool | None = None, world: SimWorld | None = None
+) -> MissionSetup:
     """Reopen a mission folder (stopped, failed or crashed) and the rig its plan names."""
     plan = read_plan(folder)
     if (folder / SESSION_FILE).exists():
         SessionWriter.open(folder)  # a broken session is reported before the rig is opened
-    rig = _open(plan, realtime)
+    rig = _open(plan, realtime, world)
     try:
         writer = reopen_session(folder, lambda: calibration_in_force(plan, rig.world))
     except BaseException:
@@ -79,7 +89,8 @@ def resume_mission(folder: Path, realtime: bool | None = None) -> MissionSetup:
     return MissionSetup(plan, rig, writer)
 
 
-def _open(plan: MissionPlan, realtime: bool | None) -> Rig:
+def _open(plan: MissionPlan, realtime: bool | None, world: SimWorld | None) -> Rig:
+    simulation = plan.simulation
     return open_rig(
-        plan.devices, realtime=realtime, seed=plan.simulation.seed, day=plan.simulation.day
+        plan.devices, realtime=realtime, world=world, seed=simulation.seed, day=simulation.day
     )

@@ -21,7 +21,6 @@ from devices.base import (
     BaseClient,
     BaseError,
     BaseOffline,
-    BaseRequestRejected,
     BaseStopped,
     NavigationFailed,
 )
@@ -104,8 +103,9 @@ def prepare_base(base: BaseClient) -> MissionWarning | None:
         if status.state is not BaseState.STOPPED:
             return None
         base.reset()
-    except BaseRequestRejected as error:
-        raise MissionFault(Fault("base", str(error), "check the base")) from error
+    except BaseOffline as error:
+        advice = f"check the Wi-Fi link to the base and the base's bridge; {RESUME_ADVICE}"
+        raise MissionFault(Fault("base", f"link lost: {error}", advice)) from error
     except BaseError as error:
         advice = f"check the base and its link; {RESUME_ADVICE}"
         raise MissionFault(Fault("base", str(error), advice)) from error

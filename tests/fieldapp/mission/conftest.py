@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from devices.sim.world import SimWorld
 from fieldapp.mission import MissionPlan, MissionSetup, new_mission
 from fieldapp.mission.plan import RetryLimits, ViewPlan, grid_stations
 from fieldapp.settings import DeviceSettings
@@ -32,13 +33,20 @@ def small_plan(
     return MissionPlan(**values)
 
 
+@pytest.fixture(scope="session")
+def sim_world() -> SimWorld:
+    """The default world, built once (about a second); each mission's rig sets its state."""
+    return SimWorld.default()
+
+
 @pytest.fixture
-def open_mission(tmp_path: Path) -> Iterator[Callable[..., MissionSetup]]:
+def open_mission(tmp_path: Path, sim_world: SimWorld) -> Iterator[Callable[..., MissionSetup]]:
     """``open_mission(plan, realtime=False)``: a new mission in ``tmp_path/S``; closed after."""
     setups: list[MissionSetup] = []
 
     def make(plan: MissionPlan, realtime: bool = False) -> MissionSetup:
-        setup = new_mission(plan, tmp_path / "S", realtime=realtime)
+        sim_world.set_base_pose(1.6, 1.6, 0.0)  # where a fresh world's rig stands: station 5
+        setup = new_mission(plan, tmp_path / "S", realtime=realtime, world=sim_world)
         setups.append(setup)
         return setup
 

@@ -174,7 +174,7 @@ def test_resume_of_a_folder_captures_only_what_is_missing(open_mission: Opener) 
     assert first is not None and first.missing == [(4, 0)]  # station 4 turns back: 1, then 0
     setup.close()
     before = {(c.station, c.view): c.captured_at for c in load_session(setup.folder).captures}
-    with resume_mission(setup.folder, realtime=False) as resumed:
+    with resume_mission(setup.folder, realtime=False, world=setup.rig.world) as resumed:
         assert resumed.missing() == [(4, 0)]
         again = resumed.runner()
         views = record(again)["views"]
