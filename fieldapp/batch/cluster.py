@@ -4,8 +4,9 @@
 
 The local cluster has ``workers`` worker processes with one thread each, so a worker holds one
 session at a time, and a nanny per worker that restarts it when it dies or passes its
-``memory_limit``. Dask's own logging is kept off the terminal (errors only), and the local
-workers log only errors of fieldapp too: each session's warnings are in its ``report.json``.
+``memory_limit``. Dask's own logging is kept off the terminal (the client's errors only; the
+local workers' not even those: the client reports each failed session), and the local workers
+log only fieldapp's errors: each session's warnings are in its ``report.json``.
 """
 
 from __future__ import annotations
@@ -29,14 +30,15 @@ CONNECT_TIMEOUT_S = 20.0
 def memory_limit_bytes(text: str) -> str | int:
     """``"auto"`` (the machine's memory shared between the workers), ``"0"`` (no limit) or a
     size such as ``"4GiB"``, in bytes; raises :class:`BatchError` naming the option."""
-    if text.strip().lower() == "auto":
+    text = text.strip()
+    if text.lower() == "auto":
         return "auto"
     try:
-        value = int(parse_bytes(text))
+        value = int(parse_bytes(text)) if text else -1
     except (ValueError, TypeError):
         raise BatchError(f"--memory-limit: {text!r} is not a size (e.g. 4GiB, auto)") from None
     if value < 0:
-        raise BatchError(f"--memory-limit: {text!r} is negative")
+        raise BatchError(f"--memory-limit: {text!r} is not a size (e.g. 4GiB, auto)")
     return value
 
 
@@ -87,7 +89,7 @@ def open_client(
                 memory_limit=memory_limit,
                 host="127.0.0.1",
                 dashboard_address=None,
-                silence_logs=logging.ERROR,
+                silence_logs=logging.CRITICAL,  # a task's error is reported by the client
             ) as cluster,
             Client(cluster) as client,
         ):

@@ -13,10 +13,10 @@ from __future__ import annotations
 import logging
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from distributed import Client, Future, wait
 
@@ -70,6 +70,8 @@ class BatchStatus:
         return self.elapsed_s / self.finished * (self.total - self.finished)
 
 
+Task = Callable[[str, Mapping[str, Any], str], SessionSummary]
+"""What a task runs: (session folder, settings data, output folder) -> summary."""
 OnStatus = Callable[[BatchStatus], None]
 OnOutcome = Callable[[Outcome], None]
 
@@ -83,12 +85,13 @@ def run_batch(
     retries: int = DEFAULT_RETRIES,
     on_status: OnStatus | None = None,
     on_outcome: OnOutcome | None = None,
+    task: Task = reconstruct_session,
 ) -> list[Outcome]:
     """Reconstruct ``plan.to_run`` on ``client``'s cluster; returns the outcomes in the order
     the sessions finished. ``on_status`` is called about twice a second and after each
     session, ``on_outcome`` once per session."""
     started_s = time.perf_counter()
-    futures = _submit(client, plan, out_dir.resolve(), retries)
+    futures = _submit(client, task, plan, out_dir.resolve(), retries)
     items = {future.key: item for future, item in futures.items()}
     outcomes: list[Outcome] = []
     pending = set(futures)
@@ -106,12 +109,12 @@ def run_batch(
 
 
 def _submit(
-    client: Client, plan: BatchPlan, out_dir: Path, retries: int
+    client: Client, task: Task, plan: BatchPlan, out_dir: Path, retries: int
 ) -> dict[TaskFuture, BatchItem]:
     batch = uuid.uuid4().hex[:8]
     return {
         client.submit(
-            reconstruct_session,
+            task,
             str(item.session_dir),
             plan.settings,
             str(out_dir),

@@ -1,0 +1,121 @@
+"""Batch speed: N sessions one by one in one process, then as a batch on a local Dask cluster.
+
+    .venv/bin/python benchmarks/bench_batch.py [--sessions 12] [--workers 2]
+        [--stations 4,5] [--views 0-7] [--keep DIR]
+
+Simulates N plot sessions (seeds 0..N-1) into a temporary folder (or ``--keep DIR``, reused
+when it already holds them), then:
+
+- one by one: ``run_reconstruction`` + ``write_outputs`` for each session in this process,
+  with the default settings (two reconstruction threads), as ``fieldapp reconstruct`` would;
+- batch: what ``fieldapp batch`` does (plan, local cluster of ``--workers`` single-threaded
+  workers, one task per session, runs recorded in a fresh results database), cluster start-up
+  and shutdown included.
+
+Prints wall and CPU time of both (the batch's CPU includes its worker processes), the
+workers' peak memory, the load average around each run (the machine may be shared: rerun when
+it is quiet), and checks that every plants.csv is byte for byte the same.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import os
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+
+def simulate(root: Path, count: int, stations: str, views: str) -> list[Path]:
+    from fieldapp.cli import main
+
+    folders = []
+    for seed in range(count):
+        folder = root / f"s{seed:03d}"
+        if not (folder / "session.json").is_file():
+            argv = ["simulate", "--out", str(folder), "--seed", str(seed)]
+            with contextlib.redirect_stdout(io.StringIO()):
+                main([*argv, "--stations", stations, "--views", views])
+        folders.append(folder)
+    return folders
+
+
+def one_by_one(folders: list[Path], out: Path) -> tuple[float, float]:
+    from fieldapp.io.session import load_session
+    from fieldapp.recon.outputs import write_outputs
+    from fieldapp.recon.pipeline import run_reconstruction
+    from fieldapp.recon.settings import ReconstructionSettings
+
+    start, start_cpu = time.perf_counter(), time.process_time()
+    for folder in folders:
+        session = load_session(folder)
+        result = run_reconstruction(session, ReconstructionSettings())
+        plant_clouds = {p.id: p.cloud for p in result.plants}
+        target = out / session.id
+        write_outputs(target, result.rows(), result.cloud, plant_clouds, result.report())
+    return time.perf_counter() - start, time.process_time() - start_cpu
+
+
+def batch(folders: list[Path], out: Path, workers: int) -> tuple[float, float, float, int]:
+    """(wall s, CPU s of this process and its workers, workers' peak MB, sessions done)."""
+    from fieldapp import __version__
+    from fieldapp.batch.cluster import open_client
+    from fieldapp.batch.plan import plan_batch, task_settings
+    from fieldapp.batch.runner import run_batch
+    from fieldapp.recon.settings import ReconstructionSettings
+    from fieldapp.results.db import ResultsDB
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start, start_cpu = time.perf_counter(), time.process_time()
+    with ResultsDB.open(out / "results.sqlite") as db:
+        settings = task_settings(ReconstructionSettings())
+        plan = plan_batch(folders, settings, __version__, db, out)
+        with open_client(None, workers, "auto") as client:
+            outcomes = run_batch(client, plan, out, db)
+    wall, cpu = time.perf_counter() - start, time.process_time() - start_cpu
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    children_cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    done = sum(o.status == "done" for o in outcomes)
+    return wall, cpu + children_cpu, after.ru_maxrss / 1024.0, done
+
+
+def same_results(first: Path, second: Path) -> bool:
+    names = sorted(p.relative_to(first) for p in first.glob("*/plants.csv"))
+    return bool(names) and all((first / n).read_bytes() == (second / n).read_bytes() for n in names)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sessions", type=int, default=12)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--stations", default="4,5")
+    parser.add_argument("--views", default="0-7")
+    parser.add_argument("--keep", type=Path, help="simulate into (and reuse) this folder")
+    args = parser.parse_args()
+    import logging
+
+    logging.basicConfig(level=logging.ERROR)
+    with tempfile.TemporaryDirectory() as temporary:
+        root = args.keep or Path(temporary)
+        folders = simulate(root / "sessions", args.sessions, args.stations, args.views)
+        print(f"{len(folders)} sessions: stations {args.stations}, views {args.views}")
+        print(f"load average before: {os.getloadavg()[0]:.2f}")
+        serial_s, serial_cpu_s = one_by_one(folders, Path(temporary) / "one-by-one")
+        print(f"one by one: {serial_s:.1f} s wall, {serial_cpu_s:.1f} s CPU")
+        print(f"load average: {os.getloadavg()[0]:.2f}")
+        wall_s, cpu_s, peak_mb, done = batch(folders, Path(temporary) / "batch", args.workers)
+        print(
+            f"batch on {args.workers} workers: {wall_s:.1f} s wall, {cpu_s:.1f} s CPU "
+            f"(client + workers), {done} done, worker peak {peak_mb:.0f} MB"
+        )
+        print(f"load average after: {os.getloadavg()[0]:.2f}")
+        print(f"speed-up: {serial_s / wall_s:.2f} x")
+        same = same_results(Path(temporary) / "one-by-one", Path(temporary) / "batch")
+        print(f"plants.csv identical: {'yes' if same else 'NO'}")
+
+
+if __name__ == "__main__":
+    main()

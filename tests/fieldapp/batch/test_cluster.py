@@ -1,0 +1,66 @@
+"""Options of the cluster, Dask's logging kept quiet, the progress figures."""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+
+from fieldapp.batch.cluster import memory_limit_bytes, open_client, quiet_dask_logging
+from fieldapp.batch.runner import BatchStatus
+from fieldapp.batch.task import BatchError
+from fieldapp.cli.batch import format_duration
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [("auto", "auto"), ("AUTO", "auto"), ("4GiB", 4 * 2**30), ("500MB", 500 * 10**6), ("0", 0)],
+)
+def test_memory_limits(text, expected):
+    assert memory_limit_bytes(text) == expected
+
+
+@pytest.mark.parametrize("text", ["lots", "4 parsecs", "-1GB", ""])
+def test_bad_memory_limits_name_the_option(text):
+    with pytest.raises(BatchError, match="--memory-limit"):
+        memory_limit_bytes(text)
+
+
+def test_at_least_one_worker():
+    with pytest.raises(BatchError, match="--workers: 0"), open_client(None, 0):
+        pass
+
+
+@pytest.mark.parametrize("address", ["nonsense", "foo://host:1", "tcp://127.0.0.1:1"])
+def test_an_unreachable_scheduler_is_one_clear_error(address):
+    with (
+        pytest.raises(BatchError, match=f"--scheduler: cannot reach {address}"),
+        open_client(address, 1, connect_timeout_s=0.5),
+    ):
+        pass
+
+
+def test_dask_logs_are_errors_only_inside_and_as_before_after():
+    logger = logging.getLogger("distributed")
+    logger.setLevel(logging.DEBUG)
+    try:
+        with quiet_dask_logging():
+            assert logger.level == logging.ERROR
+            assert logging.getLogger("distributed.worker").getEffectiveLevel() == logging.ERROR
+        assert logger.level == logging.DEBUG
+    finally:
+        logger.setLevel(logging.NOTSET)
+
+
+def test_time_left_at_the_pace_so_far():
+    assert BatchStatus(10, 0, 0, 2, 30.0).time_left_s is None
+    assert BatchStatus(10, 3, 1, 2, 40.0).time_left_s == pytest.approx(60.0)
+    assert BatchStatus(10, 9, 1, 0, 40.0).time_left_s == 0.0
+    assert BatchStatus(10, 3, 1, 2, 40.0).finished == 4
+
+
+@pytest.mark.parametrize(
+    ("seconds", "text"), [(0.0, "0:00"), (75.4, "1:15"), (3725.0, "1:02:05"), (-3.0, "0:00")]
+)
+def test_durations(seconds, text):
+    assert format_duration(seconds) == text
