@@ -53,6 +53,8 @@ def advice_for(error: BaseException) -> str:
         (camera.CameraDisconnected, "Check the camera's cable and power, then Connect again."),
         (camera.CameraTimeout, "The camera stopped sending frames: reconnect it."),
         (camera.CameraFormatError, "Choose another session folder for the replay camera."),
+        (camera.CameraEnded, "The replay reached the end of its session: Connect again to "
+         "replay it once more."),
         (table.TableDisconnected, "Check the table's USB cable and choose its port in Devices."),
         (table.TableTimeout, "Is the table's controller powered and is this its port?"),
         (table.TableHeld, "Resume or reset the table in Mission > Set-up."),

@@ -1,0 +1,151 @@
+"""Mission control on simulated devices (instant moves), driving the real widgets: connect,
+start, pause, STOP, resume to the end; closing during a mission; the plan editor."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from fieldapp.io.session import load_session
+from fieldapp.mission.events import MissionState, Outcome
+from fieldapp.mission.plan import MissionPlan, StationPlan, ViewPlan, load_plan
+from ui.main_window import MainWindow
+from ui.mission.page import MissionPage
+
+pytestmark = pytest.mark.usefixtures("no_leaks")
+
+Wait = Callable[..., bool]
+
+
+def small_plan() -> MissionPlan:
+    """Three stations of the paper's grid, four views 45 degrees apart, one frame each."""
+    stations = [
+        StationPlan(number=5, x_m=1.6, y_m=1.6),
+        StationPlan(number=6, x_m=3.2, y_m=1.6),
+        StationPlan(number=3, x_m=3.2, y_m=0.0),
+    ]
+    return MissionPlan(
+        name="small", stations=stations, views=ViewPlan(count=4), frames_per_capture=1,
+        settle_s=0.0,
+    )  # fmt: skip
+
+
+def connected_page(
+    make_window: Callable[..., MainWindow], wait_until: Wait
+) -> tuple[MainWindow, MissionPage]:
+    window = make_window()
+    page = window.pages["mission"]
+    assert isinstance(page, MissionPage)
+    page.editor.set_plan(small_plan())
+    assert not page.start_button.isEnabled()  # not connected yet
+    window.toggle_connection()
+    assert wait_until(lambda: window.context.hub.connected)
+    assert page.start_button.isEnabled()
+    return window, page
+
+
+def test_start_pause_stop_resume_to_the_end(
+    make_window: Callable[..., MainWindow], wait_until: Wait
+) -> None:
+    window, page = connected_page(make_window, wait_until)
+    rig = window.context.hub.rig
+    assert rig is not None and rig.sim_base is not None
+    page.start_button.click()
+    assert wait_until(lambda: page.progress.captured >= 1)
+    assert page.controller.state is MissionState.RUNNING
+    assert not page.start_button.isEnabled() and page.abort_button.isEnabled()
+
+    page.pause_button.click()
+    assert wait_until(lambda: page.controller.state is MissionState.PAUSED, 10.0)
+    assert page.pause_button.text().endswith("Continue")
+    held = page.progress.captured
+    assert not wait_until(lambda: page.progress.captured > held, 0.6)  # nothing while paused
+    page.pause_button.click()
+    assert wait_until(lambda: page.controller.state is MissionState.RUNNING, 5.0)
+
+    window.emergency_stop()
+    assert wait_until(lambda: page.result is not None)
+    assert page.result is not None and page.result.outcome is Outcome.STOPPED
+    assert page.result.missing, "the mission was stopped before its end"
+    assert rig.sim_base.latched  # the base obeyed STOP
+    assert "stopped" in window.notices.cards()[0].label.text()
+    folder = page.controller.folder
+    assert folder is not None and folder.parent == window.context.settings.paths.sessions_dir
+    taken_before = len(load_session(folder).captures)
+    assert taken_before == page.result.captured
+
+    page.resume(folder)
+    assert wait_until(lambda: page.result is not None and page.result.complete, 60.0)
+    session = load_session(folder)
+    keys = sorted((c.station, c.view) for c in session.captures)
+    assert keys == sorted(small_plan().capture_keys())  # each view once, none lost
+    assert page.progress.bar.value() == page.progress.bar.maximum() == 12
+    assert page.controller.state is MissionState.FINISHED
+    # the map shows where the base is: at the last station
+    assert wait_until(lambda: page.map.base_pose is not None, 5.0)
+    x_m, y_m, _ = page.map.base_pose  # type: ignore[misc]
+    assert abs(x_m - 3.2) < 0.1 and abs(y_m - 0.0) < 0.1
+    icons = [page.progress.grid.item(r, c) for r in range(3) for c in range(4)]
+    assert all(item is not None and not item.icon().isNull() for item in icons[-4:])
+
+
+def test_closing_during_a_mission_asks_then_stops_cleanly(
+    make_window: Callable[..., MainWindow], wait_until: Wait, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    window, page = connected_page(make_window, wait_until)
+    page.start_button.click()
+    assert wait_until(lambda: page.progress.captured >= 1)
+    questions: list[str] = []
+    monkeypatch.setattr("ui.mission.page.ask", lambda _p, _t, text: questions.append(text) or False)
+    window.close()
+    assert window.isVisible() and page.controller.busy  # the operator said no
+    monkeypatch.setattr("ui.mission.page.ask", lambda _p, _t, text: questions.append(text) or True)
+    window.close()
+    assert len(questions) == 2 and "mission" in questions[0]
+    assert not window.isVisible()
+    assert page.controller.runner is not None
+    result = page.controller.runner.result
+    assert result is not None and result.outcome in (Outcome.STOPPED, Outcome.COMPLETE)
+    assert window.context.hub.rig is None  # devices closed
+
+
+def test_start_without_devices_is_refused_with_a_notice(
+    make_window: Callable[..., MainWindow], wait_until: Wait
+) -> None:
+    window = make_window()
+    page = window.pages["mission"]
+    assert isinstance(page, MissionPage)
+    page.start()
+    assert wait_until(lambda: bool(window.notices.cards()), 5.0)
+    assert "not connected" in window.notices.cards()[0].label.text()
+
+
+def test_plan_editor_validates_saves_and_loads(
+    make_window: Callable[..., MainWindow], tmp_path: Path
+) -> None:
+    page = make_window().pages["mission"]
+    assert isinstance(page, MissionPage)
+    editor = page.editor
+    editor.set_plan(small_plan())
+    editor.table.item(1, 1).setText("4.8")  # station 6 moves east
+    assert editor.valid and editor.plan().station(6).x_m == pytest.approx(4.8)
+    assert page.map.plan is not None and page.map.plan.station(6).x_m == pytest.approx(4.8)
+    editor.table.item(0, 2).setText("north")
+    assert not editor.valid and "stations.0.y_m" in editor.error.text()
+    assert editor.plan().station(5).y_m == pytest.approx(1.6)  # the last valid plan is kept
+    editor.table.item(0, 2).setText("1.6")
+    editor.reference.setValue(9)
+    assert "reference station 9" in editor.error.text()
+    editor.reference.setValue(5)
+    assert editor.valid
+    path = tmp_path / "small.yaml"
+    editor.save(path)
+    assert load_plan(path) == editor.plan()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\nstations: [{number: 1, x_m: .nan, y_m: 0}]\n")
+    editor.load(bad)
+    assert "bad.yaml" in editor.error.text() and "x_m" in editor.error.text()
+    editor.load(path)
+    assert editor.valid and editor.plan().name == "small" and editor.path == path
