@@ -59,8 +59,9 @@ def one_by_one(folders: list[Path], out: Path) -> tuple[float, float]:
     return time.perf_counter() - start, time.process_time() - start_cpu
 
 
-def batch(folders: list[Path], out: Path, workers: int) -> tuple[float, float, float, int]:
-    """(wall s, CPU s of this process and its workers, workers' peak MB, sessions done)."""
+def batch(folders: list[Path], out: Path, workers: int) -> tuple[float, float, float, float, int]:
+    """(wall s, CPU s of this process, CPU s of its workers, workers' peak MB, sessions
+    done)."""
     from fieldapp import __version__
     from fieldapp.batch.cluster import open_client
     from fieldapp.batch.plan import plan_batch, task_settings
@@ -79,7 +80,7 @@ def batch(folders: list[Path], out: Path, workers: int) -> tuple[float, float, f
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     children_cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     done = sum(o.status == "done" for o in outcomes)
-    return wall, cpu + children_cpu, after.ru_maxrss / 1024.0, done
+    return wall, cpu, children_cpu, after.ru_maxrss / 1024.0, done
 
 
 def same_results(first: Path, second: Path) -> bool:
@@ -106,10 +107,12 @@ def main() -> None:
         serial_s, serial_cpu_s = one_by_one(folders, Path(temporary) / "one-by-one")
         print(f"one by one: {serial_s:.1f} s wall, {serial_cpu_s:.1f} s CPU")
         print(f"load average: {os.getloadavg()[0]:.2f}")
-        wall_s, cpu_s, peak_mb, done = batch(folders, Path(temporary) / "batch", args.workers)
+        wall_s, client_s, workers_s, peak_mb, done = batch(
+            folders, Path(temporary) / "batch", args.workers
+        )
         print(
-            f"batch on {args.workers} workers: {wall_s:.1f} s wall, {cpu_s:.1f} s CPU "
-            f"(client + workers), {done} done, worker peak {peak_mb:.0f} MB"
+            f"batch on {args.workers} workers: {wall_s:.1f} s wall, CPU {client_s:.1f} s client "
+            f"+ {workers_s:.1f} s workers, {done} done, worker peak {peak_mb:.0f} MB"
         )
         print(f"load average after: {os.getloadavg()[0]:.2f}")
         print(f"speed-up: {serial_s / wall_s:.2f} x")

@@ -1,4 +1,7 @@
-"""Twelve tiny simulated sessions and their one-by-one reconstructions, made once per run."""
+"""Twelve tiny simulated sessions and their one-by-one reconstructions, made once per run.
+
+Two fixtures, so that the first tests to use them (cheap ones) share the set-up time between
+them under the per-test timeout."""
 
 from __future__ import annotations
 
@@ -35,28 +38,42 @@ def quietly(argv: list[str]) -> int:
         return main(argv)
 
 
+@dataclass(frozen=True)
+class Simulated:
+    """The session folders in seed order, and a settings file that does not exist."""
+
+    folders: list[Path]
+    no_settings: Path
+
+
 @pytest.fixture(scope="session")
-def sessions(tmp_path_factory: pytest.TempPathFactory) -> Sessions:
+def simulated(tmp_path_factory: pytest.TempPathFactory) -> Simulated:
     root = tmp_path_factory.mktemp("batch")
-    no_settings = root / "no-settings.yaml"  # absent: the default settings, whatever the user's
-    folders, one_by_one = [], {}
+    folders = []
     for seed in SEEDS:
         folder = root / "sessions" / f"s{seed:02d}"
         argv = ["simulate", "--out", str(folder), "--stations", stations(seed), "--views", "0-3"]
         assert quietly([*argv, "--seed", str(seed)]) == 0
         folders.append(folder)
-    for folder in folders:
-        out = root / "one-by-one" / folder.name
-        argv = ["reconstruct", str(folder), "--out", str(out), "--settings", str(no_settings)]
-        assert quietly([*argv, "--quiet"]) == 0
+    return Simulated(folders, root / "no-settings.yaml")
+
+
+@pytest.fixture(scope="session")
+def sessions(simulated: Simulated, tmp_path_factory: pytest.TempPathFactory) -> Sessions:
+    """The simulated sessions, each reconstructed by ``fieldapp reconstruct`` in turn."""
+    root, one_by_one = tmp_path_factory.mktemp("one-by-one"), {}
+    for folder in simulated.folders:
+        out = root / folder.name
+        argv = ["reconstruct", str(folder), "--out", str(out), "--quiet"]
+        assert quietly([*argv, "--settings", str(simulated.no_settings)]) == 0
         one_by_one[load_session(folder).id] = out
-    return Sessions(folders, one_by_one, no_settings)
+    return Sessions(simulated.folders, one_by_one, simulated.no_settings)
 
 
 @pytest.fixture
-def no_user_settings(sessions: Sessions, monkeypatch: pytest.MonkeyPatch) -> Path:
+def no_user_settings(simulated: Simulated, monkeypatch: pytest.MonkeyPatch) -> Path:
     """``FIELDAPP_SETTINGS`` pointing at no file: the defaults, whatever the user has."""
-    monkeypatch.setenv("FIELDAPP_SETTINGS", str(sessions.no_settings))
+    monkeypatch.setenv("FIELDAPP_SETTINGS", str(simulated.no_settings))
     for name in ("FIELDAPP_RECONSTRUCTION__THREADS", "FIELDAPP_PATHS__RESULTS_DB"):
         monkeypatch.delenv(name, raising=False)
-    return sessions.no_settings
+    return simulated.no_settings

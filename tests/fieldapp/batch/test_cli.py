@@ -12,9 +12,28 @@ from fieldapp.batch.cluster import quiet_dask_logging
 from fieldapp.cli import main
 from fieldapp.results.db import ResultsDB
 
-from .conftest import Sessions
+from .conftest import Sessions, Simulated
 
 pytestmark = pytest.mark.slow
+
+
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        (["--workers", "0"], "--workers: 0 is outside 1..1024"),
+        (["--workers", "two"], "--workers: 'two' is not a whole number"),
+        (["--retries", "-1"], "--retries: -1 is outside 0..100"),
+        (["--memory-limit", "lots"], "--memory-limit: 'lots' is not a size"),
+        (["--scheduler", "nonsense"], "--scheduler: cannot reach nonsense"),
+    ],
+)
+def test_bad_options_are_one_line(
+    simulated: Simulated, no_user_settings: Path, tmp_path: Path, capsys, option, message
+):
+    argv = ["batch", str(simulated.folders[0]), "--out", str(tmp_path / "out")]
+    assert main([*argv, "--db", str(tmp_path / "r.sqlite"), *option]) == 1
+    err = capsys.readouterr().err
+    assert f"fieldapp batch: {message}" in err and "Traceback" not in err
 
 
 def test_local_batch_then_rerun_skips_what_is_done(
@@ -61,22 +80,3 @@ def test_the_same_command_runs_on_an_existing_scheduler(
     reference = sessions.one_by_one["sim-plot-seed4-day0"] / "plants.csv"
     written = tmp_path / "out" / "sim-plot-seed4-day0" / "plants.csv"
     assert written.read_bytes() == reference.read_bytes()
-
-
-@pytest.mark.parametrize(
-    ("option", "message"),
-    [
-        (["--workers", "0"], "--workers: 0 is outside 1..1024"),
-        (["--workers", "two"], "--workers: 'two' is not a whole number"),
-        (["--retries", "-1"], "--retries: -1 is outside 0..100"),
-        (["--memory-limit", "lots"], "--memory-limit: 'lots' is not a size"),
-        (["--scheduler", "nonsense"], "--scheduler: cannot reach nonsense"),
-    ],
-)
-def test_bad_options_are_one_line(
-    sessions: Sessions, no_user_settings: Path, tmp_path: Path, capsys, option, message
-):
-    argv = ["batch", str(sessions.folders[0]), "--out", str(tmp_path / "out")]
-    assert main([*argv, "--db", str(tmp_path / "r.sqlite"), *option]) == 1
-    err = capsys.readouterr().err
-    assert f"fieldapp batch: {message}" in err and "Traceback" not in err
