@@ -90,6 +90,8 @@ class GrblSimulator:
         self._last_angle_deg = 0.0
         self.executed_lines: deque[str] = deque(maxlen=1000)
         """The cleaned lines the controller ran, oldest first (for tests and logs)."""
+        self.soft_resets_received = 0
+        """Ctrl-X bytes the host sent (a driver should need none when the banner comes)."""
 
     # --- what the world sees -----------------------------------------------------------------
 
@@ -137,6 +139,7 @@ class GrblSimulator:
                 if self._silent:
                     continue
                 if byte == p.SOFT_RESET[0]:
+                    self.soft_resets_received += 1
                     self._soft_reset()
                 elif byte == p.STATUS_QUERY[0]:
                     self._emit(self._status_line())
