@@ -11,6 +11,7 @@ from PySide6 import QtWidgets
 from devices.camera.stream import FrameStream
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import load_calibration
+from fieldapp.settings import Settings
 from ui.calibration.intrinsics_wizard import IntrinsicsWizard
 from ui.calibration.session_wizards import GroundWizard, StationsWizard, ViewsWizard
 
@@ -45,13 +46,19 @@ def summary(path: Path) -> str:
     return "\n".join(lines)
 
 
+def default_calibration_path(settings: Settings) -> Path:
+    """The rig's calibration file: ``calibration.json`` beside the sessions folder."""
+    return settings.paths.sessions_dir.parent / "calibration.json"
+
+
 class CalibratePage(QtWidgets.QWidget):
-    """Launches each wizard on the calibration file; ``stream`` feeds their live previews."""
+    """Launches each wizard on the calibration file; ``stream`` (or a function giving the
+    current one) feeds their live previews."""
 
     def __init__(
         self,
         calibration_path: Path,
-        stream: FrameStream | None = None,
+        stream: FrameStream | Callable[[], FrameStream | None] | None = None,
         serial: str | None = None,
         parent: QtWidgets.QWidget | None = None,
     ) -> None:
@@ -83,13 +90,19 @@ class CalibratePage(QtWidgets.QWidget):
     def open_wizard(self, key: str) -> QtWidgets.QWizard:
         """Open the wizard ``key`` (intrinsics, views, stations, ground), non-modal."""
         factory = {k: f for k, _, f in WIZARDS}[key]
+        stream = self.stream() if callable(self.stream) else self.stream
         wizard = factory(
-            Path(self.path.text().strip()), stream=self.stream, serial=self.serial, parent=self
+            Path(self.path.text().strip()), stream=stream, serial=self.serial, parent=self
         )
         wizard.finished.connect(lambda _: self._closed(wizard))
         self.wizard = wizard
         wizard.show()
         return wizard
+
+    def shutdown(self) -> None:
+        """Close an open wizard (its workers are waited for)."""
+        if self.wizard is not None:
+            self.wizard.reject()
 
     def _closed(self, wizard: QtWidgets.QWizard) -> None:
         self.refresh()

@@ -122,6 +122,11 @@ class ResultsPanel(QtWidgets.QWidget):
         calibration = self.session.calibration.to_document() if self.session else None
         return export_results(self.results, folder, self.manual.evaluation, growth, calibration)
 
+    def shutdown(self) -> None:
+        """Stop a running reconstruction (the main window calls this as it closes)."""
+        self.runner.cancel()
+        self.runner.wait()
+
     # --- building ----------------------------------------------------------------------
 
     def _build(self) -> None:

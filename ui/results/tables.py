@@ -14,48 +14,33 @@ STATION_COLUMNS = ("station", "ICP accepted", "fitness", "RMSE (mm)", "correctio
 Role = QtCore.Qt.ItemDataRole
 
 
-class PlantTableModel(QtCore.QAbstractTableModel):
-    """One row per plant, sortable by any column (numbers sort as numbers)."""
+class PlantTableModel(QtGui.QStandardItemModel):
+    """One row per plant; each cell's number is kept under ``UserRole`` for sorting."""
 
     def __init__(self, parent: QtCore.QObject | None = None) -> None:
-        super().__init__(parent)
+        super().__init__(0, len(PLANT_COLUMNS), parent)
+        self.setHorizontalHeaderLabels(list(PLANT_COLUMNS))
         self.plants: list[PlantRecord] = []
 
     def set_plants(self, plants: list[PlantRecord]) -> None:
-        self.beginResetModel()
+        self.removeRows(0, self.rowCount())
         self.plants = list(plants)
-        self.endResetModel()
+        for p in self.plants:
+            values = (p.plant, p.x_m, p.y_m, p.height_cm, p.width_cm, p.points)
+            row = []
+            for column, value in enumerate(values):
+                digits = {1: 3, 2: 3, 3: 1, 4: 1}.get(column)
+                item = QtGui.QStandardItem(f"{value:.{digits}f}" if digits else str(value))
+                item.setData(value, Role.UserRole)
+                item.setEditable(False)
+                item.setTextAlignment(QtCore.Qt.AlignmentFlag.AlignRight)
+                row.append(item)
+            self.appendRow(row)
 
     def row_of(self, plant: int) -> int | None:
         for row, record in enumerate(self.plants):
             if record.plant == plant:
                 return row
-        return None
-
-    def rowCount(self, parent: Any = QtCore.QModelIndex()) -> int:  # noqa: B008
-        return 0 if parent.isValid() else len(self.plants)
-
-    def columnCount(self, parent: Any = QtCore.QModelIndex()) -> int:  # noqa: B008
-        return 0 if parent.isValid() else len(PLANT_COLUMNS)
-
-    def headerData(self, section: int, orientation: QtCore.Qt.Orientation, role: int = 0) -> Any:
-        if role == Role.DisplayRole and orientation == QtCore.Qt.Orientation.Horizontal:
-            return PLANT_COLUMNS[section]
-        return None
-
-    def data(self, index: Any, role: int = 0) -> Any:
-        if not index.isValid():
-            return None
-        p = self.plants[index.row()]
-        values = (p.plant, p.x_m, p.y_m, p.height_cm, p.width_cm, p.points)
-        value = values[index.column()]
-        if role == Role.DisplayRole:
-            digits = {1: 3, 2: 3, 3: 1, 4: 1}.get(index.column())
-            return f"{value:.{digits}f}" if digits else str(value)
-        if role == Role.UserRole:
-            return value
-        if role == Role.TextAlignmentRole:
-            return int(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
         return None
 
 

@@ -3,7 +3,6 @@ circle enclosing its projection). Clicking a plant selects it."""
 
 from __future__ import annotations
 
-import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
@@ -25,7 +24,7 @@ class TopMap(pg.PlotWidget):  # type: ignore[misc]
         self.setLabel("bottom", "x (m, field frame)")
         self.setLabel("left", "y (m, field frame)")
         self.showGrid(x=True, y=True, alpha=0.25)
-        self.points = pg.ScatterPlotItem(size=2, pen=None)
+        self.points = pg.ScatterPlotItem(size=2, pen=None, brush=pg.mkBrush(60, 140, 60, 160))
         self.addItem(self.points)
         self.circles: dict[int, QtWidgets.QGraphicsEllipseItem] = {}
         self.texts: list[pg.TextItem] = []
@@ -42,12 +41,7 @@ class TopMap(pg.PlotWidget):  # type: ignore[misc]
             self.points.clear()
             return
         step = max(1, len(scene.points_m) // MAP_POINTS)
-        colors = (scene.colors[::step] * 255).astype(np.uint8)
-        self.points.setData(
-            x=scene.points_m[::step, 0],
-            y=scene.points_m[::step, 1],
-            brush=[pg.mkBrush(*c) for c in colors],
-        )
+        self.points.setData(x=scene.points_m[::step, 0], y=scene.points_m[::step, 1])
         for label in scene.labels:
             x, y, r = float(label.position_m[0]), float(label.position_m[1]), label.radius_m
             circle = QtWidgets.QGraphicsEllipseItem(x - r, y - r, 2 * r, 2 * r)

@@ -21,6 +21,7 @@ from ui.results.scene import CloudScene, nearest_on_screen, project
 log = logging.getLogger(__name__)
 
 GRID_SPACING_M = 0.1
+SIDE_POINTS = 30_000
 
 
 @functools.cache
@@ -47,7 +48,7 @@ class CloudView(QtWidgets.QWidget):
         layout.setContentsMargins(0, 0, 0, 0)
         self.is_3d = gl_available()
         self.view: _GLView | _SideView = _GLView(self) if self.is_3d else _SideView(self)
-        self.view.clicked_plant.connect(self.plant_clicked.emit)
+        self.view.clicked_plant.connect(self.plant_clicked)
         if not self.is_3d:
             note = QtWidgets.QLabel("No OpenGL here: side view (x against height).")
             note.setObjectName("fallbackNote")
@@ -161,9 +162,11 @@ class _SideView(pg.PlotWidget):  # type: ignore[misc]
         self.setLabel("bottom", "x (m, field frame)")
         self.setLabel("left", "height (m)")
         self.setAspectLocked(True)
-        self.scatter = pg.ScatterPlotItem(size=2, pen=None)
+        self.scatter = pg.ScatterPlotItem(size=2, pen=None, brush=pg.mkBrush(70, 150, 70, 160))
         self.addItem(self.scatter)
-        self.ground = pg.InfiniteLine(pos=0.0, angle=0, pen=pg.mkPen((120, 120, 120), width=1))
+        self.selected = pg.ScatterPlotItem(size=3, pen=None, brush=pg.mkBrush(255, 90, 30))
+        self.addItem(self.selected)
+        self.ground = pg.PlotDataItem(pen=pg.mkPen((120, 120, 120), width=1))
         self.addItem(self.ground)
         self.texts: list[pg.TextItem] = []
         self.scene_data: CloudScene | None = None
@@ -178,6 +181,8 @@ class _SideView(pg.PlotWidget):  # type: ignore[misc]
             self.scatter.clear()
             return
         self._draw_points(scene, None)
+        x0, x1 = scene.extent_m[:2]
+        self.ground.setData([x0, x1], [0.0, 0.0])
         for label in scene.labels:
             text = pg.TextItem(str(label.plant), color=(200, 150, 0), anchor=(0.5, 1.0))
             text.setPos(float(label.position_m[0]), float(label.position_m[2]))
@@ -188,10 +193,13 @@ class _SideView(pg.PlotWidget):  # type: ignore[misc]
         self._draw_points(scene, plant)
 
     def _draw_points(self, scene: CloudScene, plant: int | None) -> None:
-        colors = (scene.colors_for(plant) * 255).astype(np.uint8)
-        brushes = [pg.mkBrush(*c) for c in colors[:: max(1, len(colors) // 20000)]]
-        points = scene.points_m[:: max(1, len(colors) // 20000)]
-        self.scatter.setData(x=points[:, 0], y=points[:, 2], brush=brushes)
+        """Every point in one colour, the selected plant's over them in the highlight colour
+        (one brush per item: per-point brush lists, replaced, crash PySide6 6.12)."""
+        step = max(1, len(scene.points_m) // SIDE_POINTS)
+        points = scene.points_m[::step]
+        self.scatter.setData(x=points[:, 0], y=points[:, 2])
+        mine = scene.points_m[scene.plant_of_point == plant] if plant is not None else points[:0]
+        self.selected.setData(x=mine[:, 0], y=mine[:, 2])
 
     def _clicked(self, event: object) -> None:
         if self.scene_data is None:

@@ -16,7 +16,6 @@ from fieldapp.io.calibration import load_calibration
 from ui.calibration import CalibratePage
 from ui.calibration.intrinsics_wizard import IntrinsicsWizard
 from ui.calibration.session_wizards import GroundWizard, StationsWizard, ViewsWizard
-from ui.calibration.verdict import Level
 
 Next = QtWidgets.QWizard.WizardButton.NextButton
 
@@ -92,7 +91,10 @@ def test_intrinsics_too_few_views_is_a_redo(qtbot, boards_session, tmp_path):
     wizard.close()
 
 
-def _views(qtbot, boards_session, path, board=Board(9, 6, 50.0)):
+VIEW_BOARD = Board(9, 6, 50.0)
+
+
+def _views(qtbot, boards_session, path, board=VIEW_BOARD):
     wizard = ViewsWizard(path)
     qtbot.addWidget(wizard)
     wizard.show()

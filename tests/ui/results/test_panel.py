@@ -24,8 +24,20 @@ def panel(qtbot, tmp_path):
     widget = ResultsPanel(settings)
     qtbot.addWidget(widget)
     yield widget
-    widget.runner.cancel()
-    widget.runner.wait()
+    widget.shutdown()
+    release_plot_menus(widget)
+
+
+def release_plot_menus(widget):
+    """pyqtgraph's context menus are parentless: pytest still holds the panel while the leak
+    check runs, so they are deleted here rather than with the panel."""
+    import pyqtgraph as pg
+
+    for plot in widget.findChildren(pg.PlotWidget):
+        item = plot.getPlotItem()
+        for menu in (item.vb.menu, item.ctrlMenu):
+            if menu is not None:
+                menu.deleteLater()
 
 
 def _run(panel, plot_session, out):
