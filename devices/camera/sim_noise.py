@@ -7,8 +7,9 @@ pose without noise (:func:`prepare`, slow) and draws every frame's noise on it
 (:class:`devices.sim.render.SensorModel`, ``shared/KINECT-V2.md``): axial noise by distance
 and incidence (Fankhauser et al. 2015), stronger on dim returns, mixed pixels along depth
 edges, dropouts at grazing angles and where too little IR returns, 0.5-4.5 m range. The
-incidence angle comes from normals of the rendered depth image (exact on smooth surfaces,
-approximate on depth edges, where the mixed pixels dominate anyway).
+incidence angle is the renderer's own (``Frame.meta["cos_incidence"]``); for other clean
+frames it is estimated from normals of the depth image (exact on smooth surfaces, poor on thin
+leaves).
 """
 
 from __future__ import annotations
@@ -19,7 +20,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.camera.frames import Frame, Intrinsics
-from devices.sim.render import MAX_RANGE_M, MIN_RANGE_M, SensorModel, axial_noise_m, ray_table
+from devices.sim.render import (
+    COS_INCIDENCE,
+    MAX_RANGE_M,
+    MIN_RANGE_M,
+    SensorModel,
+    axial_noise_m,
+    ray_table,
+)
 
 COLOUR_NOISE = 0.03
 """Relative noise of the linear colour per pixel (the renderer's), about 1/2.2 of it in sRGB."""
@@ -89,7 +97,10 @@ def prepare(clean: Frame, intrinsics: Intrinsics, sensor: SensorModel) -> CleanV
     depth = clean.depth_m.astype(np.float32)
     ir = (clean.ir if clean.ir is not None else np.zeros(depth.shape)).astype(np.float32)
     valid = np.isfinite(depth)
-    cos = cos_incidence(depth, intrinsics)
+    true_cos = clean.meta.get(COS_INCIDENCE)
+    # the renderer's own incidence when it gives one; normals of the depth image are poor on
+    # thin leaves, and too many dropouts there thin the plants
+    cos = true_cos if isinstance(true_cos, np.ndarray) else cos_incidence(depth, intrinsics)
     theta = np.arccos(cos)
     weak = np.sqrt(np.clip(400.0 / np.maximum(ir, 1.0), 1.0, 9.0))  # dim returns are noisier
     sigma = np.where(valid, axial_noise_m(np.where(valid, depth, 1.0), theta) * weak, 0.0)
@@ -105,7 +116,7 @@ def prepare(clean: Frame, intrinsics: Intrinsics, sensor: SensorModel) -> CleanV
         drop_index=drop_index,
         drop_p=p_drop.ravel()[drop_index].astype(np.float32),
         edges=_edges(depth, sensor),
-        meta=dict(clean.meta),
+        meta={k: v for k, v in clean.meta.items() if k != COS_INCIDENCE},
     )
 
 

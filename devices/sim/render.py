@@ -80,6 +80,11 @@ def ray_table(intrinsics: Intrinsics, supersample: int = 1) -> NDArray[np.float3
     return table
 
 
+COS_INCIDENCE = "cos_incidence"
+"""``Frame.meta`` key of the true (H, W) float32 |cos| of each pixel's incidence angle: what a
+re-noiser needs to draw the sensor's noise on a noise-free render."""
+
+
 @dataclass
 class Hits:
     """What the rays hit, flattened, float32: ``t`` (N,) depth along the axis (inf = nothing),
@@ -156,9 +161,9 @@ class Renderer:
         depth = _pixels(hits.t, h, w, s)
         ir = _pixels(self._ir_amplitude(hits), h, w, s)
         color = _pixels(rgb, h, w, s) if rgb is not None else np.zeros((h, w, 3), np.float32)
+        cos_incidence = _pixels(hits.cos_incidence, h, w, s)
         if self.sensor.noise:
             ir *= 1.0 + self.sensor.ir_noise * rng.standard_normal(ir.shape, np.float32)
-            cos_incidence = _pixels(hits.cos_incidence, h, w, s)
             depth = sensor_depth(self.sensor, depth, cos_incidence, ir, rng)
         else:
             depth[~np.isfinite(depth)] = np.nan
@@ -167,6 +172,7 @@ class Renderer:
             depth_m=depth,
             color=_to_srgb8(color, rng if self.sensor.noise else None),
             ir=np.clip(ir, 0, 65535).astype(np.uint16),
+            meta={COS_INCIDENCE: cos_incidence},
         )
 
     def _cast(self, T_field_camera: Matrix4) -> Hits:
