@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 RUN_ARGS ?= gui
 
-.PHONY: run test lint typecheck layers pytest sysdeps bench clean
+.PHONY: run test lint typecheck layers pytest sysdeps bench clean bundle
 .DEFAULT_GOAL := run
 
 run: $(VENV)/.installed
@@ -34,6 +34,15 @@ $(VENV)/.installed: pyproject.toml $(VENV)/.python
 $(VENV)/.installed-dev: pyproject.toml $(VENV)/.python
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	touch $@ $(VENV)/.installed
+
+# The self-contained app (packaging/README.md): build/bundle/dist/fieldapp/ and a .tar.gz.
+# Slow (minutes), so never part of `make test`.
+bundle: $(VENV)/.installed-bundle
+	sh packaging/build.sh $(BIN)/python
+
+$(VENV)/.installed-bundle: pyproject.toml $(VENV)/.python
+	$(BIN)/python -m pip install --quiet -e ".[dev,bundle]"
+	touch $@ $(VENV)/.installed-dev $(VENV)/.installed
 
 bench: $(VENV)/.installed-dev
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

@@ -302,7 +302,7 @@ uninstall() {
 
 # --- main -------------------------------------------------------------------------------------
 
-[ $DRY_RUN = 1 ] && say "dry run: nothing is changed"
+[ $DRY_RUN = 1 ] && echo "$PROG: dry run: nothing is changed"
 say "$MODE install, app folder $ROOT$APP_DIR"
 if [ $UNINSTALL = 1 ]; then
     uninstall
