@@ -88,13 +88,18 @@ def open_client(
                 processes=True,
                 memory_limit=memory_limit,
                 host="127.0.0.1",
-                dashboard_address=None,
+                dashboard_address=":0",  # any free port: 8787 may be another cluster's
                 silence_logs=logging.CRITICAL,  # a task's error is reported by the client
             ) as cluster,
             Client(cluster) as client,
         ):
             client.register_plugin(QuietFieldappLogs())
-            log.info("local cluster of %d workers: %s", workers, cluster.scheduler_address)
+            log.info(
+                "local cluster of %d workers: %s, dashboard %s",
+                workers,
+                cluster.scheduler_address,
+                client.dashboard_link,
+            )
             yield client
 
 

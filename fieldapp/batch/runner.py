@@ -89,7 +89,8 @@ def run_batch(
 ) -> list[Outcome]:
     """Reconstruct ``plan.to_run`` on ``client``'s cluster; returns the outcomes in the order
     the sessions finished. ``on_status`` is called about twice a second and after each
-    session, ``on_outcome`` once per session."""
+    session, ``on_outcome`` once per session. ``task`` is what each task runs (tests give a
+    stand-in)."""
     started_s = time.perf_counter()
     futures = _submit(client, task, plan, out_dir.resolve(), retries)
     items = {future.key: item for future, item in futures.items()}
@@ -142,7 +143,10 @@ def _summary_of(future: TaskFuture) -> SessionSummary | str:
         return f"{type(error).__name__}: {error}"
     if future.status == "cancelled":
         return "cancelled"
-    return future.result()
+    try:
+        return future.result()
+    except Exception as error:  # lost between completion and gathering, and not recomputed
+        return f"{type(error).__name__}: {error}"
 
 
 def _record(

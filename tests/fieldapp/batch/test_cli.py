@@ -70,7 +70,7 @@ def test_the_same_command_runs_on_an_existing_scheduler(
     with (
         quiet_dask_logging(),
         LocalCluster(
-            n_workers=1, processes=False, dashboard_address=None, silence_logs=logging.ERROR
+            n_workers=1, processes=False, dashboard_address=":0", silence_logs=logging.ERROR
         ) as cluster,
     ):
         argv = ["batch", str(sessions.folders[4]), "--out", str(tmp_path / "out")]
