@@ -13,8 +13,8 @@ from numpy.typing import NDArray
 from fieldapp.errors import FormatError, Problem
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.outputs import read_ply
+from fieldapp.recon.result import Reconstruction
 from fieldapp.results.files import PlantRecord, read_plants_csv, read_report
-from ui.results.runner import Outcome
 
 
 @dataclass
@@ -44,19 +44,20 @@ class PlotResults:
         return np.array([record.x_m, record.y_m, z])
 
 
-def from_outcome(outcome: Outcome) -> PlotResults:
-    result = outcome.result
+def from_reconstruction(
+    result: Reconstruction, results_dir: Path, session_folder: Path | None
+) -> PlotResults:
     plants = [
         PlantRecord(r.plant, r.x_m, r.y_m, r.height_cm, r.width_cm, r.points) for r in result.rows()
     ]
     return PlotResults(
         session_id=result.session_id,
-        results_dir=outcome.results_dir,
+        results_dir=results_dir,
         plants=plants,
         cloud=result.cloud,
         plant_clouds={p.id: p.cloud for p in result.plants},
         report=result.report(),
-        session_folder=outcome.session.folder,
+        session_folder=session_folder,
         warnings=list(result.warnings),
     )
 

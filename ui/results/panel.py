@@ -12,12 +12,12 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.session import Session, load_session
 from fieldapp.recon.progress import Progress
 from fieldapp.settings import Settings
-from ui.results.data import PlotResults, from_outcome, load_results_dir
+from ui.results.data import PlotResults, load_results_dir
 from ui.results.export import export_results
 from ui.results.history import HistoryPanel
 from ui.results.manual import ManualPanel
 from ui.results.runner import Outcome, ReconstructionRunner, default_results_dir
-from ui.results.scene import build_scene
+from ui.results.scene import CloudScene, build_scene
 from ui.results.tables import PlantTableModel, station_model
 from ui.results.topmap import TopMap
 from ui.results.view3d import CloudView
@@ -77,9 +77,10 @@ class ResultsPanel(QtWidgets.QWidget):
         self.runner.cancel()
         self.stage.setText("cancelling at the next step…")
 
-    def show_results(self, results: PlotResults) -> None:
+    def show_results(self, results: PlotResults, scene: CloudScene | None = None) -> None:
+        """Show ``results`` (``scene``: its drawing, when already built off the GUI thread)."""
         self.results, self.selected = results, None
-        scene = build_scene(results)
+        scene = scene or build_scene(results)
         self.view3d.show_scene(scene)
         self.map.show_scene(scene)
         self.plant_model.set_plants(results.plants)
@@ -219,7 +220,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self._set_running(False)
         self.progress.setValue(1000)
         self.stage.setText(f"done: {len(outcome.result.plants)} plants")
-        self.show_results(from_outcome(outcome))
+        self.show_results(outcome.plot, outcome.scene)
 
     def _failed(self, message: str) -> None:
         self._set_running(False)

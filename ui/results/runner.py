@@ -20,6 +20,8 @@ from fieldapp.recon.pipeline import reconstruct
 from fieldapp.recon.progress import Progress
 from fieldapp.recon.result import Reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
+from ui.results.data import PlotResults, from_reconstruction
+from ui.results.scene import CloudScene, build_scene
 
 log = logging.getLogger(__name__)
 
@@ -30,11 +32,14 @@ class WorkerCrashed(Exception):
 
 @dataclass
 class Outcome:
-    """A finished reconstruction and the folder its files were written to."""
+    """A finished reconstruction, the folder its files were written to, and what the panel
+    shows of it (prepared on the worker, so the GUI thread only hands arrays to widgets)."""
 
     session: Session
     result: Reconstruction
     results_dir: Path
+    plot: PlotResults
+    scene: CloudScene
 
 
 def default_results_dir(session_folder: Path) -> Path:
@@ -60,7 +65,8 @@ def reconstruction_steps(
         steps.close()
     plant_clouds = {p.id: p.cloud for p in result.plants}
     write_outputs(results_dir, result.rows(), result.cloud, plant_clouds, result.report())
-    return Outcome(session, result, results_dir)
+    plot = from_reconstruction(result, results_dir, session.folder)
+    return Outcome(session, result, results_dir, plot, build_scene(plot))
 
 
 class ReconstructionRunner(QtCore.QObject):
