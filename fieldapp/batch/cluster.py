@@ -81,18 +81,7 @@ def open_client(
             with _connect(scheduler, connect_timeout_s) as client:
                 yield client
             return
-        with (
-            LocalCluster(
-                n_workers=workers,
-                threads_per_worker=1,
-                processes=True,
-                memory_limit=memory_limit,
-                host="127.0.0.1",
-                dashboard_address=":0",  # any free port: 8787 may be another cluster's
-                silence_logs=logging.CRITICAL,  # a task's error is reported by the client
-            ) as cluster,
-            Client(cluster) as client,
-        ):
+        with _local_cluster(workers, memory_limit) as cluster, Client(cluster) as client:
             client.register_plugin(QuietFieldappLogs())
             log.info(
                 "local cluster of %d workers: %s, dashboard %s",
@@ -101,6 +90,23 @@ def open_client(
                 client.dashboard_link,
             )
             yield client
+
+
+def _local_cluster(workers: int, memory_limit: str | int) -> LocalCluster:
+    """Started, or a :class:`BatchError` saying why not (e.g. a script without a
+    ``__main__`` guard: worker processes are spawned and import the main module)."""
+    try:
+        return LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            memory_limit=memory_limit,
+            host="127.0.0.1",
+            dashboard_address=":0",  # any free port: 8787 may be another cluster's
+            silence_logs=logging.CRITICAL,  # a task's error is reported by the client
+        )
+    except (RuntimeError, OSError, ValueError) as error:
+        raise BatchError(f"cannot start a local cluster of {workers} workers: {error}") from None
 
 
 @contextmanager

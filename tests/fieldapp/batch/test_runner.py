@@ -4,6 +4,8 @@ recorded once on the client, skipped when run again; a failing session stops not
 from __future__ import annotations
 
 import json
+import logging
+import os
 import shutil
 from pathlib import Path
 
@@ -34,6 +36,18 @@ def assert_same_outputs(batch_dir: Path, reference_dir: Path) -> None:
         ).read_bytes()
 
 
+def assert_one_session_at_a_time_per_worker(client) -> None:
+    """Two worker processes of one thread, 2 GiB each, one thread for OpenMP and BLAS,
+    fieldapp's warnings left to the reports."""
+    assert sorted(client.nthreads().values()) == [1, 1]
+    assert len(set(client.run(os.getpid).values())) == 2
+    assert set(client.run(os.environ.get, "OMP_NUM_THREADS").values()) == {"1"}
+    limits = client.run(lambda dask_worker: dask_worker.memory_manager.memory_limit)
+    assert set(limits.values()) == {2 * 2**30}
+    levels = client.run(lambda: logging.getLogger("fieldapp").level)
+    assert set(levels.values()) == {logging.ERROR}
+
+
 def broken_copy(source: Path, folder: Path) -> Path:
     """A copy of ``source`` under another id whose depth images are not images."""
     shutil.copytree(source, folder)
@@ -52,6 +66,7 @@ def test_twelve_sessions_on_two_workers_match_one_by_one(sessions: Sessions, tmp
     statuses: list[BatchStatus] = []
     outcomes: list[Outcome] = []
     with ResultsDB.open(tmp_path / "results.sqlite") as db, open_client(None, 2, "2GiB") as client:
+        assert_one_session_at_a_time_per_worker(client)
         plan = plan_batch(folders, settings, __version__, db, out)
         assert len(plan.to_run) == 13 and not plan.skipped and not plan.rejected
         returned = run_batch(
