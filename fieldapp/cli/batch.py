@@ -33,7 +33,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--out", type=Path, required=True, help="folder for the results")
     parser.add_argument("--scheduler", help="a Dask scheduler, e.g. tcp://host:8786")
     parser.add_argument(
-        "--workers", default=str(os.cpu_count() or 1), help="local worker processes (CPUs)"
+        "--workers", default=str(usable_cpus()), help="local worker processes (the CPUs)"
     )
     parser.add_argument(
         "--memory-limit", default="auto", help="per local worker: auto (RAM / workers), 4GiB, 0"
@@ -45,6 +45,13 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--retries", default="2", help="retries of a task that raised (2)")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
     parser.set_defaults(handler=run)
+
+
+def usable_cpus() -> int:
+    """The CPUs this process may run on (its affinity mask where the system has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
 
 
 def run(args: argparse.Namespace) -> int:

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import logging
+import os
 
 import pytest
 
 from fieldapp.batch.cluster import memory_limit_bytes, open_client, quiet_dask_logging
 from fieldapp.batch.runner import BatchStatus
 from fieldapp.batch.task import BatchError
-from fieldapp.cli.batch import format_duration
+from fieldapp.cli.batch import format_duration, usable_cpus
 
 
 @pytest.mark.parametrize(
@@ -64,3 +65,9 @@ def test_time_left_at_the_pace_so_far():
 )
 def test_durations(seconds, text):
     assert format_duration(seconds) == text
+
+
+def test_default_workers_are_the_cpus_this_process_may_use():
+    assert 1 <= usable_cpus() <= (os.cpu_count() or 1)
+    if hasattr(os, "sched_getaffinity"):
+        assert usable_cpus() == len(os.sched_getaffinity(0))
