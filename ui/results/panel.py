@@ -173,6 +173,9 @@ class ResultsPanel(QtWidgets.QWidget):
         self.table.setSelectionBehavior(QtWidgets.QAbstractItemView.SelectionBehavior.SelectRows)
         self.table.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.SingleSelection)
         self.table.verticalHeader().hide()
+        self.table.horizontalHeader().setSectionResizeMode(
+            QtWidgets.QHeaderView.ResizeMode.ResizeToContents
+        )
         self.table.selectionModel().selectionChanged.connect(self._table_selected)
         self.view3d = CloudView()
         self.view3d.plant_clicked.connect(self.select_plant)
@@ -198,6 +201,7 @@ class ResultsPanel(QtWidgets.QWidget):
         splitter.addWidget(self.table)
         splitter.addWidget(self.tabs)
         splitter.setStretchFactor(1, 3)
+        splitter.setSizes([460, 1000])
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(row1)
         layout.addLayout(row2)

@@ -80,20 +80,17 @@ class _GLView(QtWidgets.QWidget):
         self.widget.setBackgroundColor((20, 22, 26))
         self.widget.clicked.connect(self._clicked)
         layout.addWidget(self.widget)
-        self.cloud = gl.GLScatterPlotItem(pxMode=True, size=2.0)
+        self.cloud = gl.GLScatterPlotItem(pxMode=True, size=2.0, glOptions="opaque")
         self.widget.addItem(self.cloud)
         self.grid = gl.GLGridItem(color=(255, 255, 255, 60))
         self.widget.addItem(self.grid)
-        self.texts: list[object] = []
         self.scene: CloudScene | None = None
 
     def show_scene(self, scene: CloudScene | None) -> None:
         self.scene = scene
-        for text in self.texts:
-            self.widget.removeItem(text)
-        self.texts = []
         if scene is None:
             self.cloud.setData(pos=np.zeros((0, 3)), color=np.zeros((0, 4)))
+            self.widget.set_labels([])
             return
         self.cloud.setData(pos=scene.points_m, color=scene.colors)
         x0, x1, y0, y1 = scene.extent_m
@@ -101,14 +98,7 @@ class _GLView(QtWidgets.QWidget):
         self.grid.setSpacing(x=GRID_SPACING_M, y=GRID_SPACING_M)
         self.grid.resetTransform()
         self.grid.translate((x0 + x1) / 2, (y0 + y1) / 2, 0.0)
-        for label in scene.labels:
-            text = gl.GLTextItem(
-                pos=label.position_m + np.array([0.0, 0.0, 0.03]),
-                text=str(label.plant),
-                color=(255, 230, 80),
-            )
-            self.widget.addItem(text)
-            self.texts.append(text)
+        self.widget.set_labels([(str(label.plant), label.position_m) for label in scene.labels])
         centre = QtGui.QVector3D((x0 + x1) / 2, (y0 + y1) / 2, 0.0)
         self.widget.setCameraPosition(
             pos=centre, distance=1.4 * max(x1 - x0, y1 - y0), elevation=35, azimuth=-60
@@ -118,16 +108,13 @@ class _GLView(QtWidgets.QWidget):
         self.cloud.setData(color=scene.colors_for(plant))
         if plant is not None:
             label = scene.label(plant)
-            self.widget.setCameraPosition(pos=QtGui.QVector3D(*label.position_m), distance=0.9)
+            self.widget.setCameraPosition(pos=QtGui.QVector3D(*label.position_m), distance=1.8)
 
     def _clicked(self, x: float, y: float) -> None:
         if self.scene is None or not self.scene.labels:
             return
-        mvp = np.array(
-            (self.widget.projectionMatrix() * self.widget.viewMatrix()).copyDataTo()
-        ).reshape(4, 4)
         positions = np.array([label.position_m for label in self.scene.labels])
-        pixels = project(positions, mvp, self.widget.width(), self.widget.height())
+        pixels = self.widget.to_screen(positions)
         projected = [
             (label.plant, float(px), float(py))
             for label, (px, py) in zip(self.scene.labels, pixels, strict=True)
@@ -139,9 +126,49 @@ class _GLView(QtWidgets.QWidget):
 
 
 class _ClickableGL(gl.GLViewWidget):  # type: ignore[misc]
-    """A GLViewWidget that reports a click (press and release without a drag)."""
+    """A GLViewWidget that reports a click (press and release without a drag) and paints
+    text labels over the scene at 3D positions (GLTextItem draws nothing on some drivers)."""
 
     clicked = QtCore.Signal(float, float)
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.labels: list[tuple[str, np.ndarray]] = []
+        self._label_widgets: list[QtWidgets.QLabel] = []
+
+    def to_screen(self, points_m: np.ndarray) -> np.ndarray:
+        """(N, 2) widget pixels of (N, 3) field points; NaN behind the camera."""
+        viewport = self.getViewport()
+        projection = self.projectionMatrix(viewport, viewport)
+        mvp = np.array((projection * self.viewMatrix()).copyDataTo()).reshape(4, 4)
+        return project(points_m, mvp, self.width(), self.height())
+
+    def set_labels(self, labels: list[tuple[str, np.ndarray]]) -> None:
+        """Text at 3D positions, as child labels kept over their points as the view turns
+        (GLTextItem and painting inside paintGL draw nothing on some drivers)."""
+        for widget in self._label_widgets:
+            widget.deleteLater()
+        self.labels = labels
+        self._label_widgets = []
+        for text, _ in labels:
+            widget = QtWidgets.QLabel(text, self)
+            widget.setStyleSheet("color:#ffe650;font-weight:bold;background:transparent")
+            widget.setAttribute(QtCore.Qt.WidgetAttribute.WA_TransparentForMouseEvents)
+            widget.adjustSize()
+            widget.show()
+            self._label_widgets.append(widget)
+        self.update()
+
+    def paintGL(self, *args: object, **kwargs: object) -> None:
+        super().paintGL(*args, **kwargs)
+        if not self.labels:
+            return
+        pixels = self.to_screen(np.array([position for _, position in self.labels]))
+        for widget, (x, y) in zip(self._label_widgets, pixels, strict=True):
+            visible = bool(np.isfinite(x) and np.isfinite(y))
+            widget.setVisible(visible)
+            if visible:
+                widget.move(round(x) - widget.width() // 2, round(y) - widget.height())
 
     def mousePressEvent(self, event: QtGui.QMouseEvent) -> None:
         self._pressed_at = event.position()
