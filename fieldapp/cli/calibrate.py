@@ -225,25 +225,31 @@ def run_ground(args: argparse.Namespace) -> int:
 
     session = _load(args.session)
     calibration = load_calibration(args.calibration)
-    result = calibrate_ground(session, calibration, load_settings().reconstruction)
+    settings = load_settings().reconstruction
+    result = calibrate_ground(session, calibration, settings)
     ground = Ground(matrix=result.T_field_reference)
     ground.calibrated = provenance(  # type: ignore[attr-defined]
         args.serial,
         method="RANSAC plane of the reference station",
         camera_height_m=round(result.camera_height_m, 4),
         camera_pitch_deg=round(result.camera_pitch_deg, 3),
+        station=result.station,
         inlier_fraction=round(result.inlier_fraction, 3),
-        rms_mm=round(1000 * result.rms_m, 2),
+        inlier_rms_mm=round(1000 * result.rms_m, 2),
     )
     previous = save_keeping_previous(args.out, calibration.model_copy(update={"ground": ground}))
     print(
         f"camera {result.camera_height_m:.3f} m above the ground, pitched "
         f"{result.camera_pitch_deg:.2f} degrees down"
     )
+    distance_cm = 100 * settings.ground.ransac_distance_m
     print(
-        f"ground plane: {100 * result.inlier_fraction:.0f} % of {result.points} soil points "
-        f"within 10 cm, RMS {1000 * result.rms_m:.1f} mm"
+        f"ground plane from station {result.station}: {100 * result.inlier_fraction:.0f} % of "
+        f"{result.points} points within {distance_cm:g} cm, RMS {1000 * result.rms_m:.1f} mm"
     )
+    if result.change_from_previous is not None:
+        moved_m, turned_deg = result.change_from_previous
+        print(f"change from the ground in force: {100 * moved_m:.1f} cm, {turned_deg:.2f} degrees")
     for warning in result.warnings:
         print(f"warning: {warning}")
     print(f"written to {args.out}" + (f" (previous kept as {previous})" if previous else ""))
