@@ -38,7 +38,7 @@ PIPELINES = {
 }
 INSTALL_HINT = (
     "Kinect v2 needs libfreenect2 and its Python binding pylibfreenect2, which pip cannot "
-    "build without the C library: see devices/camera/KINECT2.md"
+    "build without the C library: see packaging/README.md (Kinect v2)"
 )
 
 
@@ -123,7 +123,7 @@ class Kinect2Camera(DepthCamera):
         if count == 0:
             raise CameraUnavailable(
                 "no Kinect v2 found: is it on a USB 3 port, powered by its adapter, and are "
-                "libfreenect2's udev rules installed (devices/camera/KINECT2.md)?"
+                "the udev rules installed (packaging/README.md, Kinect v2)?"
             )
         serials = [freenect.getDeviceSerialNumber(i) for i in range(count)]
         if self.serial is None:
