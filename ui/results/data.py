@@ -13,7 +13,6 @@ from numpy.typing import NDArray
 from fieldapp.errors import FormatError, Problem
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.outputs import read_ply
-from fieldapp.recon.result import Reconstruction
 from fieldapp.results.files import PlantRecord, read_plants_csv, read_report
 
 
@@ -42,24 +41,6 @@ class PlotResults:
         cloud = self.plant_clouds.get(plant_id)
         z = float(cloud.points[:, 2].max()) if cloud is not None and len(cloud) else 0.0
         return np.array([record.x_m, record.y_m, z])
-
-
-def from_reconstruction(
-    result: Reconstruction, results_dir: Path, session_folder: Path | None
-) -> PlotResults:
-    plants = [
-        PlantRecord(r.plant, r.x_m, r.y_m, r.height_cm, r.width_cm, r.points) for r in result.rows()
-    ]
-    return PlotResults(
-        session_id=result.session_id,
-        results_dir=results_dir,
-        plants=plants,
-        cloud=result.cloud,
-        plant_clouds={p.id: p.cloud for p in result.plants},
-        report=result.report(),
-        session_folder=session_folder,
-        warnings=list(result.warnings),
-    )
 
 
 def load_results_dir(folder: Path) -> PlotResults:

@@ -223,7 +223,7 @@ class ResultsPanel(QtWidgets.QWidget):
     def _succeeded(self, outcome: Outcome) -> None:
         self._set_running(False)
         self.progress.setValue(1000)
-        self.stage.setText(f"done: {len(outcome.result.plants)} plants")
+        self.stage.setText(f"done: {len(outcome.plot.plants)} plants")
         self.show_results(outcome.plot, outcome.scene)
 
     def _failed(self, message: str) -> None:

@@ -1,6 +1,8 @@
-"""The reconstruction on a worker thread: ``reconstruct()`` is driven by a superqt generator
-worker, every :class:`Progress` reaches the GUI thread as a signal, and cancelling stops the
-work at the next step boundary (the generator is closed there)."""
+"""The reconstruction off the GUI: it runs in a child process
+(:func:`fieldapp.recon.process.reconstruct_in_process`: Open3D's native work would otherwise
+stall the GUI thread), a superqt generator worker relays every :class:`Progress` to the GUI
+thread as a signal and then reads the results back, and cancelling stops the child at its next
+step boundary."""
 
 from __future__ import annotations
 
@@ -15,12 +17,10 @@ from superqt.utils import GeneratorWorker, create_worker
 
 from fieldapp.errors import FieldappError
 from fieldapp.io.session import Session
-from fieldapp.recon.outputs import write_outputs
-from fieldapp.recon.pipeline import reconstruct
+from fieldapp.recon.process import reconstruct_in_process
 from fieldapp.recon.progress import Progress
-from fieldapp.recon.result import Reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
-from ui.results.data import PlotResults, from_reconstruction
+from ui.results.data import PlotResults, load_results_dir
 from ui.results.scene import CloudScene, build_scene
 
 log = logging.getLogger(__name__)
@@ -36,7 +36,6 @@ class Outcome:
     shows of it (prepared on the worker, so the GUI thread only hands arrays to widgets)."""
 
     session: Session
-    result: Reconstruction
     results_dir: Path
     plot: PlotResults
     scene: CloudScene
@@ -50,23 +49,12 @@ def default_results_dir(session_folder: Path) -> Path:
 def reconstruction_steps(
     session: Session, settings: ReconstructionSettings, results_dir: Path
 ) -> Generator[Progress, None, Outcome]:
-    """:func:`reconstruct`, then its files written into ``results_dir``. Closing this
-    generator closes the reconstruction's."""
-    steps = reconstruct(session, settings)
-    try:
-        while True:
-            try:
-                event = next(steps)
-            except StopIteration as done:
-                result: Reconstruction = done.value
-                break
-            yield event
-    finally:
-        steps.close()
-    plant_clouds = {p.id: p.cloud for p in result.plants}
-    write_outputs(results_dir, result.rows(), result.cloud, plant_clouds, result.report())
-    plot = from_reconstruction(result, results_dir, session.folder)
-    return Outcome(session, result, results_dir, plot, build_scene(plot))
+    """The reconstruction in its own process, then its files read back for display. Closing
+    this generator cancels the child process."""
+    yield from reconstruct_in_process(session.folder, settings, results_dir)
+    plot = load_results_dir(results_dir)
+    plot.session_folder = session.folder
+    return Outcome(session, results_dir, plot, build_scene(plot))
 
 
 class ReconstructionRunner(QtCore.QObject):
