@@ -112,10 +112,7 @@ def run_intrinsics(args: argparse.Namespace) -> int:
         else:
             print(f"  {view.name}: REJECTED: {view.rejected}")
     print(f"corner coverage {100 * result.coverage:.0f} % of the image")
-    for warning in result.warnings:
-        print(f"warning: {warning}")
-    print(f"written to {args.out}" + (f" (previous kept as {previous})" if previous else ""))
-    return 0
+    return _finish(result.warnings, args.out, previous)
 
 
 def _load(path: Path) -> Any:
@@ -159,10 +156,7 @@ def run_views(args: argparse.Namespace) -> int:
     print(f"feature point RMSE {1000 * result.rmse_m:.2f} mm over {result.points} corners")
     for pair in result.pairs:
         print(f"  {pair}")
-    for warning in result.warnings:
-        print(f"warning: {warning}")
-    print(f"written to {args.out}" + (f" (previous kept as {previous})" if previous else ""))
-    return 0
+    return _finish(result.warnings, args.out, previous)
 
 
 def run_stations(args: argparse.Namespace) -> int:
@@ -211,10 +205,7 @@ def run_stations(args: argparse.Namespace) -> int:
         f"{result.bundle.boards} boards: RMSE {1000 * result.bundle.rmse_m:.2f} mm "
         "(view_step refined too)"
     )
-    for warning in result.warnings:
-        print(f"warning: {warning}")
-    print(f"written to {args.out}" + (f" (previous kept as {previous})" if previous else ""))
-    return 0
+    return _finish(result.warnings, args.out, previous)
 
 
 def run_ground(args: argparse.Namespace) -> int:
@@ -250,7 +241,12 @@ def run_ground(args: argparse.Namespace) -> int:
     if result.change_from_previous is not None:
         moved_m, turned_deg = result.change_from_previous
         print(f"change from the ground in force: {100 * moved_m:.1f} cm, {turned_deg:.2f} degrees")
-    for warning in result.warnings:
+    return _finish(result.warnings, args.out, previous)
+
+
+def _finish(warnings: list[str], out: Path, previous: Path | None) -> int:
+    """Every solver's last lines: its warnings, where it wrote, what it kept."""
+    for warning in warnings:
         print(f"warning: {warning}")
-    print(f"written to {args.out}" + (f" (previous kept as {previous})" if previous else ""))
+    print(f"written to {out}" + (f" (previous kept as {previous})" if previous else ""))
     return 0
