@@ -109,6 +109,7 @@ class MainWindow(QtWidgets.QMainWindow):
         hub.state_changed.connect(self.status.show_device)
         hub.state_changed.connect(self.badge.show_device)
         hub.state_changed.connect(self._update_connect_button)
+        hub.state_changed.connect(self._base_state)
         hub.base_status.connect(lambda status: self.status.set_battery(status.battery_pct))
         hub.connect_failed.connect(self._connect_failed)
         hub.device_lost.connect(self._device_lost)
@@ -187,6 +188,13 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _mission_busy(self) -> bool:
         return any(bool(getattr(page, "busy", False)) for page in self.pages.values())
+
+    def _base_state(self, status: DeviceStatus) -> None:
+        if status.name == "base" and status.state not in (
+            DeviceState.CONNECTED,
+            DeviceState.SIMULATED,
+        ):
+            self.status.set_battery(None)
 
     def _update_connect_button(self, _status: DeviceStatus) -> None:
         hub = self.context.hub

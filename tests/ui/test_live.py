@@ -184,3 +184,14 @@ def test_a_stream_that_ends_is_reported(
     finally:
         stream.stop()
         camera.close()
+
+
+def test_depth_colour_indices_follow_the_fixed_levels() -> None:
+    from ui.live.frame_math import depth_indices, depth_lut
+
+    depth = np.array([[np.nan, 0.2, 0.5, 2.5, 4.5, 9.0]], np.float32)
+    indices = depth_indices(depth, 0.5, 4.5)
+    assert indices.tolist() == [[0, 1, 1, 128, 255, 255]]
+    lut = depth_lut(np.full((255, 3), 200, np.uint8))
+    assert lut.shape == (256, 4) and tuple(lut[0]) == (0, 0, 0, 255)
+    assert (lut[1:, :3] == 200).all() and (lut[:, 3] == 255).all()

@@ -83,10 +83,13 @@ def test_start_pause_stop_resume_to_the_end(
     assert keys == sorted(small_plan().capture_keys())  # each view once, none lost
     assert page.progress.bar.value() == page.progress.bar.maximum() == 12
     assert page.controller.state is MissionState.FINISHED
-    # the map shows where the base is: at the last station
-    assert wait_until(lambda: page.map.base_pose is not None, 5.0)
-    x_m, y_m, _ = page.map.base_pose  # type: ignore[misc]
-    assert abs(x_m - 3.2) < 0.1 and abs(y_m - 0.0) < 0.1
+
+    # the map follows the base's telemetry: it ends at the last station
+    def at_last_station() -> bool:
+        pose = page.map.base_pose
+        return pose is not None and abs(pose[0] - 3.2) < 0.1 and abs(pose[1] - 0.0) < 0.1
+
+    assert wait_until(at_last_station, 5.0), page.map.base_pose
     icons = [page.progress.grid.item(r, c) for r in range(3) for c in range(4)]
     assert all(item is not None and not item.icon().isNull() for item in icons[-4:])
 

@@ -246,15 +246,25 @@ class DeviceSettingsDialog(QtWidgets.QDialog):
             return
         label = self.results[device]
         label.show_testing()
-        self._workers.run(lambda: probe(device, devices), label.show_result, self._crashed(device))
+        self._workers.run(
+            lambda: probe(device, devices), self._shower(device), self._crashed(device)
+        )
 
     def test_all(self) -> None:
         for device in self.results:
             self.test(device)
 
+    def _shower(self, device: str) -> Callable[[ProbeResult], None]:
+        def show(result: ProbeResult) -> None:
+            self.results[device].show_result(result)
+            self.adjustSize()
+
+        return show
+
     def _crashed(self, device: str) -> Callable[[BaseException], None]:
         def show(error: BaseException) -> None:
             self.results[device].show_result(ProbeResult(device, False, str(error)))
+            self.adjustSize()
 
         return show
 

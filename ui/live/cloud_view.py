@@ -24,11 +24,27 @@ def opengl_problem() -> str | None:
         import OpenGL.GL  # noqa: F401
     except ImportError as error:
         return f"PyOpenGL is not installed ({error})"
+    from PySide6.QtOpenGL import QOpenGLFramebufferObject
+
+    platform = QtGui.QGuiApplication.platformName()
+    if platform in ("offscreen", "minimal"):  # no widget can render OpenGL there
+        return f"the '{platform}' display has no OpenGL widgets"
     context = QtGui.QOpenGLContext()
     if not context.create():
-        platform = QtGui.QGuiApplication.platformName()
         return f"no OpenGL context on the '{platform}' display"
-    return None
+    surface = QtGui.QOffscreenSurface()
+    surface.setFormat(context.format())
+    surface.create()
+    try:
+        if not context.makeCurrent(surface):
+            return f"OpenGL context cannot be made current on the '{platform}' display"
+        framebuffer = QOpenGLFramebufferObject(16, 16)  # what QOpenGLWidget renders into
+        usable = framebuffer.isValid()
+        del framebuffer
+        context.doneCurrent()
+    finally:
+        surface.destroy()
+    return None if usable else f"no OpenGL framebuffer on the '{platform}' display"
 
 
 class CloudView(QtWidgets.QWidget):

@@ -66,11 +66,35 @@ def cloud_points(
     return points, colours
 
 
+def depth_indices(depth_m: NDArray[np.float32], low_m: float, high_m: float) -> NDArray[np.uint8]:
+    """(H, W) uint8 indices into a 256-entry lookup table: 0 where depth is missing, 1..255
+    from ``low_m`` to ``high_m`` (clipped). Cheaper on the GUI thread than letting the image
+    item scale float data."""
+    scale = np.float32(254.0 / max(high_m - low_m, 1e-6))
+    with np.errstate(invalid="ignore"):
+        scaled = (depth_m - np.float32(low_m)) * scale
+        np.clip(scaled, 0.0, 254.0, out=scaled)
+    indices = np.zeros(depth_m.shape, np.uint8)
+    valid = np.isfinite(scaled)
+    indices[valid] = scaled[valid].astype(np.uint8) + 1
+    return indices
+
+
+def depth_lut(colours: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """(256, 4) RGBA table for :func:`depth_indices`: black for missing, then ``colours``
+    ((255, 3 or 4) uint8, low to high)."""
+    lut = np.zeros((256, 4), np.uint8)
+    lut[0] = (0, 0, 0, 255)
+    lut[1:, : colours.shape[1]] = colours
+    lut[1:, 3] = 255
+    return lut
+
+
 def ir_for_display(
     ir: NDArray[np.uint16], low_pct: float = 1.0, high_pct: float = 99.0
 ) -> NDArray[np.uint8]:
     """(H, W) uint8: IR amplitude stretched between its percentiles (the raw range is wide)."""
-    low, high = np.percentile(ir, [low_pct, high_pct])
+    low, high = np.percentile(ir[::4, ::4], [low_pct, high_pct])  # a sample is enough
     span = max(float(high - low), 1.0)
     scaled = np.clip((ir.astype(np.float32) - float(low)) / span, 0.0, 1.0)
     shown: NDArray[np.uint8] = (scaled * 255.0).astype(np.uint8)

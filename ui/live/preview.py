@@ -15,14 +15,16 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
 import pyqtgraph as pg
+from numpy.typing import NDArray
 from PySide6 import QtCore, QtWidgets
 
 from devices.camera import CameraError
 from devices.camera.frames import Frame, Intrinsics
 from devices.camera.quality import QualityReport, QualityThresholds
 from ui.live.cloud_view import CloudView
-from ui.live.frame_math import ir_for_display, read_pixel, save_frame
+from ui.live.frame_math import depth_indices, depth_lut, ir_for_display, read_pixel, save_frame
 from ui.live.quality_monitor import QualityMonitor
 from ui.workers import WorkerSet
 
@@ -89,19 +91,32 @@ class ImagePanel(pg.GraphicsLayoutWidget):
         self.second_item = pg.ImageItem(axisOrder="row-major")
         self.depth_plot.addItem(self.depth_item)
         self.second_plot.addItem(self.second_item)
+        colour_map = pg.colormap.get("turbo")
         self.colour_bar = pg.ColorBarItem(
-            values=DEPTH_LEVELS_M, colorMap=pg.colormap.get("turbo"), interactive=False,
-            label="depth (m)", colorMapMenu=False,
+            values=DEPTH_LEVELS_M, colorMap=colour_map, interactive=False, label="depth (m)",
+            colorMapMenu=False,
         )  # fmt: skip
-        self.colour_bar.setImageItem(self.depth_item)
         self.addItem(self.colour_bar, row=0, col=1)
+        lut = colour_map.getLookupTable(nPts=255, alpha=False)
+        self.depth_item.setLookupTable(depth_lut(lut))
+        self.levels_m: tuple[float, float] = DEPTH_LEVELS_M
+        self.depth_m: NDArray[np.float32] | None = None
 
-    def fit(self, width: int, height: int) -> None:
-        """Frame the whole image."""
-        self.depth_plot.setRange(xRange=(0, width), yRange=(0, height), padding=0.0)
+    def show_depth(self, depth_m: NDArray[np.float32]) -> None:
+        """Depth colour-mapped between the fixed levels (black where missing)."""
+        self.depth_m = depth_m
+        self.depth_item.setImage(depth_indices(depth_m, *self.levels_m), levels=(0, 255))
+
+    def fit(self) -> None:
+        """Frame the whole image, and keep framing it as the panel is resized."""
+        self.depth_plot.getViewBox().setDefaultPadding(0.0)
+        self.depth_plot.enableAutoRange()
 
     def set_levels(self, low_m: float, high_m: float) -> None:
+        self.levels_m = (low_m, high_m)
         self.colour_bar.setLevels((low_m, high_m))
+        if self.depth_m is not None:
+            self.show_depth(self.depth_m)
 
     def show_second(self, kind: str) -> None:
         visible = kind != "None"
@@ -245,9 +260,9 @@ class LivePreview(QtWidgets.QWidget):
         now_s = time.monotonic()
         self.rate.tick(now_s)
         first = self.images.depth_item.image is None
-        self.images.depth_item.setImage(frame.depth_m, autoLevels=False)
+        self.images.show_depth(frame.depth_m)
         if first:
-            self.images.fit(frame.depth_m.shape[1], frame.depth_m.shape[0])
+            self.images.fit()
         self._show_second()
         if self.intrinsics is not None and now_s >= self._cloud_due_s:
             self._cloud_due_s = now_s + CLOUD_PERIOD_S

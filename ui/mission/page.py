@@ -222,6 +222,10 @@ class MissionPage(QtWidgets.QWidget):
         advice = "" if result.complete else "Press Resume session... to capture what is missing."
         if result.fault is not None:
             advice = result.fault.advice
+        self._show_outcome(result)
+        self.progress.finish(
+            f"{result.outcome.value}: {result.captured} captured, {len(result.missing)} missing"
+        )
         self.context.notifier.post(
             Notice(level, f"Mission {result.outcome.value}", "; ".join(result.lines()[:2]), advice)
         )
@@ -234,6 +238,9 @@ class MissionPage(QtWidgets.QWidget):
         self.map.show_base(pose.x_m, pose.y_m, pose.yaw_deg)
 
     def _show_state(self, state: MissionState) -> None:
+        if state in (MissionState.FINISHED, MissionState.FAILED) and self.result is not None:
+            self._update_buttons()
+            return
         colour = STATE_COLOURS[state]
         self.state_label.setText(
             f"<span style='font-size:15px; font-weight:bold; color:{colour}'>"
@@ -241,6 +248,16 @@ class MissionPage(QtWidgets.QWidget):
         )
         self.pause_button.setText("▶ Continue" if state is MissionState.PAUSED else "❚❚ Pause")
         self._update_buttons()
+
+    def _show_outcome(self, result: MissionResult) -> None:
+        colour = {Outcome.COMPLETE: "#2e7d32", Outcome.FAILED: "#c62828"}.get(
+            result.outcome, "#ef6c00"
+        )
+        total = result.captured + len(result.missing)
+        self.state_label.setText(
+            f"<span style='font-size:15px; font-weight:bold; color:{colour}'>"
+            f"{result.outcome.value.upper()}</span> {result.captured} of {total} captures"
+        )
 
     def _update_buttons(self) -> None:
         connected = self.context.hub.connected

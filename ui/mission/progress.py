@@ -125,6 +125,11 @@ class ProgressPanel(QtWidgets.QWidget):
         )
         self.step.setText(progress.step)
 
+    def finish(self, text: str) -> None:
+        """The mission ended: ``text`` replaces the time remaining."""
+        self.times.setText(text)
+        self.step.clear()
+
     def add_station(self, event: StationReached) -> None:
         self.step.setText(
             f"at station {event.station} (x {event.x_m:.2f} m, y {event.y_m:.2f} m, "
