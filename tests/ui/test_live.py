@@ -47,21 +47,34 @@ def stream(no_leaks: None, world: SimWorld) -> Iterator[FrameStream]:
 
 
 @pytest.fixture
-def preview(no_leaks: None, settings: Settings, tmp_path: Path) -> Iterator[LivePreview]:
-    context = AppContext(settings, DeviceHub(), Notifier(), UiState(tmp_path / "ui.ini"))
-    widget = LivePreview(context)
-    widget.resize(1000, 700)
-    widget.show()
-    yield widget
-    widget.shutdown()
-    widget.close()
-    for obj in (widget, context.hub, context.notifier):
-        shiboken6.delete(obj)
+def make_preview(
+    no_leaks: None, settings: Settings, tmp_path: Path
+) -> Iterator[Callable[[], LivePreview]]:
+    """Builds live previews; each is shut down and deleted after the test (the factory keeps
+    no reference, so nothing outlives the test)."""
+    made: list[tuple[LivePreview, AppContext]] = []
+
+    def make() -> LivePreview:
+        context = AppContext(settings, DeviceHub(), Notifier(), UiState(tmp_path / "ui.ini"))
+        widget = LivePreview(context)
+        widget.resize(1000, 700)
+        widget.show()
+        made.append((widget, context))
+        return widget
+
+    yield make
+    for widget, context in made:
+        widget.shutdown()
+        widget.close()
+        for obj in (widget, context.hub, context.notifier):
+            shiboken6.delete(obj)
+    made.clear()
 
 
 def test_frames_are_shown_with_rates_and_quality(
-    preview: LivePreview, stream: FrameStream, world: SimWorld, wait_until: Wait
+    make_preview: Callable[[], LivePreview], stream: FrameStream, world: SimWorld, wait_until: Wait
 ) -> None:
+    preview = make_preview()
     preview.attach(stream, world.intrinsics)
     assert wait_until(lambda: preview.frames_shown >= 10, 10.0)
     image = preview.images.depth_item.image
@@ -84,8 +97,9 @@ def field_point(T_field_camera: Matrix4, point_m: tuple[float, float, float]) ->
 
 
 def test_cursor_reading_lies_on_the_simulated_soil(
-    preview: LivePreview, stream: FrameStream, world: SimWorld, wait_until: Wait
+    make_preview: Callable[[], LivePreview], stream: FrameStream, world: SimWorld, wait_until: Wait
 ) -> None:
+    preview = make_preview()
     preview.attach(stream, world.intrinsics)
     assert wait_until(lambda: preview.frame is not None, 10.0)
     frame = preview.frame
@@ -105,8 +119,13 @@ def test_cursor_reading_lies_on_the_simulated_soil(
 
 
 def test_save_writes_the_shown_frame(
-    preview: LivePreview, stream: FrameStream, world: SimWorld, wait_until: Wait, tmp_path: Path
+    make_preview: Callable[[], LivePreview],
+    stream: FrameStream,
+    world: SimWorld,
+    wait_until: Wait,
+    tmp_path: Path,
 ) -> None:
+    preview = make_preview()
     preview.attach(stream, world.intrinsics)
     assert wait_until(lambda: preview.frame is not None, 10.0)
     preview.freeze.setChecked(True)
@@ -123,8 +142,9 @@ def test_save_writes_the_shown_frame(
 
 
 def test_ir_beside_depth(
-    preview: LivePreview, stream: FrameStream, world: SimWorld, wait_until: Wait
+    make_preview: Callable[[], LivePreview], stream: FrameStream, world: SimWorld, wait_until: Wait
 ) -> None:
+    preview = make_preview()
     preview.attach(stream, world.intrinsics)
     assert wait_until(lambda: preview.frame is not None, 10.0)
     preview.second_view.setCurrentText("IR")
@@ -138,8 +158,9 @@ def test_ir_beside_depth(
 
 
 def test_3d_view_or_a_clear_reason(
-    preview: LivePreview, stream: FrameStream, world: SimWorld, wait_until: Wait
+    make_preview: Callable[[], LivePreview], stream: FrameStream, world: SimWorld, wait_until: Wait
 ) -> None:
+    preview = make_preview()
     preview.attach(stream, world.intrinsics)
     assert wait_until(lambda: preview.cloud.points_shown > 1000, 10.0)
     if opengl_problem() is None:
@@ -163,8 +184,9 @@ def test_cloud_points_follow_the_pinhole_model(world: SimWorld) -> None:
 
 
 def test_a_stream_that_ends_is_reported(
-    preview: LivePreview, world: SimWorld, wait_until: Wait, tmp_path: Path
+    make_preview: Callable[[], LivePreview], world: SimWorld, wait_until: Wait, tmp_path: Path
 ) -> None:
+    preview = make_preview()
     from devices.camera.replay import ReplayCamera
     from fieldapp.cli.simulate import write_session
 

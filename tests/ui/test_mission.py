@@ -13,6 +13,7 @@ from fieldapp.mission.events import MissionState, Outcome
 from fieldapp.mission.plan import MissionPlan, StationPlan, ViewPlan, load_plan
 from ui.main_window import MainWindow
 from ui.mission.page import MissionPage
+from ui.mission.plan_map import DONE
 
 pytestmark = pytest.mark.usefixtures("no_leaks")
 
@@ -90,6 +91,8 @@ def test_start_pause_stop_resume_to_the_end(
         return pose is not None and abs(pose[0] - 3.2) < 0.1 and abs(pose[1] - 0.0) < 0.1
 
     assert wait_until(at_last_station, 5.0), page.map.base_pose
+    assert page.map.colours == {5: DONE, 6: DONE, 3: DONE}
+    assert page.map.by_colour[DONE].data["data"].tolist() == [5, 6, 3]
     icons = [page.progress.grid.item(r, c) for r in range(3) for c in range(4)]
     assert all(item is not None and not item.icon().isNull() for item in icons[-4:])
 

@@ -50,15 +50,22 @@ class PlanMap(pg.PlotWidget):
         self.path = pg.PlotDataItem(
             pen=pg.mkPen("#607d8b", width=2, style=QtCore.Qt.PenStyle.DashLine)
         )
-        self.stations = pg.ScatterPlotItem(size=34, pxMode=True, hoverable=True)
-        self.stations.sigClicked.connect(self._clicked)
+        # one item, one brush per state: replacing per-point brush lists crashes PySide6 6.12
+        self.by_colour = {
+            colour: pg.ScatterPlotItem(
+                size=34, pxMode=True, brush=pg.mkBrush(colour), pen=pg.mkPen("k")
+            )
+            for colour in (PENDING, ACTIVE, DONE, LOW)
+        }
+        for item in self.by_colour.values():
+            item.sigClicked.connect(self._clicked)
         self.reference = pg.ScatterPlotItem(
             size=46, pxMode=True, brush=None, pen=pg.mkPen("#1e88e5", width=3)
         )
         self.base = pg.ScatterPlotItem(
             size=30, pxMode=True, brush=pg.mkBrush("#d32f2f"), pen=pg.mkPen("k")
         )
-        for item in (self.path, self.reference, self.stations, self.base):
+        for item in (self.path, self.reference, *self.by_colour.values(), self.base):
             self.addItem(item)
         self.labels: list[pg.TextItem] = []
         self.plan: MissionPlan | None = None
@@ -98,22 +105,20 @@ class PlanMap(pg.PlotWidget):
         """The base's pose (map frame)."""
         self.base_pose = (x_m, y_m, yaw_deg)
         symbol = rotated(arrow_symbol(), yaw_deg)
-        self.base.setData([x_m], [y_m], symbol=[symbol])
+        self.base.setData([x_m], [y_m])
+        self.base.setSymbol(symbol)
         self.base.setToolTip(f"base at x {x_m:.2f} m, y {y_m:.2f} m, yaw {yaw_deg:.0f} deg")
 
     def _draw_stations(self) -> None:
         if self.plan is None:
             return
-        spots = [
-            {
-                "pos": (s.x_m, s.y_m),
-                "data": s.number,
-                "brush": pg.mkBrush(self.colours[s.number]),
-                "pen": pg.mkPen("k"),
-            }
-            for s in self.plan.stations
-        ]
-        self.stations.setData(spots)
+        for colour, item in self.by_colour.items():
+            stations = [s for s in self.plan.stations if self.colours[s.number] == colour]
+            item.setData(
+                x=[s.x_m for s in stations],
+                y=[s.y_m for s in stations],
+                data=[s.number for s in stations],
+            )
 
     def _clicked(self, _item: object, points: list[pg.SpotItem]) -> None:
         if points:
