@@ -37,7 +37,7 @@ def _flush_deletes() -> None:
 def _plot_menu(widget: QtWidgets.QWidget) -> bool:
     """A hidden menu under a parentless menu: pyqtgraph gives each plot one ("Plot Options"
     and its submenus), owned by the plot's Python object. pytest can keep such objects alive
-    past the teardown (a captured log record holds an exception whose traceback holds the
+    past the teardown (likely: a captured log record holding an exception whose traceback holds the
     widget), so these are not counted; every other top-level widget is."""
     root: QtCore.QObject = widget
     while root.parent() is not None:
