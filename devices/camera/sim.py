@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from devices.camera.base import CameraInfo, DepthCamera
+from devices.camera.base import CameraDisconnected, CameraInfo, DepthCamera
 from devices.camera.frames import Frame, Intrinsics
 from devices.camera.sim_noise import CleanView, prepare, renoise
 from devices.sim.render import Renderer
@@ -108,18 +108,20 @@ class SimCamera(DepthCamera):
         return self.world.render(rng)
 
     def _renoised(self, state: tuple[Pose2D, float]) -> Frame:
-        if self._view is None or state != self._view_state:
-            self._view = self._clean_view(state)
-            self._view_state = state
-        return renoise(self._view, self.world.renderer.sensor, self._rng)
+        view = self._view  # close() may clear it from another thread meanwhile
+        if view is None or state != self._view_state:
+            view = self._clean_view(state)
+            self._view, self._view_state = view, state
+        return renoise(view, self.world.renderer.sensor, self._rng)
 
     def _clean_view(self, state: tuple[Pose2D, float]) -> CleanView:
-        if self._clean_renderer is None:
-            raise RuntimeError("camera is not open")
+        renderer = self._clean_renderer
+        if renderer is None:  # closed while a grabber was reading
+            raise CameraDisconnected("the simulated camera was closed")
         started = time.perf_counter()
         pose, angle = state
         T_field_camera = self.world.rig.T_field_camera(pose, angle, self.world.scene.soil)
-        clean = self._clean_renderer.render(T_field_camera)
+        clean = renderer.render(T_field_camera)
         clean.meta["T_field_camera"] = T_field_camera.tolist()
         view = prepare(clean, self.intrinsics, self.world.renderer.sensor)
         self.renders += 1

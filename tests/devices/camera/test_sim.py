@@ -91,3 +91,12 @@ def test_reading_a_closed_camera_is_a_typed_error(flat_world: SimWorld) -> None:
         camera.read_frame()
     with pytest.raises(ValueError, match="fps"):
         SimCamera(flat_world, fps=0)
+
+
+def test_closing_while_a_new_pose_renders_is_a_disconnect_not_a_crash():
+    camera = SimCamera(SimWorld.default(seed=0), realtime=False)
+    camera.open()
+    camera._clean_renderer = None  # what close() does while the grabber is mid-read
+    with pytest.raises(CameraDisconnected, match="closed"):
+        camera._renoised((camera.world.base_pose(), 12.0))
+    camera.close()
