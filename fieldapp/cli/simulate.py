@@ -115,27 +115,12 @@ def build_world(scene_name: str, seed: int, day: int, rig: RigGeometry, plants: 
 
 
 def nominal_calibration(world: SimWorld) -> Calibration:
-    """The rig's pre-calibration: exact view step, stations from their nominal poses on level
-    ground, ground = the nominal reference camera in the field frame."""
-    from devices.geometry import invert
+    """The rig's pre-calibration over the 9 standard stations (reference 5)."""
     from devices.sim.rig import REFERENCE_STATION, STATIONS
-    from fieldapp.io.calibration import Calibration, DepthCamera, Ground, Stations, ViewStep
+    from fieldapp.mission.calibration import rig_calibration
 
-    rig = world.rig
-    nominal = {s: rig.T_field_camera(rig.station_pose(s), 0.0) for s in STATIONS}
-    T_field_reference = nominal[REFERENCE_STATION]
-    return Calibration(
-        format="fieldapp-calibration/1",
-        depth_camera=DepthCamera.from_intrinsics(world.intrinsics),
-        view_step=ViewStep(
-            angle_deg=rig.view_step_deg, matrix=rig.T_camera0_camera(rig.view_step_deg)
-        ),
-        stations=Stations(
-            reference=REFERENCE_STATION,
-            to_reference={s: invert(T_field_reference) @ T for s, T in nominal.items()},
-        ),
-        ground=Ground(matrix=T_field_reference),
-    )
+    poses = {s: world.rig.station_pose(s) for s in STATIONS}
+    return rig_calibration(world, poses, REFERENCE_STATION, world.rig.view_step_deg)
 
 
 def write_session(

@@ -7,6 +7,7 @@ the plan's reference station and every planned station.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from fieldapp.errors import FieldappError
@@ -14,6 +15,7 @@ from fieldapp.io.calibration import Calibration, load_calibration
 from fieldapp.mission.plan import MissionPlan
 
 if TYPE_CHECKING:
+    from devices.sim.rig import Pose2D
     from devices.sim.world import SimWorld
 
 log = logging.getLogger(__name__)
@@ -34,29 +36,35 @@ def calibration_in_force(plan: MissionPlan, world: SimWorld | None) -> Calibrati
     return nominal_calibration(plan, world)
 
 
-def nominal_calibration(plan: MissionPlan, world: SimWorld) -> Calibration:
-    """The simulated rig's pre-calibration for the plan: the exact view step, each planned
-    station from its map pose on level ground, ground = the nominal reference camera."""
+def rig_calibration(
+    world: SimWorld, poses: Mapping[int, Pose2D], reference: int, step_deg: float
+) -> Calibration:
+    """The simulated rig's pre-calibration: the exact view step, each station from its map pose
+    on level ground, ground = the reference station's nominal camera in the field frame."""
     from devices.geometry import invert
-    from devices.sim.rig import Pose2D
     from fieldapp.io.calibration import DepthCamera, Ground, Stations, ViewStep
 
     rig = world.rig
-    nominal = {
-        s.number: rig.T_field_camera(Pose2D(s.x_m, s.y_m, s.yaw_deg), 0.0) for s in plan.stations
-    }
-    T_field_reference = nominal[plan.reference_station]
-    step_deg = plan.views.step_deg
+    nominal = {station: rig.T_field_camera(pose, 0.0) for station, pose in poses.items()}
+    T_field_reference = nominal[reference]
     return Calibration(
         format="fieldapp-calibration/1",
         depth_camera=DepthCamera.from_intrinsics(world.intrinsics),
         view_step=ViewStep(angle_deg=step_deg, matrix=rig.T_camera0_camera(step_deg)),
         stations=Stations(
-            reference=plan.reference_station,
+            reference=reference,
             to_reference={s: invert(T_field_reference) @ T for s, T in nominal.items()},
         ),
         ground=Ground(matrix=T_field_reference),
     )
+
+
+def nominal_calibration(plan: MissionPlan, world: SimWorld) -> Calibration:
+    """The simulated rig's pre-calibration for the plan's stations."""
+    from devices.sim.rig import Pose2D
+
+    poses = {s.number: Pose2D(s.x_m, s.y_m, s.yaw_deg) for s in plan.stations}
+    return rig_calibration(world, poses, plan.reference_station, plan.views.step_deg)
 
 
 def check_against_plan(calibration: Calibration, plan: MissionPlan, source: str) -> None:
