@@ -76,9 +76,9 @@ def squared_pearson(a: ArrayLike, m: ArrayLike) -> float | None:
     if len(x) < MIN_PAIRS_FOR_R2:
         return None
     dx, dy = x - x.mean(), y - y.mean()
-    sxx, syy = float(dx @ dx), float(dy @ dy)
-    scale = max(float(np.abs(x).max()), float(np.abs(y).max()), 1e-300)
-    if sxx <= (1e-12 * scale) ** 2 * len(x) or syy <= (1e-12 * scale) ** 2 * len(y):
-        return None
-    r = float(dx @ dy) / math.sqrt(sxx * syy)
+    spread_x, spread_y = float(np.abs(dx).max()), float(np.abs(dy).max())
+    if spread_x <= 1e-12 * float(np.abs(x).max()) or spread_y <= 1e-12 * float(np.abs(y).max()):
+        return None  # a constant side, up to rounding (this also catches a zero spread)
+    dx, dy = dx / spread_x, dy / spread_y  # r is scale-free; tiny values must not underflow
+    r = float(dx @ dy) / math.sqrt(float(dx @ dx) * float(dy @ dy))
     return min(1.0, r * r)

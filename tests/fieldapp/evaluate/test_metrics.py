@@ -87,3 +87,10 @@ def test_r2_is_numpy_corrcoef_squared(pairs):
     if np.ptp(a) < 1e-6 or np.ptp(m) < 1e-6:
         return
     assert r2 == pytest.approx(np.corrcoef(a, m)[0, 1] ** 2, abs=1e-9)
+
+
+def test_r2_of_tiny_values_does_not_underflow():
+    # found by hypothesis: the product of two variances of ~1e-187 underflowed to 0
+    tiny = 7.094698625978579e-94
+    assert squared_pearson([0.0, 0.0, tiny], [0.0, tiny, 0.0]) == pytest.approx(0.25)
+    assert squared_pearson([1e300, -1e300, 0.0], [1.0, 2.0, 3.0]) == pytest.approx(0.25)
