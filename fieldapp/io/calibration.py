@@ -19,6 +19,7 @@ from pydantic import (
 )
 
 from devices.camera.frames import Intrinsics
+from devices.geometry import make_transform
 from fieldapp.io.durable import write_json_durably
 from fieldapp.io.jsonfile import load_model, to_rigid_matrix
 
@@ -82,6 +83,20 @@ class DepthCamera(SpecModel):
         )
 
 
+def T_view0_view(T_view_next: NDArray[np.float64], view: int) -> NDArray[np.float64]:
+    """Maps view ``view`` into view 0, given the step that maps view k+1 into view k: the
+    paper's Eq. 9, p0 = R^j p_j + (R^(j-1) + ... + R + I) t."""
+    if view < 0:
+        raise ValueError(f"view must be >= 0, got {view}")
+    R, t = T_view_next[:3, :3], T_view_next[:3, 3]
+    R_power = np.eye(3)
+    t_sum = np.zeros(3)
+    for _ in range(view):
+        t_sum = t_sum + R_power @ t
+        R_power = R_power @ R
+    return make_transform(R_power, t_sum)
+
+
 class ViewStep(SpecModel):
     """``matrix`` maps view k+1 into view k at the same station (the table turned by angle)."""
 
@@ -102,7 +117,7 @@ class ViewStep(SpecModel):
 
     def T_view0_view(self, view: int) -> NDArray[np.float64]:
         """Maps view ``view`` into view 0 by applying ``matrix`` ``view`` times (paper, Eq. 9)."""
-        return np.linalg.matrix_power(self.matrix, view)
+        return T_view0_view(self.matrix, view)
 
 
 class Stations(SpecModel):

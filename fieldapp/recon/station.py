@@ -6,23 +6,11 @@ view j reaches view 0 as p0 = R^j p_j + (R^(j-1) + ... + R + I) t.
 
 from __future__ import annotations
 
-import numpy as np
-
-from devices.geometry import Matrix4, make_transform
+from devices.geometry import Matrix4
+from fieldapp.io.calibration import T_view0_view
 from fieldapp.recon.cloud import Cloud
 
-
-def T_view0_view(T_view_next: Matrix4, view: int) -> Matrix4:
-    """Maps view ``view`` into view 0, given the step that maps view k+1 into view k (Eq. 9)."""
-    if view < 0:
-        raise ValueError(f"view must be >= 0, got {view}")
-    R, t = T_view_next[:3, :3], T_view_next[:3, 3]
-    R_power = np.eye(3)
-    t_sum = np.zeros(3)
-    for _ in range(view):
-        t_sum = t_sum + R_power @ t
-        R_power = R_power @ R
-    return make_transform(R_power, t_sum)
+__all__ = ["T_view0_view", "station_cloud"]
 
 
 def station_cloud(views: dict[int, Cloud], T_view_next: Matrix4) -> Cloud:
