@@ -62,6 +62,12 @@ class _SessionWizard(QtWidgets.QWizard):
         self.board_form = BoardForm(board or Board(9, 6, 40.0))
         self.session_page = SessionPage(self.board_form.board, stream, self.in_force)
 
+    def _add_pages(self, prepare: PreparePage, solve: SolvePage, save: SavePage) -> None:
+        """Every session wizard's pages: prepare, choose or capture the session, solve, save."""
+        self.solve, self.save = solve, save
+        for page in (prepare, self.session_page, solve, save):
+            self.addPage(page)
+
     def in_force(self) -> Calibration | None:
         """The rig's calibration file as it is now (None when absent)."""
         path = (
@@ -95,17 +101,13 @@ class ViewsWizard(_SessionWizard):
         super().__init__(
             "Calibrate view to view", calibration_path, Board(9, 6, 50.0), stream, serial, parent
         )
-        self.solve = SolvePage(
-            lambda: calibrate_view_step(self.session, self.board_form.board()), self._describe
-        )
-        self.save = SavePage(calibration_path, self._update)
-        for page in (
+        self._add_pages(
             PreparePage("What to prepare", VIEWS_TEXT, self.board_form),
-            self.session_page,
-            self.solve,
-            self.save,
-        ):
-            self.addPage(page)
+            SolvePage(
+                lambda: calibrate_view_step(self.session, self.board_form.board()), self._describe
+            ),
+            SavePage(calibration_path, self._update),
+        )
 
     def _nominal_deg(self) -> float:
         step = self.session.calibration.view_step
@@ -153,15 +155,11 @@ class StationsWizard(_SessionWizard):
             parent,
         )
         self.reference = reference
-        self.solve = SolvePage(self._solve, self._describe)
-        self.save = SavePage(calibration_path, self._update)
-        for page in (
+        self._add_pages(
             PreparePage("What to prepare", STATIONS_TEXT, self.board_form),
-            self.session_page,
-            self.solve,
-            self.save,
-        ):
-            self.addPage(page)
+            SolvePage(self._solve, self._describe),
+            SavePage(calibration_path, self._update),
+        )
 
     def _solve(self) -> StationsResult:
         calibration = self.base(self.in_force())
@@ -224,15 +222,11 @@ class GroundWizard(_SessionWizard):
         parent: QtWidgets.QWidget | None = None,
     ) -> None:
         super().__init__("Calibrate the ground", calibration_path, None, stream, serial, parent)
-        self.solve = SolvePage(self._solve, self._describe)
-        self.save = SavePage(calibration_path, self._update)
-        for page in (
+        self._add_pages(
             PreparePage("What to prepare", GROUND_TEXT),
-            self.session_page,
-            self.solve,
-            self.save,
-        ):
-            self.addPage(page)
+            SolvePage(self._solve, self._describe),
+            SavePage(calibration_path, self._update),
+        )
 
     def _solve(self) -> GroundResult:
         return calibrate_ground(self.session, self.base(self.in_force()))
