@@ -51,7 +51,11 @@ class PlanEditor(QtWidgets.QWidget):
         self.frames = QtWidgets.QSpinBox(minimum=1, maximum=100)
         self.settle = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=60.0, decimals=1, suffix=" s")
         self.reference = QtWidgets.QSpinBox(minimum=1, maximum=999)
-        self.keep_low = QtWidgets.QCheckBox("keep a view below quality (with a warning)")
+        self.keep_low = QtWidgets.QCheckBox("keep it, with a warning")
+        self.keep_low.setToolTip(
+            "A view still below the quality limits after its retries keeps its best attempt, "
+            "with a warning, instead of stopping the mission."
+        )
         form = QtWidgets.QFormLayout()
         form.addRow("Name", self.name)
         form.addRow("Views per station", self.view_count)
@@ -59,7 +63,7 @@ class PlanEditor(QtWidgets.QWidget):
         form.addRow("Frames per capture", self.frames)
         form.addRow("Settle after a turn", self.settle)
         form.addRow("Reference station", self.reference)
-        form.addRow("", self.keep_low)
+        form.addRow("View below quality", self.keep_low)
         self.table = QtWidgets.QTableWidget(0, len(COLUMNS))
         self.table.setHorizontalHeaderLabels(COLUMNS)
         self.table.verticalHeader().setVisible(False)
