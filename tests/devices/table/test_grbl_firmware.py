@@ -47,9 +47,11 @@ TIMEOUTS = TableTimeouts(
 def firmware(tmp_path: Path) -> Iterator[FirmwarePty]:
     assert EXECUTABLE is not None
     pty = FirmwarePty(EXECUTABLE, tmp_path)
-    _write_settings(pty.device_path, {110: RATE_DEG_MIN, 120: ACCEL_DEG_S2})
-    yield pty
-    pty.close()
+    try:
+        _write_settings(pty.device_path, {110: RATE_DEG_MIN, 120: ACCEL_DEG_S2})
+        yield pty
+    finally:
+        pty.close()
 
 
 @pytest.fixture
