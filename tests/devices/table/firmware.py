@@ -19,7 +19,6 @@ import select
 import signal
 import subprocess
 import threading
-import time
 import tty
 from pathlib import Path
 
@@ -32,30 +31,13 @@ def grbl_sim_executable() -> Path | None:
     return Path(value) if value and os.access(value, os.X_OK) else None
 
 
-def _first_boot(executable: Path, folder: Path) -> None:
-    """Boot once on a blank EEPROM, for grbl-sim to write its default settings: a first boot
-    prints error:7 and a settings dump (the rebuild used here went silent after it), so the
-    tests start from the ordinary power-up that follows."""
-    process = subprocess.Popen(
-        [str(executable), "-n", "-s", os.devnull, "-b", os.devnull],
-        cwd=folder,
-        stdin=subprocess.PIPE,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    time.sleep(2.0)
-    process.kill()
-    process.wait(timeout=5)
-    assert process.stdin is not None
-    process.stdin.close()
-
-
 class FirmwarePty:
-    """grbl-sim in real time (``-t 1``), its serial port on a pty at :attr:`device_path`."""
+    """grbl-sim in real time (``-t 1``), its serial port on a pty at :attr:`device_path`.
+
+    ``folder`` holds its EEPROM; a blank one makes the first boot print ``error:7`` and the
+    default settings before the banner, as a freshly flashed board does."""
 
     def __init__(self, executable: Path, folder: Path) -> None:
-        if not (folder / "EEPROM.DAT").exists():
-            _first_boot(executable, folder)
         self._master, slave = os.openpty()
         tty.setraw(slave)
         self.device_path = os.ttyname(slave)
