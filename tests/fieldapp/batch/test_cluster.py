@@ -100,7 +100,7 @@ def test_workers_reuse_freed_large_blocks_instead_of_faulting_them_in_again():
     with open_client(None, 1, "1GiB") as client:
         (pinned,) = client.run(_pinned_by_dask).values()
         (faults,) = client.run(_page_faults_per_large_array).values()
-    # Dask's nanny pins the thresholds; unrepaired, each array would fault in 2048 pages.
+    # Dask's nanny pins the thresholds; unrepaired, each array faults in anew (516 here).
     assert pinned is not None
     assert faults < 100
 
