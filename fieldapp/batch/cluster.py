@@ -13,7 +13,7 @@ Every worker, local or remote, gets glibc's large allocation thresholds back
 ``MALLOC_TRIM_THRESHOLD_=65536``, which also pins glibc's mmap threshold at 128 KiB, so each
 of the pipeline's large temporary arrays was mapped, page-faulted and unmapped anew. That cost
 a reconstruction 30 % more CPU on a worker than in ``fieldapp reconstruct`` (3.9 s against
-3.0 s per 16-capture session, measured).
+3.0 s per 72-capture session, measured).
 """
 
 from __future__ import annotations

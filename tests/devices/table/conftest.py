@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Iterator
 
 import pytest
@@ -23,6 +24,26 @@ def connect(server: PtyGrblServer, timeouts: TableTimeouts = FAST) -> GrblTable:
     table = GrblTable(port, timeouts=timeouts)
     table.connect()
     return table
+
+
+def goto_in_background(
+    table: GrblTable, target_deg: float
+) -> tuple[threading.Thread, list[BaseException]]:
+    """Start ``table.goto_deg(target_deg)`` on a thread, for a test to interrupt. The list
+    receives the error it raised, or an AssertionError if the move was reported done."""
+    outcome: list[BaseException] = []
+
+    def move() -> None:
+        try:
+            table.goto_deg(target_deg)
+        except BaseException as error:
+            outcome.append(error)
+        else:
+            outcome.append(AssertionError("the move was reported done"))
+
+    mover = threading.Thread(target=move, daemon=True)
+    mover.start()
+    return mover, outcome
 
 
 @pytest.fixture

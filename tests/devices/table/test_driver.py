@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import random
-import threading
 import time
 from collections.abc import Callable
 
@@ -23,7 +22,7 @@ from devices.table import (
     open_table,
 )
 
-from .conftest import FAST, QUICK_TABLE
+from .conftest import FAST, QUICK_TABLE, goto_in_background
 
 MakeServer = Callable[..., PtyGrblServer]
 MakeTable = Callable[..., GrblTable]
@@ -112,9 +111,7 @@ def test_hold_stops_the_move_and_resume_finishes_it(
     timed_server: PtyGrblServer, make_table: MakeTable
 ) -> None:
     table = make_table(timed_server)
-    outcome: list[BaseException] = []
-    mover = threading.Thread(target=_goto_catching, args=(table, 20.0, outcome))
-    mover.start()
+    mover, outcome = goto_in_background(table, 20.0)
     time.sleep(0.4)
     held = table.hold()
     mover.join(timeout=5.0)
@@ -133,9 +130,7 @@ def test_reset_mid_move_marks_the_position_unknown(
     table = make_table(timed_server)
     reasons: list[str] = []
     table.position_unknown.connect(reasons.append)
-    outcome: list[BaseException] = []
-    mover = threading.Thread(target=_goto_catching, args=(table, 20.0, outcome))
-    mover.start()
+    mover, outcome = goto_in_background(table, 20.0)
     time.sleep(0.4)
     status = table.reset()
     mover.join(timeout=5.0)
@@ -162,15 +157,6 @@ def test_home_and_unlock_only_when_asked(make_server: MakeServer, make_table: Ma
 def test_open_table_on_a_missing_port() -> None:
     with pytest.raises(TableDisconnected, match="/dev/does-not-exist"):
         open_table("/dev/does-not-exist", timeouts=FAST)
-
-
-def _goto_catching(table: GrblTable, target_deg: float, outcome: list[BaseException]) -> None:
-    try:
-        table.goto_deg(target_deg)
-    except BaseException as error:
-        outcome.append(error)
-    else:
-        outcome.append(AssertionError("the move was reported done"))
 
 
 assert QUICK_TABLE[110] == 1800.0  # the timings above assume 30 deg/s and 60 deg/s^2

@@ -3,7 +3,6 @@ never a false "done"."""
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable
 
@@ -19,7 +18,7 @@ from devices.table import (
     TableTimeouts,
 )
 
-from .conftest import FAST
+from .conftest import FAST, goto_in_background
 
 MakeServer = Callable[..., PtyGrblServer]
 MakeTable = Callable[..., GrblTable]
@@ -54,9 +53,7 @@ def test_alarm_in_the_middle_of_a_real_time_move(
     timed_server: PtyGrblServer, make_table: MakeTable
 ) -> None:
     table = make_table(timed_server)
-    outcome: list[BaseException] = []
-    mover = threading.Thread(target=_goto_catching, args=(table, 20.0, outcome))
-    mover.start()
+    mover, outcome = goto_in_background(table, 20.0)
     time.sleep(0.4)
     timed_server.simulator.inject_alarm(2)
     mover.join(timeout=5.0)
@@ -93,10 +90,8 @@ def test_silence_during_a_move_times_out_within_the_move_bound(
     timed_server: PtyGrblServer, make_table: MakeTable
 ) -> None:
     table = make_table(timed_server)
-    outcome: list[BaseException] = []
     started_s = time.monotonic()
-    mover = threading.Thread(target=_goto_catching, args=(table, 20.0, outcome))
-    mover.start()
+    mover, outcome = goto_in_background(table, 20.0)
     time.sleep(0.2)
     timed_server.simulator.set_silent(True)
     mover.join(timeout=10.0)
@@ -139,9 +134,7 @@ def test_unplug_mid_move(timed_server: PtyGrblServer, make_table: MakeTable) -> 
     reasons: list[str] = []
     table.disconnected.connect(reasons.append)
     assert table.position_known
-    outcome: list[BaseException] = []
-    mover = threading.Thread(target=_goto_catching, args=(table, 20.0, outcome))
-    mover.start()
+    mover, outcome = goto_in_background(table, 20.0)
     time.sleep(0.4)
     timed_server.unplug()
     mover.join(timeout=5.0)
@@ -150,12 +143,3 @@ def test_unplug_mid_move(timed_server: PtyGrblServer, make_table: MakeTable) -> 
     assert not table.position_known
     with pytest.raises(TableDisconnected):
         table.status()
-
-
-def _goto_catching(table: GrblTable, target_deg: float, outcome: list[BaseException]) -> None:
-    try:
-        table.goto_deg(target_deg)
-    except BaseException as error:
-        outcome.append(error)
-    else:
-        outcome.append(AssertionError("the move was reported done"))

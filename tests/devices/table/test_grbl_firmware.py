@@ -8,11 +8,9 @@ its EEPROM by the test, so each module run takes about a minute.
 from __future__ import annotations
 
 import re
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 import serial
@@ -28,6 +26,7 @@ from devices.table import (
     TableTimeouts,
 )
 
+from .conftest import goto_in_background
 from .firmware import GRBL_SIM_ENV, FirmwarePty, grbl_sim_executable
 
 EXECUTABLE = grbl_sim_executable()
@@ -77,20 +76,6 @@ def _write_settings(device_path: str, settings: dict[int, float]) -> None:
                 raise AssertionError(f"${number}={value} not accepted: {answer!r}")
 
 
-def _in_background(call: Callable[[], Any]) -> tuple[threading.Thread, dict[str, Any]]:
-    outcome: dict[str, Any] = {}
-
-    def run() -> None:
-        try:
-            outcome["value"] = call()
-        except Exception as error:  # the test inspects it
-            outcome["error"] = error
-
-    thread = threading.Thread(target=run, daemon=True)
-    thread.start()
-    return thread, outcome
-
-
 def test_turns_through_the_eight_views_and_the_barrier_waits_for_the_motion(table: GrblTable):
     assert table.settings[110] == RATE_DEG_MIN
     assert table.position_known
@@ -110,11 +95,11 @@ def test_turns_through_the_eight_views_and_the_barrier_waits_for_the_motion(tabl
 
 
 def test_a_feed_hold_interrupts_the_move_and_the_table_stops(table: GrblTable):
-    thread, outcome = _in_background(lambda: table.goto_deg(270.0))
+    thread, outcome = goto_in_background(table, 270.0)
     time.sleep(1.0)
     held = table.hold()
     thread.join(10)
-    assert isinstance(outcome.get("error"), TableHeld)
+    assert isinstance(outcome[0], TableHeld)
     assert (held.state, held.substate) == ("Hold", 0)
     time.sleep(0.5)
     assert table.position_deg() == held.position_deg
@@ -128,12 +113,12 @@ def test_a_feed_hold_interrupts_the_move_and_the_table_stops(table: GrblTable):
 def test_a_reset_mid_move_is_alarm_3_and_the_position_unknown(table: GrblTable):
     alarms: list[int] = []
     table.alarm_raised.connect(lambda code, meaning: alarms.append(code))
-    thread, outcome = _in_background(lambda: table.goto_deg(300.0))
+    thread, outcome = goto_in_background(table, 300.0)
     time.sleep(1.0)
     after = table.reset()
     thread.join(10)
     assert alarms == [3]
-    assert isinstance(outcome.get("error"), TableReset)  # the waiting G4 P0 died with it
+    assert isinstance(outcome[0], TableReset)  # the waiting G4 P0 died with it
     assert after.state == "Alarm"
     assert not table.position_known
     with pytest.raises(TableAlarm, match="ALARM:3"):
@@ -153,13 +138,13 @@ def test_the_firmware_s_errors_are_typed(table: GrblTable):
 
 def test_a_silent_controller_times_out_within_the_bound(table: GrblTable, firmware: FirmwarePty):
     bound = TIMEOUTS.move_margin_s + 1.5 * (90.0 / 60.0 + 60.0 / ACCEL_DEG_S2)
-    thread, outcome = _in_background(lambda: table.goto_deg(90.0))
+    thread, outcome = goto_in_background(table, 90.0)
     time.sleep(0.5)
     started = time.monotonic()
     firmware.freeze()
     thread.join(bound + 5.0)
     waited = time.monotonic() - started
-    assert isinstance(outcome.get("error"), TableTimeout)
+    assert isinstance(outcome[0], TableTimeout)
     assert waited <= bound + 1.0
     firmware.thaw()
 
@@ -169,11 +154,11 @@ def test_unplugging_mid_move_is_disconnected_and_the_position_unknown(
 ):
     lost: list[str] = []
     table.disconnected.connect(lost.append)
-    thread, outcome = _in_background(lambda: table.goto_deg(200.0))
+    thread, outcome = goto_in_background(table, 200.0)
     time.sleep(1.0)
     firmware.unplug()
     thread.join(10)
-    assert isinstance(outcome.get("error"), TableDisconnected)
+    assert isinstance(outcome[0], TableDisconnected)
     assert lost
     assert not table.position_known
 
