@@ -3,8 +3,10 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 RUN_ARGS ?= gui
+LOCK   := requirements.lock
+PIP    := $(BIN)/python -m pip install --quiet -c $(LOCK)
 
-.PHONY: run test lint typecheck layers pytest sysdeps bench clean bundle
+.PHONY: run test lint typecheck layers pytest sysdeps bench clean bundle lock
 .DEFAULT_GOAL := run
 
 run: $(VENV)/.installed
@@ -24,15 +26,15 @@ $(VENV)/.python: | sysdeps
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
 	  { echo "fieldapp needs Python >= 3.11 (found: $$($(PYTHON) --version 2>&1)); set PYTHON=python3.11"; exit 1; }
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(PIP) --upgrade pip
 	touch $@
 
-$(VENV)/.installed: pyproject.toml $(VENV)/.python
-	$(BIN)/python -m pip install --quiet -e .
+$(VENV)/.installed: pyproject.toml $(LOCK) $(VENV)/.python
+	$(PIP) -e .
 	touch $@
 
-$(VENV)/.installed-dev: pyproject.toml $(VENV)/.python
-	$(BIN)/python -m pip install --quiet -e ".[dev]"
+$(VENV)/.installed-dev: pyproject.toml $(LOCK) $(VENV)/.python
+	$(PIP) -e ".[dev]"
 	touch $@ $(VENV)/.installed
 
 # The self-contained app (packaging/README.md): build/bundle/dist/fieldapp/ and a .tar.gz.
@@ -40,12 +42,16 @@ $(VENV)/.installed-dev: pyproject.toml $(VENV)/.python
 bundle: $(VENV)/.installed-bundle
 	sh packaging/build.sh $(BIN)/python
 
-$(VENV)/.installed-bundle: pyproject.toml $(VENV)/.python
-	$(BIN)/python -m pip install --quiet -e ".[dev,bundle]"
+$(VENV)/.installed-bundle: pyproject.toml $(LOCK) $(VENV)/.python
+	$(PIP) -e ".[dev,bundle]"
 	touch $@ $(VENV)/.installed-dev $(VENV)/.installed
 
 bench: $(VENV)/.installed-dev
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+
+# Upgrade the pinned versions (docs/INSTALL.md); run `make clean test` before committing.
+lock:
+	PYTHON=$(PYTHON) sh packaging/lock.sh
 
 clean:
 	rm -rf $(VENV) .mypy_cache .pytest_cache .ruff_cache build *.egg-info
