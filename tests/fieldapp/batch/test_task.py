@@ -33,7 +33,7 @@ def test_a_session_s_outputs_are_those_of_fieldapp_reconstruct(sessions: Session
     assert summary.plants == len(rows) - 1 > 0
     assert summary.worker.endswith(f":{os.getpid()}")
     assert summary.software_version == __version__
-    assert summary.cpu_s > 0 and 0 < summary.wall_s < 120
+    assert summary.cpu_s > 0 and summary.wall_s > 0
     assert pickle.loads(pickle.dumps(summary)) == summary  # travels back to the client
 
 
