@@ -30,11 +30,11 @@ $(VENV)/.python: | sysdeps
 	touch $@
 
 $(VENV)/.installed: pyproject.toml $(LOCK) $(VENV)/.python
-	$(PIP) -e .
+	$(PIP) -e ".[gui]"
 	touch $@
 
 $(VENV)/.installed-dev: pyproject.toml $(LOCK) $(VENV)/.python
-	$(PIP) -e ".[dev]"
+	$(PIP) -e ".[gui,dev]"
 	touch $@ $(VENV)/.installed
 
 # The self-contained app (packaging/README.md): build/bundle/dist/fieldapp/ and a .tar.gz.
@@ -43,7 +43,7 @@ bundle: $(VENV)/.installed-bundle
 	sh packaging/build.sh $(BIN)/python
 
 $(VENV)/.installed-bundle: pyproject.toml $(LOCK) $(VENV)/.python
-	$(PIP) -e ".[dev,bundle]"
+	$(PIP) -e ".[gui,dev,bundle]"
 	touch $@ $(VENV)/.installed-dev $(VENV)/.installed
 
 bench: $(VENV)/.installed-dev

@@ -20,7 +20,7 @@ now() { date +%s; }
 
 [ -x "$PYTHON" ] || fail "no Python at $PYTHON (run 'make bundle', which creates the venv)"
 "$PYTHON" -c 'import PyInstaller' 2>/dev/null ||
-    fail "PyInstaller is missing: $PYTHON -m pip install -e '.[bundle]'"
+    fail "PyInstaller is missing: $PYTHON -m pip install -c requirements.lock -e '.[gui,bundle]'"
 VERSION=$("$PYTHON" -c 'from importlib.metadata import version; print(version("fieldapp"))')
 ARCH=$(uname -m)
 ARCHIVE="$OUT/fieldapp-$VERSION-linux-$ARCH.tar.gz"

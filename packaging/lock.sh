@@ -11,7 +11,7 @@ tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 "$PYTHON" -m venv "$tmp/venv"
 "$tmp/venv/bin/python" -m pip install --quiet --upgrade pip
-"$tmp/venv/bin/python" -m pip install --quiet "$here[dev,bundle,realsense]"
+"$tmp/venv/bin/python" -m pip install --quiet "$here[gui,dev,bundle,realsense]"
 {
   echo "# The exact versions the test suite passed with (Python $("$tmp/venv/bin/python" -c 'import sys; print(".".join(map(str, sys.version_info[:2])))'), $(uname -m) Linux)."
   echo "# Installed as constraints by make run / make test / make bundle. Regenerate with"

@@ -7,6 +7,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from fieldapp.errors import FieldappError
+
 
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
@@ -24,7 +26,18 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(handler=run)
 
 
+QT_PACKAGES = frozenset({"PySide6", "shiboken6", "pyqtgraph", "superqt", "OpenGL"})
+
+
 def run(args: argparse.Namespace) -> int:
-    from ui.app import run_gui
+    try:
+        from ui.app import run_gui
+    except ImportError as error:  # a headless install (no "gui" extra): say how to get it
+        if (error.name or "").partition(".")[0] not in QT_PACKAGES:
+            raise
+        raise FieldappError(
+            f"the window needs the GUI packages ({error.name} is not installed): "
+            "pip install 'fieldapp[gui]'"
+        ) from None
 
     return run_gui(args.settings, connect=not args.no_connect)
