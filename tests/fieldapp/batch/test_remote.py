@@ -65,9 +65,9 @@ def dask_cluster(tmp_path: Path) -> Iterator[str]:
             assert scheduler.poll() is None, (tmp_path / "scheduler.log").read_text()
             assert time.monotonic() < deadline, "the scheduler did not start"
             time.sleep(0.1)
+        worker_options = ["--nworkers", "2", "--nthreads", "1", "--scheduler-file"]
         workers = _start(
-            [str(DASK), "worker", *common, "--nworkers", "2", "--nthreads", "1"]
-            + ["--scheduler-file", str(scheduler_file)],
+            [str(DASK), "worker", *common, *worker_options, str(scheduler_file)],
             tmp_path / "workers.log",
         )
         while _workers_seen(scheduler_file) < 2:
