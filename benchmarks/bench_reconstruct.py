@@ -1,18 +1,22 @@
-"""Reconstruction speed: fieldapp's pipeline beside a straightforward Open3D one, same session.
+"""Reconstruction cost and accuracy: ``fieldapp reconstruct`` against an honest reference.
 
-    .venv/bin/python benchmarks/bench_reconstruct.py [--session DIR] [--repeats N]
+    .venv/bin/python benchmarks/bench_reconstruct.py [--session DIR ...] [--pairs N]
 
-Without ``--session`` a standard 72-frame plot session is simulated into a temporary folder.
-Each pipeline runs in its own process (so peak memory is its own): wall time, time per stage,
-peak resident memory. fieldapp's run also prints its accuracy against ``truth.json`` when the
-session has one. Figures depend on the machine's load: rerun when it is quiet.
+The reference is ``reference_pipeline.py``: the paper's method in the paper's order with plain
+Open3D calls (filters before registration, ICP on the overlaps, DBSCAN), what a competent
+engineer writes in an afternoon. Both run as a user runs them, each in its own process from
+start-up to ``plants.csv`` on disk, in pairs (the order alternating from pair to pair) on the
+same sessions, so a change in the machine's load hits both alike. Per run: wall time, CPU time
+(user + system, every thread) and peak resident memory from the process's own rusage; per pair
+the ratios reference / fieldapp; and each side's accuracy against ``truth.json`` (plants found,
+phantoms, height and width RMSE and MAPE). Without ``--session`` two standard plot sessions are
+simulated first. The load average is printed before and after: rerun when it is high.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import resource
+import os
 import statistics
 import subprocess
 import sys
@@ -21,205 +25,122 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+HERE = Path(__file__).resolve().parent
+FIELDAPP = Path(sys.executable).with_name("fieldapp")
+MATCH_RADIUS_M = 0.12
 
 
-def peak_memory_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
-def run_fieldapp(folder: Path) -> dict[str, Any]:
-    from fieldapp.io.session import load_session
-    from fieldapp.recon.pipeline import run_reconstruction
-    from fieldapp.recon.settings import ReconstructionSettings
-
-    start, start_cpu = time.perf_counter(), time.process_time()
-    result = run_reconstruction(load_session(folder), ReconstructionSettings())
-    wall, cpu = time.perf_counter() - start, time.process_time() - start_cpu
-    poses = {s: result.T_reference_station(s) for s in result.registrations}
+def measured(argv: list[str]) -> dict[str, float]:
+    """Run ``argv`` to the end; its wall, CPU (user + system) and peak memory."""
+    start = time.perf_counter()
+    process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(process.pid, 0)
+    wall = time.perf_counter() - start
+    process.returncode = os.waitstatus_to_exitcode(status)
+    stderr = process.stderr.read().decode() if process.stderr else ""
+    if process.returncode != 0:
+        raise RuntimeError(f"{argv[:3]} failed ({process.returncode}): {stderr[-2000:]}")
     return {
         "wall_s": wall,
-        "cpu_s": cpu,
-        "stages_s": result.timings_s,
-        "stages_cpu_s": result.cpu_s,
-        "plants": len(result.plants),
-    } | station_errors(folder, result.reference, poses)
-
-
-def run_open3d(folder: Path) -> dict[str, Any]:
-    """The obvious Open3D pipeline: every frame to a cloud, views and stations joined by the
-    calibration, voxel grid, RANSAC ground, ExG/Otsu, SOR + ROR, point-to-plane ICP of each
-    station onto the reference station, DBSCAN."""
-    import open3d as o3d
-
-    from fieldapp.io.session import load_session
-    from fieldapp.recon.filters import excess_green, otsu_threshold
-    from fieldapp.recon.station import T_view0_view
-
-    stages: dict[str, float] = {}
-    stages_cpu: dict[str, float] = {}
-
-    def timed(name: str, start: tuple[float, float]) -> tuple[float, float]:
-        now = (time.perf_counter(), time.process_time())
-        stages[name] = stages.get(name, 0.0) + now[0] - start[0]
-        stages_cpu[name] = stages_cpu.get(name, 0.0) + now[1] - start[1]
-        return now
-
-    t0 = t = (time.perf_counter(), time.process_time())
-    session = load_session(folder)
-    calibration = session.calibration
-    assert calibration.view_step is not None and calibration.stations is not None
-    camera = calibration.depth_camera
-    intrinsic = o3d.camera.PinholeCameraIntrinsic(
-        camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy
-    )
-    stations: dict[int, o3d.geometry.PointCloud] = {}
-    for capture in session.captures:
-        depth = o3d.io.read_image(str(session.path_of(capture.depth)))
-        color = o3d.io.read_image(str(session.path_of(capture.color)))
-        rgbd = o3d.geometry.RGBDImage.create_from_color_and_depth(
-            color,
-            depth,
-            depth_scale=camera.depth_scale,
-            depth_trunc=2.25,
-            convert_rgb_to_intensity=False,
-        )
-        cloud = o3d.geometry.PointCloud.create_from_rgbd_image(rgbd, intrinsic)
-        cloud.transform(T_view0_view(calibration.view_step.matrix, capture.view))
-        stations.setdefault(capture.station, o3d.geometry.PointCloud())
-        stations[capture.station] += cloud
-    t = timed("load + back-project (legacy)", t)
-    for station in stations:
-        stations[station] = stations[station].voxel_down_sample(0.005)
-        stations[station].transform(calibration.stations.to_reference[station])
-    t = timed("voxel grid 5 mm", t)
-    reference = calibration.stations.reference
-    target = stations[reference]
-    target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.05, max_nn=30))
-    target = target.voxel_down_sample(0.02)
-    T_reference_station = {reference: np.eye(4)}
-    for station, cloud in stations.items():
-        if station == reference:
-            continue
-        result = o3d.pipelines.registration.registration_icp(
-            cloud.voxel_down_sample(0.02),
-            target,
-            0.1,
-            np.eye(4),
-            o3d.pipelines.registration.TransformationEstimationPointToPlane(),
-        )
-        cloud.transform(result.transformation)
-        T_reference_station[station] = (
-            result.transformation @ calibration.stations.to_reference[station]
-        )
-    t = timed("ICP point-to-plane (2 cm) onto the reference", t)
-    merged = o3d.geometry.PointCloud()
-    for cloud in stations.values():
-        merged += cloud
-    _, ground = merged.segment_plane(0.01, 3, 1000)
-    above = merged.select_by_index(ground, invert=True)
-    t = timed("RANSAC ground", t)
-    colors = (np.asarray(above.colors) * 255).astype(np.uint8)
-    exg = excess_green(colors)
-    plants = above.select_by_index(np.flatnonzero(exg > otsu_threshold(exg)).tolist())
-    t = timed("ExG + Otsu", t)
-    plants, _ = plants.remove_statistical_outlier(35, 1.5)
-    plants, _ = plants.remove_radius_outlier(5, 0.008)
-    t = timed("SOR + ROR (legacy)", t)
-    labels = np.asarray(plants.cluster_dbscan(0.02, 10))
-    t = timed("DBSCAN", t)
-    return {
-        "wall_s": t[0] - t0[0],
-        "cpu_s": t[1] - t0[1],
-        "stages_s": stages,
-        "stages_cpu_s": stages_cpu,
-        "plants": int(labels.max() + 1),
-    } | station_errors(folder, reference, T_reference_station)
-
-
-def station_errors(
-    folder: Path, reference: int, T_reference_station: dict[int, Any]
-) -> dict[str, float]:
-    """Worst station pose error (relative to the reference) against ``truth.json``, if any."""
-    from devices.geometry import invert, pose_error
-
-    truth_file = folder / "truth.json"
-    if not truth_file.exists():
-        return {}
-    truth = json.loads(truth_file.read_text())
-    T = {int(s): np.array(m) for s, m in truth["T_field_camera"].items()}
-    errors = [
-        pose_error(T_est, invert(T[reference]) @ T[s]) for s, T_est in T_reference_station.items()
-    ]
-    return {
-        "max_station_error_mm": max(e[0] for e in errors) * 1000,
-        "max_station_error_deg": max(e[1] for e in errors),
+        "cpu_s": usage.ru_utime + usage.ru_stime,
+        "peak_mb": usage.ru_maxrss / 1024.0,
     }
 
 
-def child(kind: str, folder: Path) -> None:
-    figures = run_fieldapp(folder) if kind == "fieldapp" else run_open3d(folder)
-    figures["peak_memory_mb"] = peak_memory_mb()
-    print(json.dumps(figures))
+def accuracy(results: Path, session: Path) -> dict[str, float]:
+    """Plants found and phantoms, height and width RMSE (cm) and MAPE (%) against the truth."""
+    from fieldapp.evaluate.metrics import agreement
+    from fieldapp.evaluate.references import load_truth, pair_with_truth
+    from fieldapp.results.files import read_plants_csv
+
+    truth = load_truth(session / "truth.json")
+    pairing = pair_with_truth(read_plants_csv(results / "plants.csv"), truth.plants, MATCH_RADIUS_M)
+    pairs = pairing.pairs
+    height = agreement([p.height_cm for p in pairs], [p.reference_height_cm for p in pairs])
+    width = agreement([p.width_cm for p in pairs], [p.reference_width_cm for p in pairs])
+    return {
+        "found": len(pairs),
+        "truth": len(truth.plants),
+        "phantoms": len(pairing.unmatched_plants),
+        "height_rmse_cm": height.rmse or float("nan"),
+        "height_mape": height.mape_percent or float("nan"),
+        "width_rmse_cm": width.rmse or float("nan"),
+        "width_mape": width.mape_percent or float("nan"),
+    }
 
 
-def in_process(kind: str, folder: Path) -> dict[str, Any]:
-    output = subprocess.run(
-        [sys.executable, __file__, "--child", kind, "--session", str(folder)],
-        check=True,
-        capture_output=True,
-        text=True,
+def run(kind: str, session: Path, scratch: Path) -> dict[str, float]:
+    out = Path(tempfile.mkdtemp(dir=scratch))
+    if kind == "fieldapp":
+        argv = [str(FIELDAPP), "reconstruct", str(session), "--out", str(out), "--quiet"]
+    else:
+        argv = [sys.executable, __file__, "--child", "--session", str(session), "--out", str(out)]
+    figures = measured(argv)
+    if (session / "truth.json").exists():
+        figures |= accuracy(out, session)
+    return figures
+
+
+def simulate(scratch: Path, seed: int) -> Path:
+    folder = scratch / f"plot-seed{seed}"
+    argv = [str(FIELDAPP), "simulate", "--out", str(folder), "--seed", str(seed)]
+    subprocess.run(argv, check=True, capture_output=True)
+    return folder
+
+
+def load() -> str:
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def describe(name: str, f: dict[str, Any]) -> str:
+    text = (
+        f"{name:9s} wall {f['wall_s']:6.2f} s  CPU {f['cpu_s']:6.2f} s  peak {f['peak_mb']:5.0f} MB"
     )
-    return json.loads(output.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
-
-
-def simulate(folder: Path) -> Path:
-    session = folder / "plot"
-    subprocess.run(
-        [str(Path(sys.executable).parent / "fieldapp"), "simulate", "--out", str(session)],
-        check=True,
-        capture_output=True,
-    )
-    return session
-
-
-def report(kind: str, runs: list[dict[str, Any]]) -> None:
-    walls = [r["wall_s"] for r in runs]
-    print(
-        f"\n== {kind}: wall median {statistics.median(walls):.2f} s "
-        f"(runs: {', '.join(f'{w:.2f}' for w in walls)}), "
-        f"CPU median {statistics.median(r['cpu_s'] for r in runs):.2f} s, "
-        f"peak memory {max(r['peak_memory_mb'] for r in runs):.0f} MB, "
-        f"plants {runs[-1]['plants']}"
-    )
-    print(f"   {'stage':46s} {'wall s':>8s} {'CPU s':>8s}")
-    for stage in runs[0]["stages_s"]:
-        wall = statistics.median(r["stages_s"][stage] for r in runs)
-        cpu = statistics.median(r["stages_cpu_s"][stage] for r in runs)
-        print(f"   {stage:46s} {wall:8.3f} {cpu:8.3f}")
-    for key in ("max_station_error_mm", "max_station_error_deg"):
-        if key in runs[-1]:
-            print(f"   {key:46s} {runs[-1][key]:8.3f}")
+    if "found" in f:
+        text += (
+            f"  plants {f['found']}/{f['truth']} +{f['phantoms']} phantom"
+            f"  height {f['height_rmse_cm']:.2f} cm {f['height_mape']:.2f} %"
+            f"  width {f['width_rmse_cm']:.2f} cm {f['width_mape']:.2f} %"
+        )
+    return text
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--session", type=Path)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--child", choices=["fieldapp", "open3d"])
+    parser.add_argument("--session", type=Path, action="append", default=[])
+    parser.add_argument("--pairs", type=int, default=3, help="paired runs per session")
+    parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        child(args.child, args.session)
+        sys.path.insert(0, str(HERE))
+        from reference_pipeline import reconstruct
+
+        reconstruct(args.session[0], args.out)
         return 0
-    with tempfile.TemporaryDirectory() as scratch:
-        folder = args.session or simulate(Path(scratch))
-        frames = len(json.loads((folder / "session.json").read_text())["captures"])
-        with open("/proc/loadavg") as load:
-            print(f"session {folder}: {frames} frames; load average {load.read().split()[:3]}")
-        ours = [in_process("fieldapp", folder) for _ in range(args.repeats)]
-        reference = [in_process("open3d", folder)]
-        report("fieldapp", ours)
-        report("straightforward Open3D", reference)
+    with tempfile.TemporaryDirectory() as scratch_name:
+        scratch = Path(scratch_name)
+        sessions = args.session or [simulate(scratch, seed) for seed in (1, 2)]
+        print(f"load average before: {load()}  ({os.cpu_count()} CPUs)")
+        ratios: dict[str, list[float]] = {"wall": [], "cpu": [], "memory": []}
+        for session in sessions:
+            print(f"\n== {session}")
+            for pair in range(args.pairs):
+                order = ["fieldapp", "reference"] if pair % 2 == 0 else ["reference", "fieldapp"]
+                figures = {kind: run(kind, session, scratch) for kind in order}
+                ours, ref = figures["fieldapp"], figures["reference"]
+                ratios["wall"].append(ref["wall_s"] / ours["wall_s"])
+                ratios["cpu"].append(ref["cpu_s"] / ours["cpu_s"])
+                ratios["memory"].append(ref["peak_mb"] / ours["peak_mb"])
+                print(f"pair {pair + 1}: {describe('fieldapp', ours)}")
+                print(f"        {describe('reference', ref)}")
+        print(f"\nload average after: {load()}")
+        print("reference / fieldapp, median (min-max) over all pairs:")
+        for name, values in ratios.items():
+            print(
+                f"  {name:7s} {statistics.median(values):.2f} x "
+                f"({min(values):.2f}-{max(values):.2f})"
+            )
     return 0
 
 
