@@ -15,6 +15,8 @@ from PySide6 import QtCore, QtWidgets
 
 from fieldapp.settings import Settings
 
+from .thread_guard import ThreadGuard
+
 LEAK_GRACE_S = 5.0
 
 
@@ -44,6 +46,16 @@ def _plot_menu(widget: QtWidgets.QWidget) -> bool:
         root = root.parent()
     menus = isinstance(widget, QtWidgets.QMenu) and isinstance(root, QtWidgets.QMenu)
     return menus and not widget.isVisible()
+
+
+@pytest.fixture(autouse=True)
+def no_widgets_off_gui_thread() -> Iterator[ThreadGuard]:
+    """Fail the test when a widget was called from a thread other than the GUI thread."""
+    guard = ThreadGuard()
+    with guard.installed():
+        yield guard
+    unique = list(dict.fromkeys(guard.violations))
+    assert not unique, "widgets touched off the GUI thread:\n" + "\n".join(unique[:20])
 
 
 @pytest.fixture

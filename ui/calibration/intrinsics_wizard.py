@@ -3,6 +3,8 @@ coverage, solve Zhang's calibration on a worker, judge it and save ``depth_camer
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -163,9 +165,9 @@ class IntrinsicsWizard(QtWidgets.QWizard):
         for page in (self.prepare, self.capture, self.solve, self.save):
             self.addPage(page)
 
-    def _solve(self) -> IntrinsicsResult:
+    def _solve(self) -> Callable[[], IntrinsicsResult]:
         images = [(name, image) for name, image, _ in self.capture.views]
-        return calibrate_intrinsics(images, self.board_form.board())
+        return partial(calibrate_intrinsics, images, self.board_form.board())
 
     def _update(self, current: Calibration | None) -> Calibration:
         result: IntrinsicsResult = self.solve.result

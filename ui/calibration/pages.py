@@ -42,18 +42,24 @@ class PreparePage(QtWidgets.QWizardPage):
         layout.addStretch(1)
 
 
+Job = Callable[[], Any]
+"""The solve itself, run on a worker: it holds plain data only, never a widget."""
+
+
 class SolvePage(QtWidgets.QWizardPage):
-    """Runs ``solve()`` on a worker when shown; ``describe(result)`` gives the figures' lines
-    and the verdict. The wizard moves on only after a successful solve."""
+    """When shown, ``prepare()`` runs on the GUI thread (it reads the widgets and the files in
+    force, and may raise a :class:`FieldappError` that is shown at once) and returns the
+    :data:`Job`, which runs on a worker; ``describe(result)`` gives the figures' lines and the
+    verdict. The wizard moves on only after a successful solve."""
 
     def __init__(
         self,
-        solve: Callable[[], Any],
+        prepare: Callable[[], Job],
         describe: Callable[[Any], tuple[list[str], Verdict]],
     ) -> None:
         super().__init__()
         self.setTitle("Solve and check the quality")
-        self.solve, self.describe = solve, describe
+        self.prepare, self.describe = prepare, describe
         self.result: Any = None
         self.error: str | None = None
         self.worker: Any = None
@@ -81,8 +87,15 @@ class SolvePage(QtWidgets.QWizardPage):
         self.verdict.setStyleSheet("")
         self.status.setStyleSheet("")
         self.status.setText("solving…")
+        try:
+            job = self.prepare()
+        except FieldappError as error:
+            self._failed(error)
+            self.progress.hide()
+            self.completeChanged.emit()
+            return
         self.progress.show()
-        worker: Any = create_worker(self.solve, _start_thread=False, _ignore_errors=True)
+        worker: Any = create_worker(job, _start_thread=False, _ignore_errors=True)
         worker.returned.connect(self._solved)
         worker.errored.connect(self._failed)
         worker.finished.connect(self._finished)

@@ -3,6 +3,8 @@ saves its part of the rig's calibration (``view_step``, ``stations``, ``ground``
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 from PySide6 import QtWidgets
@@ -104,7 +106,8 @@ class ViewsWizard(_SessionWizard):
         self._add_pages(
             PreparePage("What to prepare", VIEWS_TEXT, self.board_form),
             SolvePage(
-                lambda: calibrate_view_step(self.session, self.board_form.board()), self._describe
+                lambda: partial(calibrate_view_step, self.session, self.board_form.board()),
+                self._describe,
             ),
             SavePage(calibration_path, self._update),
         )
@@ -161,7 +164,7 @@ class StationsWizard(_SessionWizard):
             SavePage(calibration_path, self._update),
         )
 
-    def _solve(self) -> StationsResult:
+    def _solve(self) -> Callable[[], StationsResult]:
         calibration = self.base(self.in_force())
         if calibration.view_step is None:
             raise FieldappError(
@@ -169,8 +172,13 @@ class StationsWizard(_SessionWizard):
             )
         in_force = calibration.stations or self.session.calibration.stations
         prior = in_force.to_reference if in_force else None
-        return calibrate_stations(
-            self.session, self.board_form.board(), calibration.view_step, self.reference, prior
+        return partial(
+            calibrate_stations,
+            self.session,
+            self.board_form.board(),
+            calibration.view_step,
+            self.reference,
+            prior,
         )
 
     def _describe(self, result: StationsResult) -> tuple[list[str], Verdict]:
@@ -228,8 +236,8 @@ class GroundWizard(_SessionWizard):
             SavePage(calibration_path, self._update),
         )
 
-    def _solve(self) -> GroundResult:
-        return calibrate_ground(self.session, self.base(self.in_force()))
+    def _solve(self) -> Callable[[], GroundResult]:
+        return partial(calibrate_ground, self.session, self.base(self.in_force()))
 
     def _describe(self, result: GroundResult) -> tuple[list[str], Verdict]:
         lines = [

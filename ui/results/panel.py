@@ -4,6 +4,8 @@ reconstruct in a worker with stage-by-stage progress and cancel, then inspect th
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 from PySide6 import QtCore, QtWidgets
@@ -117,11 +119,18 @@ class ResultsPanel(QtWidgets.QWidget):
 
     def export_to(self, folder: Path) -> list[Path]:
         """Export the plot shown into ``folder`` (blocking; the button runs it in a worker)."""
+        return self.export_job(folder)()
+
+    def export_job(self, folder: Path) -> Callable[[], list[Path]]:
+        """The export of what is shown, as plain data gathered here on the GUI thread, to run
+        anywhere; raises :class:`FieldappError` when there is nothing to export."""
         if self.results is None:
             raise FieldappError("nothing to export: reconstruct or open results first")
         growth = {t: self._growth(t) for t in ("height", "width")}
         calibration = self.session.calibration.to_document() if self.session else None
-        return export_results(self.results, folder, self.manual.evaluation, growth, calibration)
+        return partial(
+            export_results, self.results, folder, self.manual.evaluation, growth, calibration
+        )
 
     def shutdown(self) -> None:
         """Stop a running reconstruction (the main window calls this as it closes)."""
@@ -282,7 +291,12 @@ class ResultsPanel(QtWidgets.QWidget):
             return
         from superqt.utils import create_worker
 
-        worker = create_worker(self.export_to, Path(name), _start_thread=False, _ignore_errors=True)
+        try:
+            job = self.export_job(Path(name))
+        except FieldappError as error:
+            self.error.emit(f"export: {error}")
+            return
+        worker = create_worker(job, _start_thread=False, _ignore_errors=True)
         worker.returned.connect(
             lambda paths: self.stage.setText(f"exported {len(paths)} files to {name}")
         )
