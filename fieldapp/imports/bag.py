@@ -1,0 +1,178 @@
+"""``fieldapp import bag``: a RealSense recording (``.bag``, recorded by the SDK) into a session,
+read through the SDK's own playback, frame by frame.
+
+With a colour stream, depth is aligned to colour (``rs.align``) and the camera is the colour
+stream's, so depth and colour are registered pixel for pixel as the session format wants;
+without one the captures are depth-only and the camera is the depth stream's. Every
+``every``-th frame set becomes view ``k`` of station 1 at ``k * step_deg``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.camera.base import CameraUnavailable
+from devices.camera.realsense import load_binding
+from fieldapp.errors import FieldappError
+from fieldapp.imports.camera import IMPORT_STATION, import_calibration
+from fieldapp.imports.folder import ImportResult
+from fieldapp.io.calibration import DepthCamera
+from fieldapp.io.session import now_iso
+from fieldapp.io.writer import SessionWriter
+
+log = logging.getLogger(__name__)
+
+WAIT_MS = 2000
+"""How long one read of the playback may wait for the next frame set."""
+
+
+@dataclass
+class BagOptions:
+    every: int = 1
+    step_deg: float = 45.0
+    axis_distance_m: float = 0.0
+    max_views: int | None = None
+    session_id: str | None = None
+
+
+@dataclass
+class BagFrame:
+    """One frame set: depth (H, W) float32 m, NaN missing; colour (H, W, 3) uint8 or None."""
+
+    depth_m: NDArray[np.float32]
+    color: NDArray[np.uint8] | None
+
+
+class _Playback:
+    """The SDK pipeline playing ``path`` as fast as it can decode, colour-aligned when present."""
+
+    def __init__(self, rs: Any, path: Path) -> None:
+        self.rs = rs
+        config = rs.config()
+        config.enable_device_from_file(str(path), repeat_playback=False)
+        self.pipeline = rs.pipeline()
+        try:
+            profile = self.pipeline.start(config)
+        except RuntimeError as error:
+            raise FieldappError(f"{path}: the RealSense SDK cannot play it ({error})") from None
+        self.playback = profile.get_device().as_playback()
+        self.playback.set_real_time(False)
+        streams = {s.stream_type(): s for s in profile.get_streams()}
+        if rs.stream.depth not in streams:
+            self.pipeline.stop()
+            raise FieldappError(f"{path}: the recording has no depth stream")
+        self.has_color = rs.stream.color in streams
+        camera_stream = streams[rs.stream.color if self.has_color else rs.stream.depth]
+        self.intrinsics = camera_stream.as_video_stream_profile().get_intrinsics()
+        self.align = rs.align(rs.stream.color) if self.has_color else None
+        self.others = sorted(
+            str(kind).split(".")[-1]
+            for kind in streams
+            if kind not in (rs.stream.depth, rs.stream.color)
+        )
+
+    def frames(self) -> Iterator[BagFrame]:
+        while True:
+            ok, frames = self.pipeline.try_wait_for_frames(WAIT_MS)
+            if not ok:
+                if self.playback.current_status() == self.rs.playback_status.stopped:
+                    return
+                continue
+            if self.align is not None:
+                frames = self.align.process(frames)
+                depth, color = frames.get_depth_frame(), frames.get_color_frame()
+                if not (depth and color):
+                    continue
+                yield BagFrame(_depth_m(depth), _rgb(self.rs, color))
+            elif depth := frames.get_depth_frame():
+                yield BagFrame(_depth_m(depth), None)
+
+    def stop(self) -> None:
+        try:
+            self.pipeline.stop()
+        except RuntimeError:
+            log.exception("stopping the RealSense playback")
+
+
+def _depth_m(depth: Any) -> NDArray[np.float32]:
+    units = np.asarray(depth.get_data(), np.uint16)
+    depth_m: NDArray[np.float32] = units.astype(np.float32) * np.float32(depth.get_units())
+    depth_m[units == 0] = np.nan
+    return depth_m
+
+
+def _rgb(rs: Any, color: Any) -> NDArray[np.uint8] | None:
+    fmt = color.get_profile().format()
+    pixels = np.array(np.asanyarray(color.get_data()), np.uint8)
+    if fmt == rs.format.rgb8:
+        return pixels
+    if fmt == rs.format.bgr8:
+        return np.ascontiguousarray(pixels[:, :, ::-1])
+    return None
+
+
+def bag_camera(intrinsics: Any) -> DepthCamera:
+    """The session's depth camera from the SDK's intrinsics (Brown-Conrady coefficients)."""
+    coeffs = [float(c) for c in intrinsics.coeffs][:5]
+    return DepthCamera(
+        width=int(intrinsics.width),
+        height=int(intrinsics.height),
+        fx=float(intrinsics.fx),
+        fy=float(intrinsics.fy),
+        cx=float(intrinsics.ppx),
+        cy=float(intrinsics.ppy),
+        distortion=(coeffs + [0.0] * 5)[:5],
+        depth_scale=1000.0,
+    )
+
+
+def import_bag(path: Path, out: Path, options: BagOptions) -> ImportResult:
+    """Write a session in ``out`` from the RealSense recording ``path``."""
+    if not path.is_file():
+        raise FieldappError(f"{path}: no such recording")
+    if options.every < 1:
+        raise FieldappError(f"--every {options.every}: must be at least 1")
+    try:
+        rs = load_binding()
+    except CameraUnavailable as error:
+        raise FieldappError(str(error)) from None
+    playback = _Playback(rs, path)
+    lines = [f"{path}: stream {name} not used" for name in playback.others]
+    if not playback.has_color:
+        lines.append(f"{path}: no colour stream: the captures are depth-only")
+    try:
+        return _write(playback, path, out, options, lines)
+    finally:
+        playback.stop()
+
+
+def _write(
+    playback: _Playback, path: Path, out: Path, options: BagOptions, lines: list[str]
+) -> ImportResult:
+    calibration = import_calibration(
+        bag_camera(playback.intrinsics), options.step_deg, options.axis_distance_m, None
+    )
+    provenance = {"imported": {"from": str(path.resolve()), "at": now_iso(), "by": "bag"}}
+    writer = SessionWriter.create(out, options.session_id or path.stem, calibration, provenance)
+    result = ImportResult(out, 0, 0, lines)
+    for index, frame in enumerate(playback.frames()):
+        if index % options.every:
+            continue
+        if options.max_views is not None and result.captures >= options.max_views:
+            break
+        view = result.captures
+        writer.add_capture(
+            IMPORT_STATION, view, frame.depth_m, frame.color, angle_deg=view * options.step_deg
+        )
+        result.captures += 1
+        result.depth_only += frame.color is None
+    if result.captures == 0:
+        raise FieldappError(f"{path}: the recording holds no depth frame")
+    return result
