@@ -5,6 +5,9 @@
 - View step: a board standing near the reference station, seen by both views 0 and 1.
 - Stations: a board lying on the soil midway between each pair of neighbouring stations, seen
   from both.
+
+The view-step and station boards are 9 x 6 inner corners by default (asymmetric); ``corners``
+sets another size, e.g. (7, 5): the symmetric board of the public Kinect v2 calibration sets.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from devices.sim.visibility import project
 
 INTRINSICS_BOARD = Checkerboard("intrinsics", inner_cols=9, inner_rows=6, square_m=0.04)
 VIEW_STEP_BOARD = Checkerboard("view-step", inner_cols=9, inner_rows=6, square_m=0.05)
+DEFAULT_CORNERS = (9, 6)
 WALL_DISTANCE_M = 3.0
 VIEW_STEP_DISTANCE_M = 1.1
 """How far the view-step board stands from the camera, along the bisector of views 0 and 1."""
@@ -47,23 +51,30 @@ def neighbour_pairs() -> list[tuple[int, int]]:
     return pairs + [(s, s + 3) for s in range(1, 7)]
 
 
-def station_board(a: int, b: int) -> Checkerboard:
-    return Checkerboard(f"stations-{a}-{b}", inner_cols=9, inner_rows=6, square_m=0.04)
+def station_board(a: int, b: int, corners: tuple[int, int] = DEFAULT_CORNERS) -> Checkerboard:
+    return Checkerboard(
+        f"stations-{a}-{b}", inner_cols=corners[0], inner_rows=corners[1], square_m=0.04
+    )
 
 
-def add_calibration_boards(scene: Scene, rig: RigGeometry, seed: int) -> None:
+def view_step_board(corners: tuple[int, int] = DEFAULT_CORNERS) -> Checkerboard:
+    return replace(VIEW_STEP_BOARD, inner_cols=corners[0], inner_rows=corners[1])
+
+
+def add_calibration_boards(
+    scene: Scene, rig: RigGeometry, seed: int, corners: tuple[int, int] = DEFAULT_CORNERS
+) -> None:
     """The view-step board near the reference station (standing, facing the camera between
     views 0 and 1) and one board between each pair of neighbouring stations (lying on the soil,
-    short side towards the stations)."""
+    short side towards the stations); ``corners`` (cols, rows) inner corners each."""
     if scene.soil is None:
         raise ValueError("the calibration boards stand on soil")
     rng = np.random.default_rng([seed, 23])
     reference = rig.station_pose(REFERENCE_STATION)
     T_camera = rig.T_field_camera(reference, rig.view_step_deg / 2, scene.soil)
     centre = transform_points(T_camera, np.array([[0.0, 0.0, VIEW_STEP_DISTANCE_M]]))[0]
-    scene.add_board(
-        PlacedBoard(VIEW_STEP_BOARD, board_facing(VIEW_STEP_BOARD, centre, T_camera[:3, 3]))
-    )
+    standing = view_step_board(corners)
+    scene.add_board(PlacedBoard(standing, board_facing(standing, centre, T_camera[:3, 3])))
     for a, b in neighbour_pairs():
         pa, pb = rig.station_pose(a), rig.station_pose(b)
         mid_map = np.array([(pa.x_m + pb.x_m) / 2, (pa.y_m + pb.y_m) / 2, 0.0])
@@ -71,7 +82,7 @@ def add_calibration_boards(scene: Scene, rig: RigGeometry, seed: int) -> None:
         right = np.array([np.sin(heading_rad), -np.cos(heading_rad), 0.0])
         mid = transform_points(rig.T_field_map, (mid_map + SIDE_OFFSET_M * right)[None, :])[0]
         mid[2] = scene.soil.height_at(mid[0], mid[1])
-        board = station_board(a, b)
+        board = station_board(a, b, corners)
         # x across the line, so the short side points at the stations
         yaw = np.degrees(heading_rad) + 90.0 + rng.uniform(-8.0, 8.0)
         T = board_lying(board, mid, yaw, _ground_normal(scene.soil, mid[0], mid[1]))
@@ -97,10 +108,12 @@ def _ground_normal(soil: Soil, x: float, y: float, step_m: float = 0.2) -> NDArr
     return normal / np.linalg.norm(normal)  # type: ignore[no-any-return]
 
 
-def checkerboard_scene(seed: int, rig: RigGeometry) -> Scene:
+def checkerboard_scene(
+    seed: int, rig: RigGeometry, corners: tuple[int, int] = DEFAULT_CORNERS
+) -> Scene:
     """Bare soil with the calibration boards of :func:`add_calibration_boards`."""
     scene = empty_scene(seed)
-    add_calibration_boards(scene, rig, seed)
+    add_calibration_boards(scene, rig, seed, corners)
     return scene
 
 

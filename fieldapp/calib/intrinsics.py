@@ -17,6 +17,28 @@ from fieldapp.errors import FieldappError
 MIN_VIEWS = 3
 RECOMMENDED_VIEWS = 10
 COVERAGE_GRID = 8
+SATURATION_LEVEL = 0.98
+"""Pixels at or above this fraction of the image's full scale count as saturated."""
+WASHED_OUT_CORNERS = 0.0
+"""A rejected view with more of its corners washed out than this (any) is named over-exposed. A
+corner is washed out when most (``WASHED_OUT_PIXELS``) of the pixels around it are saturated:
+its dark squares are clipped too (clipped white squares alone, half the pixels at most, are
+common and harmless)."""
+WASHED_OUT_PIXELS = 0.6
+SATURATED_IMAGE = 0.05
+"""An image where the board is not found and more of the pixels than this are saturated is
+named possibly over-exposed."""
+
+
+@dataclass(frozen=True)
+class SolveOptions:
+    """What the Zhang solve keeps fixed. ``principal_point``: fix cx, cy (at ``(cx, cy)`` when
+    given, else at the image centre); ``fix_k3``: k3 = 0 (few views let k1, k2, k3 trade off)."""
+
+    fix_aspect: bool = False
+    fix_principal_point: bool = False
+    principal_point: tuple[float, float] | None = None
+    fix_k3: bool = False
 
 
 @dataclass
@@ -80,15 +102,47 @@ def missing_regions(counts: NDArray[np.int32]) -> list[str]:
     ]
 
 
+def _saturated(image: NDArray[np.generic]) -> NDArray[np.bool_]:
+    full = 255.0 if image.dtype == np.uint8 else float(np.iinfo(np.uint16).max)
+    gray = image.min(axis=2) if image.ndim == 3 else image
+    return np.asarray(gray, np.float64) >= SATURATION_LEVEL * full
+
+
+def saturated_fraction(image: NDArray[np.generic]) -> float:
+    """Fraction of the image's pixels that are saturated."""
+    return float(_saturated(image).mean())
+
+
+def washed_out_fraction(
+    image: NDArray[np.generic], corners: NDArray[np.float32], board: Board
+) -> float:
+    """Fraction of the corners (N, 2) with most pixels within half a square saturated."""
+    saturated = _saturated(image).astype(np.float32)
+    grid = corners.reshape(board.rows, board.cols, 2)
+    spacing = float(np.median(np.linalg.norm(np.diff(grid, axis=1), axis=2)))
+    side = 2 * max(1, round(spacing / 2)) + 1
+    share = cv2.blur(saturated, (side, side))
+    x = np.clip(np.round(corners[:, 0]).astype(int), 0, saturated.shape[1] - 1)
+    y = np.clip(np.round(corners[:, 1]).astype(int), 0, saturated.shape[0] - 1)
+    return float((share[y, x] > WASHED_OUT_PIXELS).mean())
+
+
+OVER_EXPOSURE_ADVICE = (
+    "move the board out of direct light or lower the exposure; for IR, away from the "
+    "emitter's hot spot"
+)
+
+
 def _solve(
-    corner_sets: list[NDArray[np.float32]], board: Board, size: tuple[int, int], fix_aspect: bool
+    corner_sets: list[NDArray[np.float32]],
+    board: Board,
+    size: tuple[int, int],
+    options: SolveOptions,
 ) -> tuple[float, NDArray[np.float64], NDArray[np.float64], list[float]]:
     objects = [board.object_points_m().astype(np.float32)] * len(corner_sets)
     images = [c.reshape(-1, 1, 2) for c in corner_sets]
-    flags = cv2.CALIB_FIX_ASPECT_RATIO if fix_aspect else 0
-    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
-        objects, images, size, np.eye(3), None, flags=flags
-    )
+    flags, K0 = _flags_and_guess(objects, images, size, options)
+    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(objects, images, size, K0, None, flags=flags)
     errors = []
     for obj, img, r, t in zip(objects, images, rvecs, tvecs, strict=True):
         projected, _ = cv2.projectPoints(obj, r, t, K, dist)
@@ -96,21 +150,43 @@ def _solve(
     return float(rms), K, dist.ravel(), errors
 
 
+def _flags_and_guess(
+    objects: list[NDArray[np.float32]],
+    images: list[NDArray[np.float32]],
+    size: tuple[int, int],
+    options: SolveOptions,
+) -> tuple[int, NDArray[np.float64]]:
+    flags = cv2.CALIB_FIX_ASPECT_RATIO if options.fix_aspect else 0
+    flags |= cv2.CALIB_FIX_K3 if options.fix_k3 else 0
+    K0 = np.eye(3)
+    if options.fix_principal_point:
+        flags |= cv2.CALIB_FIX_PRINCIPAL_POINT
+        if options.principal_point is not None:
+            K0 = np.asarray(cv2.initCameraMatrix2D(objects, images, size), np.float64)
+            K0[0, 2], K0[1, 2] = options.principal_point
+            flags |= cv2.CALIB_USE_INTRINSIC_GUESS
+    return flags, K0
+
+
 def calibrate_intrinsics(
     images: Sequence[tuple[str, NDArray[np.generic]]],
     board: Board,
     fix_aspect: bool = False,
     max_view_error_px: float = 1.5,
+    options: SolveOptions | None = None,
 ) -> IntrinsicsResult:
     """Zhang calibration from named images (8-bit, 16-bit IR or RGB) of ``board``.
 
     Views whose reprojection error exceeds ``max_view_error_px`` are rejected with the reason
-    and the solve is repeated without them. Raises FieldappError when too few views remain.
+    (over-exposure named when the board's pixels are saturated) and the solve is repeated
+    without them. ``options`` fixes the principal point or k3 (``fix_aspect`` is kept for
+    callers that only set that). Raises FieldappError when too few views remain.
     """
+    options = options or SolveOptions(fix_aspect=fix_aspect)
     if not images:
         raise FieldappError("no images given")
     size = (int(images[0][1].shape[1]), int(images[0][1].shape[0]))
-    views, corner_sets = [], []
+    views, corner_sets, saturation = [], [], []
     for name, image in images:
         if (image.shape[1], image.shape[0]) != size:
             raise FieldappError(
@@ -118,15 +194,10 @@ def calibrate_intrinsics(
                 f"from the first image's {size[0]} x {size[1]}"
             )
         corners = detect_corners(image, board)
-        views.append(
-            ViewResult(
-                name,
-                corners is not None,
-                rejected=None if corners is not None else "board not found",
-            )
-        )
+        views.append(ViewResult(name, corners is not None, rejected=_not_found(image, corners)))
         if corners is not None:
             corner_sets.append(corners)
+            saturation.append(washed_out_fraction(image, corners, board))
     found = [v for v in views if v.found]
     if not found:
         raise FieldappError(
@@ -140,17 +211,14 @@ def calibrate_intrinsics(
             f"the board was found in only {len(found)} image(s); at least "
             f"{MIN_VIEWS} are needed, {RECOMMENDED_VIEWS} or more recommended"
         )
-    rms, K, dist, errors = _solve(corner_sets, board, size, fix_aspect)
+    rms, K, dist, errors = _solve(corner_sets, board, size, options)
     keep = [e <= max_view_error_px for e in errors]
     if not all(keep) and sum(keep) >= MIN_VIEWS:
-        for view, error, kept in zip(found, errors, keep, strict=True):
+        for view, error, kept, saturated in zip(found, errors, keep, saturation, strict=True):
             if not kept:
-                view.rejected = (
-                    f"reprojection error {error:.2f} px > {max_view_error_px} px "
-                    "(blurred, board bent or moving, or corners misdetected)"
-                )
+                view.rejected = _rejection(error, max_view_error_px, saturated)
         corner_sets = [c for c, k in zip(corner_sets, keep, strict=True) if k]
-        rms, K, dist, errors = _solve(corner_sets, board, size, fix_aspect)
+        rms, K, dist, errors = _solve(corner_sets, board, size, options)
     for view, error in zip([v for v in found if v.rejected is None], errors, strict=True):
         view.error_px = error
     counts = coverage_of(corner_sets, size)
@@ -171,6 +239,28 @@ def calibrate_intrinsics(
     )
     result.warnings = intrinsics_warnings(result)
     return result
+
+
+def _not_found(image: NDArray[np.generic], corners: NDArray[np.float32] | None) -> str | None:
+    if corners is not None:
+        return None
+    fraction = saturated_fraction(image)
+    if fraction > SATURATED_IMAGE:
+        return (
+            f"board not found; {100 * fraction:.0f} % of the image is saturated: over-exposed? "
+            f"({OVER_EXPOSURE_ADVICE})"
+        )
+    return "board not found"
+
+
+def _rejection(error_px: float, max_error_px: float, washed_out: float) -> str:
+    reason = f"reprojection error {error_px:.2f} px > {max_error_px} px"
+    if washed_out > WASHED_OUT_CORNERS:
+        return (
+            f"{reason}: over-exposed: {100 * washed_out:.0f} % of the corners sit on a saturated "
+            f"patch ({OVER_EXPOSURE_ADVICE})"
+        )
+    return f"{reason} (blurred, board bent or moving, or corners misdetected)"
 
 
 def intrinsics_warnings(result: IntrinsicsResult) -> list[str]:

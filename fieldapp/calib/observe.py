@@ -13,10 +13,12 @@ from devices.geometry import Matrix4, pose_error
 from fieldapp.calib.board import Board, corner_zero_is_dark, detect_all_corners, detect_corners
 from fieldapp.calib.corners3d import Corners3D, lift_corners
 from fieldapp.calib.rigid import fit_rigid_weighted
-from fieldapp.errors import FieldappError
 from fieldapp.io.session import Capture, CaptureImages, Session
 
 MIN_LIFTED_FRACTION = 0.8
+SYMMETRIC_MARGIN_DEG = 20.0
+"""On a symmetric board the corner order chosen must fit the rig this much better than its
+reverse (the two differ by a half turn, so a right choice wins by well over 100 degrees)."""
 
 ItemT = TypeVar("ItemT")
 
@@ -123,14 +125,12 @@ def align_order(
 
     A grid of points maps onto itself under a half turn, so the 3D fit alone cannot tell the
     order: on an asymmetric board the colour of the square outside corner 0 decides; failing
-    that, the order whose transform lies closer to the prior (the calibration in force).
+    that, the order whose transform lies closer to the prior (the calibration in force). A
+    symmetric board (cols + rows even, e.g. 7 x 5) looks the same after a half turn, so the
+    rig's geometry decides: see :func:`align_by_rig`.
     """
     if board.is_symmetric:
-        raise FieldappError(
-            f"a {board.cols} x {board.rows} board looks the same after a half turn, so the "
-            "corner order between views is ambiguous: use a board whose inner corner counts "
-            "differ by an odd number (e.g. 9 x 6)"
-        )
+        return align_by_rig(a, b, T_a_b_prior)
     if a.corner_zero_dark is not None and b.corner_zero_dark is not None:
         return b if a.corner_zero_dark == b.corner_zero_dark else b.reversed()
     if T_a_b_prior is None:
@@ -141,6 +141,33 @@ def align_order(
         for c in candidates
     ]
     return candidates[int(np.argmin(errors))]
+
+
+def upright_tilt_deg(T_a_b: Matrix4) -> float:
+    """How far ``T_a_b`` tilts the camera's vertical (its y axis): a turntable turning about a
+    near-vertical axis, or a base driving on the ground, with an upright camera tilts it little."""
+    return float(np.degrees(np.arccos(np.clip(T_a_b[1, 1], -1.0, 1.0))))
+
+
+def align_by_rig(a: Observation, b: Observation, T_a_b_prior: Matrix4 | None) -> Observation | None:
+    """``b`` in ``a``'s corner order on a symmetric board, or None when the rig cannot tell.
+
+    The two orders give transforms a half turn about the board's normal apart. The right one
+    is the one near the prior (the table's known step, the stations' nominal poses); without a
+    prior, the one that keeps the upright camera's vertical (the table turns about a
+    near-vertical axis). The winner must beat the other by ``SYMMETRIC_MARGIN_DEG``: a board
+    lying flat seen without a prior stays ambiguous (a half turn about the vertical keeps it).
+    """
+    candidates = [b, b.reversed()]
+    fits = [fit_rigid_weighted(*paired_points(a, c)).T_target_source for c in candidates]
+    if T_a_b_prior is not None:
+        errors = [pose_error(T, T_a_b_prior)[1] for T in fits]
+    else:
+        errors = [upright_tilt_deg(T) for T in fits]
+    best = int(np.argmin(errors))
+    if errors[1 - best] - errors[best] < SYMMETRIC_MARGIN_DEG:
+        return None
+    return candidates[best]
 
 
 def match_by_prior(

@@ -101,7 +101,7 @@ def fit_pair(
         mean_b = group_b.mean
         ordered_b = align_order(group_a.mean, mean_b, board, T_prior)
         if ordered_b is None:
-            refused.append(f"stations {a}-{b} via {label}: corner order cannot be told")
+            refused.append(f"stations {a}-{b} via {label}: {_unordered(board, T_prior)}")
             continue
         why = _implausible(fit_rigid_weighted(*paired_points(group_a.mean, ordered_b)), T_prior)
         if why:
@@ -123,6 +123,16 @@ def fit_pair(
         return None, refused
     links = [(ga, gb, ob is not gb.mean) for _, ga, gb, ob in used]
     return PairResult(a, b, labels, joint, links), refused
+
+
+def _unordered(board: Board, T_prior: Matrix4 | None) -> str:
+    if board.is_symmetric and T_prior is None:
+        return (
+            f"the {board.cols} x {board.rows} board looks the same after a half turn and lies "
+            "flat: its corner order needs the stations' nominal poses (give a calibration "
+            "with stations)"
+        )
+    return "corner order cannot be told"
 
 
 def _implausible(fit: RigidFit, T_prior: Matrix4 | None) -> str | None:

@@ -22,10 +22,25 @@ def register(subparsers: Any) -> None:
         description="Zhang calibration from checkerboard images (IR images for the Kinect's "
         "depth camera). Writes depth_camera into --out (other sections kept).",
     )
-    intrinsics.add_argument("images", nargs="+", type=Path, help="checkerboard images")
+    intrinsics.add_argument(
+        "images",
+        nargs="+",
+        type=Path,
+        help="checkerboard images: files, folders of them, or quoted patterns ('ir/*.png')",
+    )
     intrinsics.add_argument("--board", required=True, help="inner corners COLSxROWS, e.g. 9x6")
     intrinsics.add_argument("--square-mm", type=float, required=True, help="square size, mm")
     intrinsics.add_argument("--fix-aspect", action="store_true", help="force fx = fy")
+    intrinsics.add_argument(
+        "--fix-principal-point",
+        nargs="?",
+        const="centre",
+        metavar="CX,CY",
+        help="keep cx, cy fixed: at the image centre, or at CX,CY (pixels)",
+    )
+    intrinsics.add_argument(
+        "--fix-k3", action="store_true", help="k3 = 0 (with few views k1, k2, k3 trade off)"
+    )
     intrinsics.add_argument(
         "--max-view-error-px", type=float, default=1.5, help="reject views above this (1.5)"
     )
@@ -84,13 +99,19 @@ def _board_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run_intrinsics(args: argparse.Namespace) -> int:
     from fieldapp.calib.board import Board
-    from fieldapp.calib.intrinsics import calibrate_intrinsics, read_calibration_image
+    from fieldapp.calib.image_files import expand_image_paths, read_images
+    from fieldapp.calib.intrinsics import calibrate_intrinsics
     from fieldapp.calib.store import provenance, save_keeping_previous, with_depth_camera
     from fieldapp.io.calibration import DepthCamera
 
     board = Board.parse(args.board, args.square_mm)
-    images = [(str(path), read_calibration_image(path)) for path in args.images]
-    result = calibrate_intrinsics(images, board, args.fix_aspect, args.max_view_error_px)
+    images, skipped = read_images(expand_image_paths(args.images))
+    for line in skipped:
+        print(f"warning: {line}")
+    options = _solve_options(args)
+    result = calibrate_intrinsics(
+        images, board, max_view_error_px=args.max_view_error_px, options=options
+    )
     k = result.intrinsics
     camera = DepthCamera.from_intrinsics(k)
     camera.calibrated = provenance(  # type: ignore[attr-defined]
@@ -101,6 +122,7 @@ def run_intrinsics(args: argparse.Namespace) -> int:
         views_used=len(result.used),
         coverage=round(result.coverage, 3),
         per_image_px={v.name: round(v.error_px, 4) for v in result.used if v.error_px},
+        fixed=[name for name, on in _fixed(options).items() if on],
     )
     previous = save_keeping_previous(args.out, with_depth_camera(args.out, camera))
     print(f"fx {k.fx:.4f}  fy {k.fy:.4f}  cx {k.cx:.4f}  cy {k.cy:.4f}")
@@ -113,6 +135,35 @@ def run_intrinsics(args: argparse.Namespace) -> int:
             print(f"  {view.name}: REJECTED: {view.rejected}")
     print(f"corner coverage {100 * result.coverage:.0f} % of the image")
     return _finish(result.warnings, args.out, previous)
+
+
+def _solve_options(args: argparse.Namespace) -> Any:
+    from fieldapp.calib.intrinsics import SolveOptions
+    from fieldapp.errors import FieldappError
+
+    point = None
+    if args.fix_principal_point not in (None, "centre"):
+        try:
+            cx, cy = (float(v) for v in args.fix_principal_point.split(","))
+        except ValueError:
+            raise FieldappError(
+                f"--fix-principal-point {args.fix_principal_point!r}: expected CX,CY in pixels"
+            ) from None
+        point = (cx, cy)
+    return SolveOptions(
+        fix_aspect=args.fix_aspect,
+        fix_principal_point=args.fix_principal_point is not None,
+        principal_point=point,
+        fix_k3=args.fix_k3,
+    )
+
+
+def _fixed(options: Any) -> dict[str, bool]:
+    return {
+        "aspect": options.fix_aspect,
+        "principal_point": options.fix_principal_point,
+        "k3": options.fix_k3,
+    }
 
 
 def _load(path: Path) -> Any:

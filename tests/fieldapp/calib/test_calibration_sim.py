@@ -207,9 +207,13 @@ def _observation(dark: bool | None) -> Observation:
     return Observation(None, grid.astype(np.float32), dark, Corners3D(points, np.ones(len(grid))))  # type: ignore[arg-type]
 
 
-def test_corner_order_on_a_symmetric_board_is_refused():
-    with pytest.raises(FieldappError, match="ambiguous"):
-        align_order(_observation(True), _observation(True), Board(8, 6, 40.0))
+def test_corner_order_on_a_symmetric_board_is_not_guessed_from_the_colours():
+    """Without a prior, two identical views of an 8 x 6 board: the identity keeps the camera
+    upright, its reverse (a half turn about the board's normal, here the optical axis) does not;
+    the colours of a symmetric board say nothing."""
+    aligned = align_order(_observation(True), _observation(False), Board(8, 6, 40.0))
+    assert aligned is not None
+    np.testing.assert_array_equal(aligned.corners.points_m, _observation(None).corners.points_m)
 
 
 def test_flipped_corner_order_is_corrected_when_the_colours_tell():
