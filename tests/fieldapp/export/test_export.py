@@ -1,0 +1,251 @@
+"""``fieldapp export``: LAZ 1.4 and PLY with per-point plant ids, CSVs with units, BrAPI v2
+JSON, a MIAPPE ISA-Tab bundle (checked structurally: the ISA tools do not install here)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fieldapp.cli import main
+from fieldapp.errors import FieldappError
+from fieldapp.export.clouds import labelled_cloud
+from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.outputs import PlantRow, write_outputs
+
+PLANTS = {1: (0.5, 1.0, 21.5, 12.25), 2: (1.25, 1.0, 18.0, 10.5), 3: (2.0, 1.1, 25.75, 14.0)}
+"""plant -> x_m, y_m, height_cm, width_cm."""
+
+
+def results_folder(folder: Path, seed: int, grid: bool = False, scale: float = 1.0) -> Path:
+    """A results folder as `fieldapp reconstruct` writes it: three plants of 400 points each
+    and 300 points that belong to no plant; with ``grid``, row and column columns too."""
+    rng = np.random.default_rng(seed)
+    clouds = {
+        p: Cloud(rng.normal([x, y, 0.1], 0.03, (400, 3)), rng.integers(0, 255, (400, 3), np.uint8))
+        for p, (x, y, _, _) in PLANTS.items()
+    }
+    loose = Cloud(rng.uniform(0, 2.5, (300, 3)), np.zeros((300, 3), np.uint8))
+    whole = Cloud.concatenate([*clouds.values(), loose])
+    order = rng.permutation(len(whole))
+    rows = [PlantRow(p, x, y, h * scale, w * scale, 400) for p, (x, y, h, w) in PLANTS.items()]
+    report = {"format": "x", "session": f"{folder.name}-session", "warnings": []}
+    write_outputs(folder, rows, whole.select(order), clouds, report)
+    if grid:
+        table = list(csv.DictReader(io.StringIO((folder / "plants.csv").read_text())))
+        with (folder / "plants.csv").open("w", newline="") as handle:
+            writer = csv.DictWriter(handle, [*table[0], "row", "column"], lineterminator="\n")
+            writer.writeheader()
+            for row in table:
+                writer.writerow(row | {"row": 1, "column": row["plant"]})
+    return folder
+
+
+@pytest.fixture
+def exported(tmp_path) -> Path:
+    first = results_folder(tmp_path / "r1", 0, grid=True)
+    second = results_folder(tmp_path / "r2", 1, grid=True, scale=1.5)
+    out = tmp_path / "export"
+    args = ["export", str(first), str(second), "--date", "2026-06-01", "--date", "2026-06-08"]
+    assert main([*args, "--study", "plot-a", "--out", str(out)]) == 0
+    return out
+
+
+def test_plant_ids_of_every_point(tmp_path):
+    cloud = labelled_cloud(results_folder(tmp_path / "r", 2))
+    assert np.bincount(cloud.plant_id).tolist() == [300, 400, 400, 400]
+    for plant, (x, y, _, _) in PLANTS.items():
+        centre = cloud.points[cloud.plant_id == plant].mean(axis=0)
+        assert np.hypot(centre[0] - x, centre[1] - y) < 0.01
+    assert not cloud.organ.any()
+
+
+def test_laz_1_4_with_plant_id_and_organ_dimensions(exported):
+    import laspy
+
+    las = laspy.read(exported / "cloud.laz")
+    assert str(las.header.version) == "1.4"
+    assert las.header.point_format.id == 7
+    assert {"plant_id", "organ"} <= set(las.point_format.extra_dimension_names)
+    assert np.bincount(np.asarray(las.plant_id)).tolist() == [300, 400, 400, 400]
+    assert not np.asarray(las.organ).any()
+    classes = np.asarray(las.classification)
+    assert set(classes[np.asarray(las.plant_id) > 0]) == {3}
+    reference = labelled_cloud(exported.parent / "r2")  # the latest date's cloud
+    points = np.column_stack([las.x, las.y, las.z])
+    np.testing.assert_allclose(
+        np.sort(points, axis=0), np.sort(reference.points, axis=0), atol=6e-5
+    )
+
+
+def test_ply_with_scalar_fields_reads_back(exported):
+    data = (exported / "cloud.ply").read_bytes()
+    header, _, body = data.partition(b"end_header\n")
+    assert b"property uint plant_id" in header and b"property uchar organ" in header
+    vertex = np.dtype([("xyz", "<f4", 3), ("rgb", "u1", 3), ("plant_id", "<u4"), ("organ", "u1")])
+    vertices = np.frombuffer(body, vertex)
+    assert np.bincount(vertices["plant_id"]).tolist() == [300, 400, 400, 400]
+    import open3d as o3d
+
+    assert len(o3d.io.read_point_cloud(str(exported / "cloud.ply")).points) == 1500
+
+
+def test_csvs_carry_units_in_their_headers(exported):
+    wide = list(csv.DictReader(io.StringIO((exported / "plants.csv").read_text())))
+    assert list(wide[0]) == [
+        "plant_id", "date", "x_m", "y_m", "row", "column", "height_cm", "width_cm"
+    ]  # fmt: skip
+    assert len(wide) == 6
+    assert {(r["date"], r["plant_id"], r["height_cm"]) for r in wide} >= {
+        ("2026-06-01", "3", "25.75"),
+        ("2026-06-08", "3", "38.62"),  # plants.csv of the results: 2 decimals
+    }
+    long = list(csv.DictReader(io.StringIO((exported / "observations.csv").read_text())))
+    assert len(long) == 3 * 2 * 2  # plants x variables x dates
+    assert {(r["variable"], r["unit"]) for r in long} == {
+        ("plant_height_cm", "cm"),
+        ("plant_width_cm", "cm"),
+    }
+    assert all(r["method"] for r in long)
+
+
+def test_brapi_units_observations_and_variables(exported):
+    units = json.loads((exported / "brapi" / "observationunits.json").read_text())
+    observations = json.loads((exported / "brapi" / "observations.json").read_text())
+    variables = json.loads((exported / "brapi" / "observationvariables.json").read_text())
+    for document in (units, observations, variables):
+        pagination = document["metadata"]["pagination"]
+        assert pagination["totalCount"] == len(document["result"]["data"])
+    data = units["result"]["data"]
+    assert [u["observationUnitName"] for u in data] == ["plant 1", "plant 2", "plant 3"]
+    position = data[2]["observationUnitPosition"]
+    assert position["observationLevel"] == {"levelName": "plant", "levelOrder": 0, "levelCode": "3"}
+    assert (position["positionCoordinateX"], position["positionCoordinateXType"]) == (
+        "3",
+        "GRID_COL",
+    )
+    assert (position["positionCoordinateY"], position["positionCoordinateYType"]) == (
+        "1",
+        "GRID_ROW",
+    )
+    assert data[2]["additionalInfo"]["x_m"] == 2.0
+    rows = observations["result"]["data"]
+    assert len(rows) == 12 and len({r["observationDbId"] for r in rows}) == 12
+    unit_ids = {u["observationUnitDbId"] for u in data}
+    variable_ids = {v["observationVariableDbId"] for v in variables["result"]["data"]}
+    assert {r["observationUnitDbId"] for r in rows} == unit_ids
+    assert {r["observationVariableDbId"] for r in rows} == variable_ids
+    height = [
+        r
+        for r in rows
+        if r["observationUnitName"] == "plant 1" and "height" in r["observationVariableName"]
+    ]
+    assert [(r["observationTimeStamp"][:10], r["value"]) for r in height] == [
+        ("2026-06-01", "21.5"),
+        ("2026-06-08", "32.25"),
+    ]
+    scales = {
+        v["observationVariableName"]: v["scale"]["units"] for v in variables["result"]["data"]
+    }
+    assert scales == {"plant_height_cm": "cm", "plant_width_cm": "cm"}
+
+
+def _table(path: Path) -> list[list[str]]:
+    rows = list(csv.reader(io.StringIO(path.read_text()), delimiter="\t"))
+    assert len({len(r) for r in rows}) == 1, f"{path.name}: rows of different lengths"
+    return rows
+
+
+def _investigation(path: Path) -> dict[str, list[str]]:
+    fields = {}
+    for line in path.read_text().splitlines():
+        cells = line.split("\t")
+        if len(cells) > 1 or not cells[0].isupper():
+            fields[cells[0]] = cells[1:]
+    return fields
+
+
+def test_isa_tab_bundle_is_complete_and_consistent(exported):
+    folder = exported / "isa"
+    text = (folder / "i_investigation.txt").read_text()
+    sections = [line for line in text.splitlines() if line.isupper() and "\t" not in line]
+    assert sections == [
+        "ONTOLOGY SOURCE REFERENCE", "INVESTIGATION", "INVESTIGATION PUBLICATIONS",
+        "INVESTIGATION CONTACTS", "STUDY", "STUDY DESIGN DESCRIPTORS", "STUDY PUBLICATIONS",
+        "STUDY FACTORS", "STUDY ASSAYS", "STUDY PROTOCOLS", "STUDY CONTACTS",
+    ]  # fmt: skip
+    fields = _investigation(folder / "i_investigation.txt")
+    assert fields["Comment[MIAPPE Version]"] == ["1.1"]
+    assert fields["Study Identifier"] == ["plot-a"]
+    assert fields["Comment[Study Start Date]"] == ["2026-06-01"]
+    study = _table(folder / fields["Study File Name"][0])
+    assay = _table(folder / fields["Study Assay File Name"][0])
+    definitions = _table(folder / fields["Comment[Trait Definition File]"][0])
+    samples = {row[study[0].index("Sample Name")] for row in study[1:]}
+    assert samples == {"plant 1", "plant 2", "plant 3"}
+    protocols = set(fields["Study Protocol Name"])
+    assert {row[study[0].index("Protocol REF")] for row in study[1:]} <= protocols
+    assert {row[assay[0].index("Protocol REF")] for row in assay[1:]} <= protocols
+    assert {row[0] for row in assay[1:]} == samples
+    data_files = {row[assay[0].index("Derived Data File")] for row in assay[1:]}
+    assert len(data_files) == 1
+    traits = _table(folder / data_files.pop())
+    assert {row[0] for row in traits[1:]} == {
+        row[assay[0].index("Assay Name")] for row in assay[1:]
+    }
+    names = [row[definitions[0].index("Variable Name")] for row in definitions[1:]]
+    assert traits[0][3:] == names
+    units = {row[1]: row[definitions[0].index("Scale")] for row in definitions[1:]}
+    assert units == {"plant_height_cm": "cm", "plant_width_cm": "cm"}
+    assert all(row[definitions[0].index("Method Description")] for row in definitions[1:])
+
+
+def test_formats_and_dates_are_chosen(tmp_path, capsys):
+    folder = results_folder(tmp_path / "r", 3)
+    out = tmp_path / "out"
+    assert main(["export", str(folder), "--formats", "csv", "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["observations.csv", "plants.csv"]
+    assert "the day the results were written; give --date" in capsys.readouterr().out
+    wide = list(csv.DictReader(io.StringIO((out / "plants.csv").read_text())))
+    assert wide[0]["row"] == "" and wide[0]["column"] == ""
+    assert main(["export", str(folder), "--formats", "las", "--out", str(out)]) == 1
+    assert "choose among csv, laz, ply, isa, brapi" in capsys.readouterr().err
+
+
+def test_a_broken_plants_csv_is_named_with_its_field(tmp_path):
+    import datetime as dt
+
+    from fieldapp.export.data import from_results_dirs
+
+    folder = results_folder(tmp_path / "r", 4)
+    text = (folder / "plants.csv").read_text().replace("21.50", "tall")
+    (folder / "plants.csv").write_text(text)
+    with pytest.raises(FieldappError, match=r"plants\.csv: line 2, height_cm: 'tall'"):
+        from_results_dirs([folder], [dt.date(2026, 6, 1)], "plot")
+
+
+def test_the_results_database_gives_dates_and_season_ids(tmp_path, capsys):
+    db = tmp_path / "season.sqlite"
+    first = results_folder(tmp_path / "r1", 5)
+    second = results_folder(tmp_path / "r2", 6, scale=1.25)
+    for folder, date in ((first, "2026-06-01"), (second, "2026-06-08")):
+        args = ["results", "--db", str(db), "add", str(folder), "--plot", "plot-b"]
+        assert main([*args, "--date", date]) == 0
+    out = tmp_path / "season"
+    assert main(["export", "--plot", "plot-b", "--db", str(db), "--out", str(out)]) == 0
+    long = list(csv.DictReader(io.StringIO((out / "observations.csv").read_text())))
+    assert {r["date"] for r in long} == {"2026-06-01", "2026-06-08"}
+    assert {r["plant_id"] for r in long} == {"1", "2", "3"}
+    assert (out / "cloud.laz").is_file()
+    single = tmp_path / "single"
+    assert (
+        main(["export", str(second), "--db", str(db), "--formats", "csv", "--out", str(single)])
+        == 0
+    )
+    assert "the day the results were written" not in capsys.readouterr().out
+    wide = list(csv.DictReader(io.StringIO((single / "plants.csv").read_text())))
+    assert {r["date"] for r in wide} == {"2026-06-08"}
