@@ -173,6 +173,11 @@ def _write(
         )
         result.captures += 1
         result.depth_only += frame.color is None
+    if playback.has_color and result.depth_only:
+        lines.append(
+            f"{path}: colour frames not used (not RGB8 or BGR8): {result.depth_only} captures "
+            "are depth-only"
+        )
     if result.captures == 0:
         raise FieldappError(f"{path}: the recording holds no depth frame")
     return result

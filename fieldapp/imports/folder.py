@@ -17,6 +17,7 @@ from fieldapp.imports.camera import camera_from_options, import_calibration, rea
 from fieldapp.imports.captures import PlannedCapture, group_files, plan_captures
 from fieldapp.imports.images import Unusable, read_color_rgb, read_depth_m, read_ir_u16
 from fieldapp.imports.names import image_files, parse_name
+from fieldapp.io.calibration import Calibration
 from fieldapp.io.session import now_iso
 from fieldapp.io.writer import SessionWriter
 
@@ -68,6 +69,7 @@ def import_folder(folder: Path, out: Path, options: FolderOptions) -> ImportResu
     calibration = import_calibration(camera, step, options.axis_distance_m, rig)
     if calibration.stations is not None:
         _check_stations(planned, set(calibration.stations.to_reference))
+        calibration = only_stations(calibration, {c.station for c in planned}, lines)
     provenance = {"imported": {"from": str(folder.resolve()), "at": now_iso(), "by": "folder"}}
     writer = SessionWriter.create(
         out, options.session_id or folder.resolve().name, calibration, extra=provenance
@@ -89,6 +91,20 @@ def _first_readable_depth(planned: list[PlannedCapture], depth_scale: float) -> 
     raise FieldappError(
         "no readable depth image: " + ", ".join(str(c.files["depth"]) for c in planned[:5])
     )
+
+
+def only_stations(calibration: Calibration, stations: set[int], lines: list[str]) -> Calibration:
+    """The calibration with only the imported stations (and the reference), so that the
+    stations not imported are not reported missing."""
+    assert calibration.stations is not None
+    kept = stations | {calibration.stations.reference}
+    dropped = sorted(set(calibration.stations.to_reference) - kept)
+    if not dropped:
+        return calibration
+    lines.append(f"calibration stations {', '.join(map(str, dropped))} not used: no images of them")
+    to_reference = {s: T for s, T in calibration.stations.to_reference.items() if s in kept}
+    kept_stations = calibration.stations.model_copy(update={"to_reference": to_reference})
+    return calibration.model_copy(update={"stations": kept_stations})
 
 
 def _check_stations(planned: list[PlannedCapture], calibrated: set[int]) -> None:

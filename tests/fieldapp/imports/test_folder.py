@@ -154,3 +154,33 @@ def test_bad_intrinsics_are_named(tmp_path):
     _write(tmp_path / "scan" / "depth.png", _depth_mm(0))
     with pytest.raises(FieldappError, match=r"principal point \(90, 24\) inside the 64 x 48"):
         import_folder(tmp_path / "scan", tmp_path / "out", FolderOptions(intrinsics="60,60,90,24"))
+
+
+def test_a_simulated_session_flattened_and_imported_reads_the_same(tmp_path, capsys):
+    """Station 5 views 0-1 of a simulated plot, written as a flat folder of
+    scan_s5_v<k>_<kind>.png, imported with the session's calibration.json: the same images,
+    the same view step, only station 5 kept."""
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--out", str(sim), "--stations", "5", "--views", "0,1"]) == 0
+    document = json.loads((sim / "session.json").read_text())
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    for capture in document["captures"]:
+        for kind in ("depth", "color", "ir"):
+            name = f"scan_s{capture['station']}_v{capture['view']}_{kind}.png"
+            (flat / name).write_bytes((sim / capture[kind]).read_bytes())
+    out = tmp_path / "imported"
+    assert main(["import", "folder", str(flat), "--calibration", str(sim / "calibration.json"),
+                 "--out", str(out)]) == 0  # fmt: skip
+    assert "calibration stations 1, 2, 3, 4, 6, 7, 8, 9 not used" in capsys.readouterr().out
+    original, imported = load_session(sim), load_session(out)
+    assert imported.missing() == [(5, v) for v in range(2, 8)]
+    np.testing.assert_array_equal(
+        imported.calibration.view_step.matrix, original.calibration.view_step.matrix
+    )
+    assert imported.calibration.depth_camera == original.calibration.depth_camera
+    for a, b in zip(original.captures, imported.captures, strict=True):
+        first, second = original.read_capture(a, True), imported.read_capture(b, True)
+        np.testing.assert_array_equal(first.depth_m, second.depth_m)
+        np.testing.assert_array_equal(first.color, second.color)
+        np.testing.assert_array_equal(first.ir, second.ir)
