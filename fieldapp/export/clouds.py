@@ -7,6 +7,7 @@ none) and an organ label. Organs are not segmented yet (issue 21): every point's
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -87,11 +88,9 @@ def write_laz(path: Path, cloud: LabelledCloud) -> None:
     las.classification = np.where(cloud.plant_id > 0, LAS_LOW_VEGETATION, LAS_UNCLASSIFIED)
     las.plant_id = cloud.plant_id
     las.organ = cloud.organ
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.tmp")
-    las.write(temporary, do_compress=path.suffix.lower() == ".laz")
-    write_bytes_durably(path, temporary.read_bytes())
-    temporary.unlink()
+    buffer = io.BytesIO()
+    las.write(buffer, do_compress=path.suffix.lower() == ".laz")
+    write_bytes_durably(path, buffer.getvalue())
 
 
 _PLY_VERTEX = np.dtype(

@@ -67,6 +67,8 @@ def test_plant_ids_of_every_point(tmp_path):
 def test_laz_1_4_with_plant_id_and_organ_dimensions(exported):
     import laspy
 
+    raw = (exported / "cloud.laz").read_bytes()
+    assert raw[104] & 0x80, "LAZ: the point format's compression bit is set"
     las = laspy.read(exported / "cloud.laz")
     assert str(las.header.version) == "1.4"
     assert las.header.point_format.id == 7
