@@ -15,6 +15,7 @@ from fieldapp.errors import FieldappError, FormatError
 from fieldapp.imports.camera import T_view_k_view_k1
 from fieldapp.imports.folder import FolderOptions, import_folder
 from fieldapp.io.calibration import T_view0_view
+from fieldapp.io.images import depth_units_to_m, read_depth_units
 from fieldapp.io.session import load_session
 from fieldapp.verify import verify_session
 
@@ -184,3 +185,27 @@ def test_a_simulated_session_flattened_and_imported_reads_the_same(tmp_path, cap
         np.testing.assert_array_equal(first.depth_m, second.depth_m)
         np.testing.assert_array_equal(first.color, second.color)
         np.testing.assert_array_equal(first.ir, second.ir)
+
+
+def test_kind_folders_and_float_depth(tmp_path):
+    """TUM RGB-D style: depth/ and rgb/ folders with the same names, depth in 1/5000 m; and
+    float depth in metres (.npy), NaN and 0 as missing."""
+    tum = tmp_path / "tum"
+    for index in range(2):
+        _write(tum / "depth" / f"{index:04d}.png", np.full((H, W), 5000 + 100 * index, np.uint16))
+        _write(tum / "rgb" / f"{index:04d}.png", np.full((H, W, 3), 90, np.uint8))
+    options = FolderOptions(intrinsics=INTRINSICS, depth_scale=5000.0, step_deg=45.0)
+    assert import_folder(tum, tmp_path / "a", options).depth_only == 0
+    session = load_session(tmp_path / "a")
+    depth = session.read_capture(session.captures[1]).depth_m
+    assert float(np.nanmedian(depth)) == pytest.approx(1.02)
+    floats = tmp_path / "floats"
+    floats.mkdir()
+    metres = np.full((H, W), 1.25, np.float32)
+    metres[0, :2] = (np.nan, 0.0)
+    np.save(floats / "depth_v0.npy", metres)
+    import_folder(floats, tmp_path / "b", FolderOptions(intrinsics=INTRINSICS))
+    session = load_session(tmp_path / "b")
+    units = read_depth_units(session.path_of(session.captures[0].depth))
+    read = depth_units_to_m(units, session.calibration.depth_camera.depth_scale)
+    assert np.isnan(read[0, :2]).all() and float(read[5, 5]) == pytest.approx(1.25)
