@@ -151,7 +151,7 @@ def _finish(result: Any) -> int:
     from fieldapp.verify import verify_session
 
     for line in result.lines:
-        print(f"not used: {line}" if not line.startswith("not used") else line)
+        print(line)
     report = verify_session(result.out)
     depth_only = f", {result.depth_only} depth-only" if result.depth_only else ""
     print(f"{result.out}: {result.captures} captures imported{depth_only}")

@@ -60,8 +60,13 @@ def step_of(groups: list[dict[str, NamedFile]], step_deg: float | None) -> float
     return None
 
 
+NOMINAL_STEP_DEG = 45.0
+"""The step written when neither --step-deg nor the names give one (views named, or a single
+capture): this project's rig; said in the import's lines."""
+
+
 def plan_captures(
-    groups: list[dict[str, NamedFile]], step_deg: float | None
+    groups: list[dict[str, NamedFile]], step_deg: float | None, lines: list[str]
 ) -> tuple[list[PlannedCapture], float]:
     """Station, view and angle of every capture; returns them with the view step (degrees).
 
@@ -76,7 +81,11 @@ def plan_captures(
         )
     if step is not None and not 0.0 < abs(step) <= 180.0:
         raise FieldappError(f"view step {step:g} degrees: must be non-zero and at most 180")
-    step = step if step is not None else 45.0
+    if step is None:
+        step = NOMINAL_STEP_DEG
+        lines.append(
+            f"view step unknown: {step:g} degrees written (give --step-deg for the real one)"
+        )
     order: dict[int, int] = defaultdict(int)
     planned: list[PlannedCapture] = []
     seen: dict[tuple[int, int], Path] = {}

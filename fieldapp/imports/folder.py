@@ -57,7 +57,7 @@ def import_folder(folder: Path, out: Path, options: FolderOptions) -> ImportResu
     named = [parse_name(p, folder) for p in image_files(folder)]
     if not named:
         raise FieldappError(f"{folder}: no image files (.png, .tif, .jpg, .bmp, .npy) in it")
-    planned, step = plan_captures(group_files(named, lines), options.step_deg)
+    planned, step = plan_captures(group_files(named, lines), options.step_deg, lines)
     if not planned:
         raise FieldappError(f"{folder}: no depth image found\n" + "\n".join(lines))
     first_depth = _first_readable_depth(planned, options.depth_scale)

@@ -98,6 +98,9 @@ def test_opencv_yaml_intrinsics(tmp_path, shared_data):
     out = tmp_path / "session"
     result = import_folder(source, out, FolderOptions(calibration=calibration))
     assert result.captures == 1
+    assert result.lines == [
+        "view step unknown: 45 degrees written (give --step-deg for the real one)"
+    ]
     camera = load_session(out).calibration.depth_camera
     assert camera.fx == pytest.approx(535.91573, rel=1e-6)
     assert camera.cx == pytest.approx(342.28315, rel=1e-6)
@@ -120,7 +123,7 @@ def test_unusable_files_are_skipped_and_said(tmp_path, capsys):
     args = ["import", "folder", str(source), "--intrinsics", INTRINSICS, "--out", str(out)]
     assert main([*args, "--step-deg", "45"]) == 0
     text = capsys.readouterr().out
-    lines = [line for line in text.splitlines() if line.startswith("not used")]
+    lines = [line for line in text.splitlines() if "not used" in line or "not imported" in line]
     assert len(lines) == 5, text
     assert any("s1_v0_color.png" in line and "registered to depth" in line for line in lines)
     assert any("s1_v1_depth.png" in line and "uint8" in line for line in lines)
