@@ -79,17 +79,25 @@ def read_plants_csv(path: Path, date: dt.date) -> tuple[list[PlantObservation], 
                     date,
                     _number(row["x_m"], path, line, "x_m"),
                     _number(row["y_m"], path, line, "y_m"),
-                    _grid(row, "row", path, line),
-                    _grid(row, "column", path, line),
+                    _grid(row, ROW_COLUMNS, path, line),
+                    _grid(row, COLUMN_COLUMNS, path, line),
                     values,
                 )
             )
     return observations, variables
 
 
-def _grid(row: dict[str, str], name: str, path: Path, line: int) -> int | None:
-    text = (row.get(name) or "").strip()
-    return int(_number(text, path, line, name)) if text else None
+ROW_COLUMNS = ("row", "grid_row")
+COLUMN_COLUMNS = ("column", "col", "grid_column", "grid_col")
+"""Names of the planting grid's row and column in plants.csv, first found wins."""
+
+
+def _grid(row: dict[str, str], names: tuple[str, ...], path: Path, line: int) -> int | None:
+    for name in names:
+        text = (row.get(name) or "").strip()
+        if text:
+            return int(_number(text, path, line, name))
+    return None
 
 
 def from_results_dirs(folders: list[Path], dates: list[dt.date], study: str) -> ExportData:

@@ -72,7 +72,24 @@ KNOWN = {
     ),
 }
 
-NOT_TRAITS = {"plant", "plant_id", "x_m", "y_m", "points", "row", "column", "date"}
+NOT_TRAITS = {
+    "plant",
+    "plant_id",
+    "x_m",
+    "y_m",
+    "points",
+    "row",
+    "column",
+    "col",
+    "grid_row",
+    "grid_column",
+    "grid_col",
+    "date",
+}
+
+
+POSITION_TOKENS = {"x", "y", "z", "lat", "lon", "easting", "northing", "map", "field"}
+"""A column whose name has one of these words is a position, not a trait (e.g. ``map_x_m``)."""
 
 
 def variable_of(column: str) -> Variable | None:
@@ -83,7 +100,7 @@ def variable_of(column: str) -> Variable | None:
     if column in NOT_TRAITS:
         return None
     match = re.fullmatch(r"(.+)_(m|cm|mm|cm2|deg|count)", column)
-    if match is None:
+    if match is None or POSITION_TOKENS & set(match[1].split("_")):
         return None
     trait = match[1].replace("_", " ")
     return Variable(column, column, trait, f"{trait} (fieldapp reconstruct)", UNITS[match[2]])

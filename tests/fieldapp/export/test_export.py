@@ -251,3 +251,13 @@ def test_the_results_database_gives_dates_and_season_ids(tmp_path, capsys):
     assert "the day the results were written" not in capsys.readouterr().out
     wide = list(csv.DictReader(io.StringIO((single / "plants.csv").read_text())))
     assert {r["date"] for r in wide} == {"2026-06-08"}
+
+
+def test_variables_are_told_from_positions_and_ids():
+    from fieldapp.export.variables import variable_of
+
+    assert variable_of("height_cm").unit == "cm"
+    assert variable_of("leaf_area_cm2").trait == "leaf area"
+    assert variable_of("internode_length_mm").unit == "mm"
+    for column in ("plant", "x_m", "map_x_m", "field_y_m", "grid_row", "points", "row"):
+        assert variable_of(column) is None, column
