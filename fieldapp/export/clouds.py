@@ -108,9 +108,10 @@ _PLY_VERTEX = np.dtype(
 
 
 def ply_with_fields(cloud: LabelledCloud) -> bytes:
-    """Binary little-endian PLY: x, y, z (float), RGB (uchar), ``plant_id`` (uint),
-    ``organ`` (uchar): CloudCompare and Open3D's tensor reader show the last two as scalar
-    fields."""
+    """Binary little-endian PLY: x, y, z (float), RGB (uchar), ``scalar_plant_id`` (uint),
+    ``scalar_organ`` (uchar). The ``scalar_`` prefix is CloudCompare's own: it loads them as
+    scalar fields named ``plant_id`` and ``organ`` without asking (checked with CloudCompare
+    2.11's command line); other readers see the properties as they are named."""
     vertices = np.empty(len(cloud.points), _PLY_VERTEX)
     for i, name in enumerate("xyz"):
         vertices[name] = cloud.points[:, i]
@@ -123,6 +124,6 @@ def ply_with_fields(cloud: LabelledCloud) -> bytes:
         f"element vertex {len(vertices)}\n"
         "property float x\nproperty float y\nproperty float z\n"
         "property uchar red\nproperty uchar green\nproperty uchar blue\n"
-        "property uint plant_id\nproperty uchar organ\nend_header\n"
+        "property uint scalar_plant_id\nproperty uchar scalar_organ\nend_header\n"
     )
     return header.encode("ascii") + vertices.tobytes()

@@ -87,7 +87,8 @@ def test_laz_1_4_with_plant_id_and_organ_dimensions(exported):
 def test_ply_with_scalar_fields_reads_back(exported):
     data = (exported / "cloud.ply").read_bytes()
     header, _, body = data.partition(b"end_header\n")
-    assert b"property uint plant_id" in header and b"property uchar organ" in header
+    assert b"property uint scalar_plant_id" in header  # CloudCompare: scalar field plant_id
+    assert b"property uchar scalar_organ" in header
     vertex = np.dtype([("xyz", "<f4", 3), ("rgb", "u1", 3), ("plant_id", "<u4"), ("organ", "u1")])
     vertices = np.frombuffer(body, vertex)
     assert np.bincount(vertices["plant_id"]).tolist() == [300, 400, 400, 400]
