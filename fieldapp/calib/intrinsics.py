@@ -185,14 +185,19 @@ def calibrate_intrinsics(
     options = options or SolveOptions(fix_aspect=fix_aspect)
     if not images:
         raise FieldappError("no images given")
-    size = (int(images[0][1].shape[1]), int(images[0][1].shape[0]))
+    size = _common_size(images)
     views, corner_sets, saturation = [], [], []
     for name, image in images:
         if (image.shape[1], image.shape[0]) != size:
-            raise FieldappError(
-                f"{name}: size {image.shape[1]} x {image.shape[0]} differs "
-                f"from the first image's {size[0]} x {size[1]}"
+            views.append(
+                ViewResult(
+                    name,
+                    False,
+                    rejected=f"size {image.shape[1]} x {image.shape[0]} differs from the "
+                    f"other images' {size[0]} x {size[1]} (another camera?)",
+                )
             )
+            continue
         corners = detect_corners(image, board)
         views.append(ViewResult(name, corners is not None, rejected=_not_found(image, corners)))
         if corners is not None:
@@ -239,6 +244,12 @@ def calibrate_intrinsics(
     )
     result.warnings = intrinsics_warnings(result)
     return result
+
+
+def _common_size(images: Sequence[tuple[str, NDArray[np.generic]]]) -> tuple[int, int]:
+    """(width, height) most of the images have (the first such on a tie)."""
+    sizes = [(int(image.shape[1]), int(image.shape[0])) for _, image in images]
+    return max(dict.fromkeys(sizes), key=sizes.count)
 
 
 def _not_found(image: NDArray[np.generic], corners: NDArray[np.float32] | None) -> str | None:

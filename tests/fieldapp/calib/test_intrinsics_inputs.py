@@ -47,11 +47,14 @@ def test_a_folder_with_a_zero_byte_bmp_calibrates_and_warns(photos, tmp_path, ca
     folder = tmp_path / "ir"
     shutil.copytree(photos, folder)
     (folder / "left15.bmp").write_bytes(b"")
+    small = cv2.resize(cv2.imread(str(folder / "left01.jpg")), (320, 240))
+    cv2.imwrite(str(folder / "colour.png"), small)  # another camera's image in the folder
     out = tmp_path / "calibration.json"
     args = ["calibrate", "intrinsics", str(folder), "--board", "9x6", "--square-mm", "25"]
     assert main([*args, "--fix-aspect", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "left15.bmp: skipped: empty file" in text
+    assert "colour.png: REJECTED: size 320 x 240 differs from the other images' 640 x 480" in text
     assert "over 13 views" in text
     assert load_calibration(out).depth_camera.fx == pytest.approx(535.91573, rel=1e-3)
 
