@@ -46,14 +46,15 @@ def capture_file_problems(session: Session, capture: Capture) -> list[Problem]:
     """Decode a capture's files and check their kinds and sizes."""
     try:
         depth = read_depth_units(session.path_of(capture.depth))
-        color = read_color(session.path_of(capture.color))
+        color = read_color(session.path_of(capture.color)) if capture.color else None
         if capture.ir:
             ir = read_ir(session.path_of(capture.ir))
             if ir.shape != depth.shape:
                 return [Problem(str(session.path_of(capture.ir)), "ir", "size differs from depth")]
     except ImageError as error:
         return [error.problem]
-    return image_size_problems(session, capture, depth.shape, color.shape[:2])
+    color_hw = color.shape[:2] if color is not None else None
+    return image_size_problems(session, capture, depth.shape, color_hw)
 
 
 def verify_session(folder: Path) -> VerifyReport:

@@ -47,7 +47,8 @@ class BasePose(SpecModel):
 
 
 class Capture(SpecModel):
-    """One capture: a depth and a colour image of view ``view`` at station ``station``.
+    """One capture: a depth and (optionally) a colour image of view ``view`` at station
+    ``station``. A depth-only capture (a sensor or recording without colour) has no ``color``.
 
     Extra fields are kept, e.g. ``target`` (the calibration board a capture sees).
     """
@@ -55,7 +56,7 @@ class Capture(SpecModel):
     station: StrictInt = Field(ge=0)
     view: StrictInt = Field(ge=0)
     depth: RelativePath
-    color: RelativePath
+    color: RelativePath | None = None
     angle_deg: FiniteFloat | None = None
     captured_at: datetime | None = None
     base_pose: BasePose | None = None
@@ -68,6 +69,16 @@ class Capture(SpecModel):
         return self.station, self.view, target if isinstance(target, str) else None
 
 
+class Turntable(SpecModel):
+    """What the turntable carries (this project's field addition to the spec): ``camera``
+    (the rig of the paper: the camera turns, the scene stands still) or ``plant`` (a lab rig:
+    the camera is fixed and the plant turns on the table). ``working_radius_m``: how far from
+    the table's axis the plant may reach; everything farther is the room and is masked."""
+
+    carries: Literal["camera", "plant"] = "camera"
+    working_radius_m: FiniteFloat | None = Field(default=None, gt=0)
+
+
 class SessionDocument(SpecModel):
     """The ``session.json`` document."""
 
@@ -76,6 +87,7 @@ class SessionDocument(SpecModel):
     created: datetime | None = None
     calibration: RelativePath
     captures: list[Capture]
+    turntable: Turntable | None = None
 
 
 @dataclass
@@ -115,6 +127,8 @@ class Session:
     def read_capture(self, capture: Capture, with_ir: bool = False) -> CaptureImages:
         """Decode one capture's images; raises :class:`FormatError` naming the bad file."""
         camera = self.calibration.depth_camera
+        if capture.color is None:
+            raise FormatError([depth_only_problem(self, capture)])
         try:
             units = read_depth_units(self.path_of(capture.depth))
             color = read_color(self.path_of(capture.color))
@@ -148,8 +162,22 @@ class Session:
         return sorted(self.expected_keys() - present)
 
 
+def depth_only_problem(session: Session, capture: Capture) -> Problem:
+    """What a colour reader says of a depth-only capture (valid in the format, but the
+    colour-based steps cannot use it)."""
+    return Problem(
+        str(session.path_of(capture.depth)),
+        "color",
+        f"station {capture.station} view {capture.view} is depth-only (no colour image): "
+        "this step needs colour",
+    )
+
+
 def image_size_problems(
-    session: Session, capture: Capture, depth_hw: tuple[int, ...], color_hw: tuple[int, ...]
+    session: Session,
+    capture: Capture,
+    depth_hw: tuple[int, ...],
+    color_hw: tuple[int, ...] | None,
 ) -> list[Problem]:
     camera = session.calibration.depth_camera
     expected = (camera.height, camera.width)
@@ -163,7 +191,7 @@ def image_size_problems(
                 f"{camera.width} x {camera.height}",
             )
         )
-    if tuple(color_hw) != tuple(depth_hw):
+    if color_hw is not None and capture.color and tuple(color_hw) != tuple(depth_hw):
         problems.append(
             Problem(
                 str(session.path_of(capture.color)),

@@ -88,7 +88,7 @@ class SessionWriter:
         station: int,
         view: int,
         depth_m: NDArray[np.floating],
-        color: NDArray[np.uint8],
+        color: NDArray[np.uint8] | None,
         ir: NDArray[np.uint16] | None = None,
         angle_deg: float | None = None,
         base_pose: BasePose | None = None,
@@ -97,14 +97,15 @@ class SessionWriter:
     ) -> Capture:
         """Write one capture's images, then list it in ``session.json``; returns its entry.
 
-        ``depth_m``: (H, W) metres, NaN or 0 where missing. ``color``: (H, W, 3) uint8 RGB.
+        ``depth_m``: (H, W) metres, NaN or 0 where missing. ``color``: (H, W, 3) uint8 RGB, or
+        ``None`` for a depth-only capture.
         """
         camera = self.session.calibration.depth_camera
         expected = (camera.height, camera.width)
-        if depth_m.shape != expected or color.shape[:2] != expected:
+        color_hw = expected if color is None else color.shape[:2]
+        if depth_m.shape != expected or color_hw != expected:
             raise ValueError(
-                f"capture images are {depth_m.shape} / {color.shape[:2]}, "
-                f"the calibration says {expected}"
+                f"capture images are {depth_m.shape} / {color_hw}, the calibration says {expected}"
             )
         with self._lock:
             if self.has(station, view, target):
@@ -114,7 +115,8 @@ class SessionWriter:
             write_bytes_durably(
                 folder / paths["depth"], encode_png(depth_m_to_units(depth_m, camera.depth_scale))
             )
-            write_bytes_durably(folder / paths["color"], encode_png(color, rgb=True))
+            if color is not None:
+                write_bytes_durably(folder / paths["color"], encode_png(color, rgb=True))
             if ir is not None:
                 write_bytes_durably(folder / paths["ir"], encode_png(ir))
             fields: dict[str, Any] = {"target": target} if target else {}
@@ -122,7 +124,7 @@ class SessionWriter:
                 station=station,
                 view=view,
                 depth=paths["depth"],
-                color=paths["color"],
+                color=paths["color"] if color is not None else None,
                 ir=paths["ir"] if ir is not None else None,
                 angle_deg=angle_deg,
                 captured_at=now_iso(),

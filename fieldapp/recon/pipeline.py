@@ -80,9 +80,13 @@ def reconstruct(
                 settings.filters,
                 settings.ground.soil_band_m,
                 settings.ground.soil_voxel_m,
+                scan.separation.by_geometry,
             )
         yield progress("filtering", (i + 1) / len(scans), f"station {station} filtered")
-    exg_thresholds = {s: scan.exg_threshold for s, scan in scans.items()}
+    separation = {s: scan.separation.describe() for s, scan in scans.items()}
+    exg_thresholds = {
+        s: scan.exg_threshold for s, scan in scans.items() if not scan.separation.by_geometry
+    }
     measured_pixels = sum(scan.measured_pixels for scan in scans.values())
     scans.clear()  # the station clouds are no longer needed
 
@@ -137,6 +141,7 @@ def reconstruct(
         timings_s=dict(timer.seconds),
         cpu_s=dict(timer.cpu_seconds),
         warnings=warnings,
+        separation=separation,
     )
 
 
