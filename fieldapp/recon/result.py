@@ -33,6 +33,8 @@ class Reconstruction:
     warnings: list[str]
     separation: dict[int, str] = field(default_factory=dict)
     """Per station, how its plants were told from the soil (colour, or geometry and why)."""
+    turntable: dict[str, Any] | None = None
+    """A plant-on-turntable session: the working volume and how the views were placed."""
 
     def separation_lines(self) -> list[str]:
         """One line per way of separating plants used, with its stations."""
@@ -76,7 +78,7 @@ class Reconstruction:
             "timings_s": {name: round(t, 4) for name, t in self.timings_s.items()},
             "cpu_s": {name: round(t, 4) for name, t in self.cpu_s.items()},
             "warnings": self.warnings,
-        }
+        } | ({"turntable": self.turntable} if self.turntable is not None else {})
 
 
 def _station_entry(registration: StationRegistration) -> dict[str, Any]:
