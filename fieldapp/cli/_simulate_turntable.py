@@ -50,10 +50,15 @@ def turntable_calibration(rig: TurntableRig) -> Calibration:
 
 
 def write_turntable_session(
-    folder: Path, seed: int, day: int, views: list[int], depth_only: bool
+    folder: Path,
+    seed: int,
+    day: int,
+    views: list[int],
+    depth_only: bool,
+    rig: TurntableRig | None = None,
 ) -> int:
     """Simulate and write the session and its truth; returns the number of captures."""
-    rig = TurntableRig()
+    rig = rig or TurntableRig()
     plant = turntable_plant(seed, day)
     about = {"scene": "turntable", "seed": seed, "day": day, "depth_only": depth_only}
     writer = SessionWriter.create(

@@ -47,7 +47,9 @@ SURFACE_RADIUS_M = 0.10
 SURFACE_BIN_M = 0.005
 BELOW_SURFACE_M = 0.02
 ICP_ABOVE_SURFACE_M = 0.02
-ICP_DISTANCES_M = (0.02, 0.01, 0.006)
+ICP_DISTANCES_M = (0.01, 0.006, 0.004)
+SEARCH_STEP_DEG = 0.25
+ICP_ROUNDS = 2
 ICP_ITERATIONS = 15
 ICP_MIN_PAIRS = 50
 MAX_REFINEMENT_DEG = 5.0
@@ -260,30 +262,43 @@ def _place_views(
     refine: bool,
     warnings: list[str],
 ) -> tuple[list[float], dict[str, object]]:
-    """Each view's turn from view 0 (table degrees): the commanded steps, each refined by ICP
-    about the axis against the views already placed when ``refine``."""
+    """Each view's turn from view 0 (table degrees): the commanded steps, refined when
+    ``refine`` by ICP about the axis: first each view against the views already placed, then
+    (``ICP_ROUNDS`` times) each against all the others, view 0 staying put."""
     turns = [v.commanded_deg - views[0].commanded_deg for v in views]
+    commanded = list(turns)
     if not refine:
         return turns, {"view_turns_deg": [round(t, 3) for t in turns], "refined_by_icp": False}
-    placed: list[NDArray[np.float64]] = []
-    corrections = [0.0]
-    for i, view in enumerate(views):
-        points = view.points.points[plant[i] & (view.height_m > surface_m + ICP_ABOVE_SURFACE_M)]
-        if i > 0:
-            turns[i] = turns[i - 1] + view.commanded_deg - views[i - 1].commanded_deg
-            correction = _icp_about_axis(points, np.concatenate(placed), axis, turns[i])
-            if correction is None or abs(correction) > MAX_REFINEMENT_DEG:
-                warnings.append(
-                    f"view {view.view}: ICP about the table's axis did not converge; the "
-                    "commanded angle is kept"
-                )
-                correction = 0.0
-            turns[i] += correction
-            corrections.append(correction)
-        placed.append(transform_points(axis.T_view0_view(turns[i]), points))
+    points = [
+        v.points.points[plant[i] & (v.height_m > surface_m + ICP_ABOVE_SURFACE_M)]
+        for i, v in enumerate(views)
+    ]
+    failed: set[int] = set()
+    for round_ in range(ICP_ROUNDS + 1):
+        for i in range(1, len(views)):
+            if round_ == 0:
+                turns[i] = turns[i - 1] + commanded[i] - commanded[i - 1]
+            others = range(i) if round_ == 0 else (j for j in range(len(views)) if j != i)
+            target = np.concatenate(
+                [transform_points(axis.T_view0_view(turns[j]), points[j]) for j in others]
+            )
+            correction = _icp_about_axis(points[i], target, axis, turns[i])
+            if correction is None:
+                failed.add(views[i].view)
+            else:
+                turns[i] += correction
+    for i, turn in enumerate(turns):
+        if abs(turn - commanded[i]) > MAX_REFINEMENT_DEG * 2:
+            failed.add(views[i].view)
+            turns[i] = commanded[i]
+    if failed:
+        warnings.append(
+            f"views {', '.join(map(str, sorted(failed)))}: ICP about the table's axis failed; "
+            "the commanded angles are kept"
+        )
     return turns, {
         "view_turns_deg": [round(t, 3) for t in turns],
-        "icp_corrections_deg": [round(c, 3) for c in corrections],
+        "icp_corrections_deg": [round(t - c, 3) for t, c in zip(turns, commanded, strict=True)],
         "refined_by_icp": True,
     }
 
@@ -292,12 +307,20 @@ def _icp_about_axis(
     source_m: NDArray[np.float64], target_m: NDArray[np.float64], axis: TableAxis, turn_deg: float
 ) -> float | None:
     """The correction (table degrees) to ``turn_deg`` that best lays ``source_m`` (N, 3), a
-    view's plant points in its camera frame, on ``target_m`` (M, 3) in view 0: ICP with one
-    degree of freedom, the turn about the axis, coarse to fine; ``None`` with too few pairs."""
+    view's plant points in its camera frame, on ``target_m`` (M, 3) in view 0: the best of a
+    search over +-``MAX_REFINEMENT_DEG``, then ICP with one degree of freedom (the turn about
+    the axis), coarse to fine; ``None`` with too few points or pairs."""
     if len(source_m) < ICP_MIN_PAIRS or len(target_m) < ICP_MIN_PAIRS:
         return None
     tree = cKDTree(target_m)
-    delta = 0.0
+
+    def cost(delta: float) -> float:
+        moved = transform_points(axis.T_view0_view(turn_deg + delta), source_m)
+        distance, _ = tree.query(moved, distance_upper_bound=ICP_DISTANCES_M[0])
+        return float(np.mean(np.minimum(distance, ICP_DISTANCES_M[0])))
+
+    candidates = np.arange(-MAX_REFINEMENT_DEG, MAX_REFINEMENT_DEG + 1e-9, SEARCH_STEP_DEG)
+    delta = float(candidates[np.argmin([cost(c) for c in candidates])])
     for max_distance in ICP_DISTANCES_M:
         for _ in range(ICP_ITERATIONS):
             moved = transform_points(axis.T_view0_view(turn_deg + delta), source_m)
