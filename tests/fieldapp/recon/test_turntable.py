@@ -19,7 +19,7 @@ from fieldapp.io.session import load_session
 from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.result import Reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
-from fieldapp.recon.turntable import table_axis
+from fieldapp.recon.turntable_axis import table_axis
 
 pytestmark = pytest.mark.slow  # a few small simulated sessions (8 views, one station)
 
