@@ -14,12 +14,13 @@ import pytest
 from devices.geometry import transform_points
 from devices.sim.turntable_scene import TurntableRig
 from fieldapp.cli._simulate_turntable import write_turntable_session
+from fieldapp.errors import FormatError
 from fieldapp.io.calibration import T_view0_view
 from fieldapp.io.session import load_session
 from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.result import Reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
-from fieldapp.recon.turntable_axis import table_axis
+from fieldapp.recon.turntable_axis import place_views, table_axis
 
 pytestmark = pytest.mark.slow  # a few small simulated sessions (8 views, one station)
 
@@ -117,3 +118,40 @@ def test_without_the_turntable_field_the_room_is_smeared_into_the_plant(
     (true,) = sessions[1].truth["plants"]
     widths = [p.traits.width_m * 100 for p in result.plants]
     assert len(result.plants) > 1 and max(widths) > 2 * true["width_cm"]
+
+
+def test_commanded_angles_place_the_views_when_not_refined() -> None:
+    rig = TurntableRig()
+    axis = table_axis(rig.T_view_next(), rig.view_step_deg)
+    angles = [10.0, 40.0, 70.5, 100.0]  # a 30-degree table, homed at 10 degrees
+    turns, report = place_views(angles, [np.zeros((0, 3))] * 4, axis, [0, 1, 2, 3], False, [])
+    assert turns == [0.0, 30.0, 60.5, 90.0]
+    assert report["refined_by_icp"] is False
+
+
+@pytest.mark.timeout(600)
+def test_a_calibrated_view_step_is_used_as_it_is(
+    sessions: dict[int, Turned], tmp_path: Path
+) -> None:
+    """A view step calibrated on a board (not ``nominal``) is not refined by ICP."""
+    folder = tmp_path / "calibrated"
+    shutil.copytree(sessions[0].folder, folder)
+    calibration = json.loads((folder / "calibration.json").read_text())
+    del calibration["view_step"]["nominal"]
+    (folder / "calibration.json").write_text(json.dumps(calibration))
+    result = run_reconstruction(load_session(folder), ReconstructionSettings())
+    report = result.report()["turntable"]
+    assert report["refined_by_icp"] is False
+    assert report["view_turns_deg"] == [45.0 * k for k in range(8)]
+    assert len(result.plants) == 1
+
+
+def test_a_bad_turntable_field_is_named(sessions: dict[int, Turned], tmp_path: Path) -> None:
+    folder = tmp_path / "bad"
+    shutil.copytree(sessions[0].folder, folder)
+    document = json.loads((folder / "session.json").read_text())
+    document["turntable"] = {"carries": "robot"}
+    (folder / "session.json").write_text(json.dumps(document))
+    with pytest.raises(FormatError) as error:
+        load_session(folder)
+    assert "session.json" in str(error.value) and "turntable.carries" in str(error.value)
