@@ -58,5 +58,8 @@ def run(args: argparse.Namespace) -> int:
     )
     for warning in result.warnings:
         print(f"warning: {warning}", file=sys.stderr)
+    for line in result.separation_lines():
+        if "by geometry" in line:
+            print(line)
     print(f"{len(result.plants)} plants -> {args.out / 'plants.csv'}")
     return 0

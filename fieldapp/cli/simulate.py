@@ -27,7 +27,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-SCENES = ("plot", "spheres", "checkerboard")
+SCENES = ("plot", "spheres", "checkerboard", "turntable")
 
 
 def register(subparsers: Any) -> None:
@@ -38,12 +38,22 @@ def register(subparsers: Any) -> None:
         "soil) and write a capture session, its nominal calibration and truth.json.",
     )
     parser.add_argument("--out", required=True, type=Path, help="the new session folder")
-    parser.add_argument("--scene", default="plot", help="plot (default), spheres or checkerboard")
+    parser.add_argument(
+        "--scene",
+        default="plot",
+        help="plot (default), spheres, checkerboard or turntable (a plant turning on a table "
+        "before a fixed camera, in a room; one station)",
+    )
     parser.add_argument("--seed", default="0", help="world seed (same seed, same plants)")
     parser.add_argument("--day", default="0", help="days since the first scan (plants grow)")
     parser.add_argument("--stations", default="1-9", help="stations to visit, e.g. 4,5 or 1-9")
     parser.add_argument("--views", default="0-7", help="views per station, e.g. 0,1 or 0-7")
     parser.add_argument("--plants", action="store_true", help="spheres scene: add the plants")
+    parser.add_argument(
+        "--depth-only",
+        action="store_true",
+        help="write depth-only captures (no colour image), as a sensor without colour records",
+    )
     parser.add_argument(
         "--intrinsics-images", default="20", help="checkerboard scene: IR board images (0-100)"
     )
@@ -86,10 +96,15 @@ def run(args: argparse.Namespace) -> int:
     shots = parse_int("intrinsics-images", args.intrinsics_images, 0, 100)
     if args.out.exists() and not args.out.is_dir():
         raise FieldappError(f"--out: {args.out} exists and is not a folder")
-    world = build_world(args.scene, seed, day, rig, args.plants)
-    about = {"scene": args.scene, "seed": seed, "day": day}
     try:
-        count = write_session(args.out, world, stations, views, seed, about)
+        if args.scene == "turntable":
+            count = _write_turntable(args.out, seed, day, views, args.depth_only)
+        else:
+            world = build_world(args.scene, seed, day, rig, args.plants)
+            about = {"scene": args.scene, "seed": seed, "day": day}
+            if args.depth_only:
+                about["depth_only"] = True
+            count = write_session(args.out, world, stations, views, seed, about)
         if args.scene == "checkerboard" and shots:
             write_intrinsics_images(args.out, seed, shots)
     except OSError as error:
@@ -98,6 +113,12 @@ def run(args: argparse.Namespace) -> int:
         ) from None
     print(f"{args.out}: {count} captures of the {args.scene} scene (truth in truth.json)")
     return 0
+
+
+def _write_turntable(out: Path, seed: int, day: int, views: list[int], depth_only: bool) -> int:
+    from fieldapp.cli._simulate_turntable import write_turntable_session
+
+    return write_turntable_session(out, seed, day, views, depth_only)
 
 
 def build_world(scene_name: str, seed: int, day: int, rig: RigGeometry, plants: bool) -> SimWorld:
@@ -146,7 +167,9 @@ def write_session(
     with ThreadPoolExecutor(max_workers=1) as saver:  # encode and write while rendering the next
         pending: deque[Future[Any]] = deque()
         for capture in survey(world, stations, views, seed, tag_boards=tag_boards):
-            pending.append(saver.submit(save_capture, writer, capture))
+            pending.append(
+                saver.submit(save_capture, writer, capture, bool(about.get("depth_only")))
+            )
             truths.append(capture.truth())
             while len(pending) > 2:
                 pending.popleft().result()
@@ -157,8 +180,9 @@ def write_session(
     return len(truths)
 
 
-def save_capture(writer: SessionWriter, capture: SimCapture) -> None:
-    """Write one simulated capture as the devices would have reported it."""
+def save_capture(writer: SessionWriter, capture: SimCapture, depth_only: bool = False) -> None:
+    """Write one simulated capture as the devices would have reported it (without its colour
+    image when ``depth_only``)."""
     from fieldapp.io.session import BasePose
 
     pose = capture.reported_pose
@@ -166,7 +190,7 @@ def save_capture(writer: SessionWriter, capture: SimCapture) -> None:
         capture.station,
         capture.view,
         capture.frame.depth_m,
-        capture.frame.color,
+        None if depth_only else capture.frame.color,
         ir=capture.frame.ir,
         angle_deg=capture.reported_angle_deg,
         base_pose=BasePose(x=pose.x_m, y=pose.y_m, yaw_deg=pose.yaw_deg),

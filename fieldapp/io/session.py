@@ -69,6 +69,16 @@ class Capture(SpecModel):
         return self.station, self.view, target if isinstance(target, str) else None
 
 
+class Turntable(SpecModel):
+    """What the turntable carries (this project's field addition to the spec): ``camera``
+    (the rig of the paper: the camera turns, the scene stands still) or ``plant`` (a lab rig:
+    the camera is fixed and the plant turns on the table). ``working_radius_m``: how far from
+    the table's axis the plant may reach; everything farther is the room and is masked."""
+
+    carries: Literal["camera", "plant"] = "camera"
+    working_radius_m: FiniteFloat | None = Field(default=None, gt=0)
+
+
 class SessionDocument(SpecModel):
     """The ``session.json`` document."""
 
@@ -77,6 +87,7 @@ class SessionDocument(SpecModel):
     created: datetime | None = None
     calibration: RelativePath
     captures: list[Capture]
+    turntable: Turntable | None = None
 
 
 @dataclass

@@ -13,10 +13,62 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.geometry_split import LOW_M as LOCAL_SOIL_M
+from fieldapp.recon.geometry_split import plants_above_local_ground
 from fieldapp.recon.settings import FilterSettings
 
 OTSU_BINS = 256
 VALLEY_SMOOTHING_BINS = 5
+MIN_GREEN_CONTRAST = 0.1
+"""Least difference of the mean ExG of Otsu's two classes for colour to separate plants: green
+leaves on soil differ by 0.3-0.5, a grey or constant image by less than 0.05."""
+
+NO_COLOUR = "no colour"
+NO_GREEN_CONTRAST = "colour has no green contrast"
+
+
+@dataclass(frozen=True)
+class Separation:
+    """How a station's plants are told from the soil: ``"colour"`` (excess green) or
+    ``"geometry"`` (height above the local ground, connectivity), and why geometry."""
+
+    method: str
+    reason: str = ""
+
+    @property
+    def by_geometry(self) -> bool:
+        return self.method == "geometry"
+
+    def describe(self) -> str:
+        """One line for the report and the CLI."""
+        if self.by_geometry:
+            return f"plants separated by geometry: {self.reason}"
+        return "plants separated by colour (excess green)"
+
+
+BY_COLOUR = Separation("colour")
+
+
+def green_contrast(exg: NDArray[np.float64]) -> float:
+    """The difference of the mean ExG (N,) of the classes either side of Otsu's threshold; 0
+    for a constant image."""
+    if len(exg) == 0:
+        return 0.0
+    threshold = otsu_threshold(exg)
+    high, low = exg[exg > threshold], exg[exg <= threshold]
+    if len(high) == 0 or len(low) == 0:
+        return 0.0
+    return float(high.mean() - low.mean())
+
+
+def choose_separation(exg: NDArray[np.float64] | None) -> Separation:
+    """Colour when every capture has a colour image (``exg`` (N,): the ExG of the measured
+    pixels) with green contrast, else geometry, saying why."""
+    if exg is None:
+        return Separation("geometry", NO_COLOUR)
+    if green_contrast(exg) < MIN_GREEN_CONTRAST:
+        return Separation("geometry", NO_GREEN_CONTRAST)
+    return BY_COLOUR
 
 
 def pass_through(height_m: NDArray[np.float64], min_m: float, max_m: float) -> NDArray[np.bool_]:
@@ -149,14 +201,29 @@ def filter_station(
     settings: FilterSettings,
     soil_band_m: float,
     soil_voxel_m: float,
+    by_geometry: bool = False,
 ) -> FilteredStation:
     """Pass-through on a levelled station's green points (z is the height above the ground),
-    then voxel means; the soil points near the ground are kept as a sparse sample."""
-    kept = {"excess_green": len(green_field)}
-    above = pass_through(
-        green_field.points[:, 2], settings.pass_through_min_m, settings.pass_through_max_m
-    )
-    plants = green_field.select(above)
+    then voxel means; the soil points near the ground are kept as a sparse sample.
+
+    ``by_geometry``: ``green_field`` holds every point (no colour to tell plants by); the
+    plants are the points standing clear of the local ground (see
+    :func:`~fieldapp.recon.geometry_split.plants_above_local_ground`) and the soil sample the
+    points that do not.
+    """
+    if by_geometry:
+        is_plant, height_m, soil_height_m = plants_above_local_ground(
+            green_field.points, soil_field.points, soil_band_m
+        )
+        kept = {"geometry": int(is_plant.sum())}
+        plants = green_field.select(is_plant & (height_m <= settings.pass_through_max_m))
+        soil_field = soil_field.select(soil_height_m < LOCAL_SOIL_M)
+    else:
+        kept = {"excess_green": len(green_field)}
+        above = pass_through(
+            green_field.points[:, 2], settings.pass_through_min_m, settings.pass_through_max_m
+        )
+        plants = green_field.select(above)
     kept["pass_through"] = len(plants)
     plants = voxel_mean(plants, settings.voxel_size_m)
     kept["voxel_mean"] = len(plants)

@@ -26,6 +26,7 @@ from fieldapp.recon.register import StationRegistration, register_stations
 from fieldapp.recon.result import Reconstruction
 from fieldapp.recon.scans import StationScan, read_stations, turntable_axis_point
 from fieldapp.recon.settings import ReconstructionSettings
+from fieldapp.recon.turntable import carries_plant, read_turntable
 
 log = logging.getLogger(__name__)
 
@@ -49,24 +50,35 @@ def reconstruct(
 
     # 1-2. Depth to points, every view of a station into its view 0 (Eq. 9).
     scans: dict[int, StationScan] = {}
-    for index, count, scan in _timed_iter(
-        timer, "local reconstruction", read_stations(session, settings, warnings)
-    ):
-        if scan is not None and scan.station not in to_reference:
-            warnings.append(f"station {scan.station} has no to_reference calibration: skipped")
-        elif scan is not None:
-            scans[scan.station] = scan
-        yield progress(
-            "local reconstruction", (index + 1) / count, f"station {index + 1} of {count}"
-        )
+    table = None
+    if carries_plant(session):  # camera fixed, plant turning: the room masked
+        with timer.stage("local reconstruction"):
+            table = read_turntable(session, settings, warnings)
+        if table is not None:
+            scans[table.scan.station] = table.scan
+        yield progress("local reconstruction", 1.0, "turntable views joined")
+    else:
+        for index, count, scan in _timed_iter(
+            timer, "local reconstruction", read_stations(session, settings, warnings)
+        ):
+            if scan is not None and scan.station not in to_reference:
+                warnings.append(f"station {scan.station} has no to_reference calibration: skipped")
+            elif scan is not None:
+                scans[scan.station] = scan
+            yield progress(
+                "local reconstruction", (index + 1) / count, f"station {index + 1} of {count}"
+            )
     if not scans:
         raise NothingUsable(f"{session.folder}: no capture could be read")
     reference = _reference_station(calibration.stations.reference, scans, to_reference, warnings)
 
     # 3. Levelling: coarse placement by the pre-calibration, each station on its own ground.
     with timer.stage("levelling"):
-        T_field_ref = T_field_reference_initial(calibration, scans[reference], settings.ground)
-        T_field_coarse = {s: T_field_ref @ to_reference[s] for s in scans}
+        if table is not None:
+            T_field_coarse = {reference: table.T_field_view0}
+        else:
+            T_field_ref = T_field_reference_initial(calibration, scans[reference], settings.ground)
+            T_field_coarse = {s: T_field_ref @ to_reference[s] for s in scans}
         T_field_levelled = level_stations(scans, T_field_coarse, settings.ground, warnings)
     yield progress("levelling", 1.0, "stations levelled")
 
@@ -80,9 +92,13 @@ def reconstruct(
                 settings.filters,
                 settings.ground.soil_band_m,
                 settings.ground.soil_voxel_m,
+                scan.separation.by_geometry,
             )
         yield progress("filtering", (i + 1) / len(scans), f"station {station} filtered")
-    exg_thresholds = {s: scan.exg_threshold for s, scan in scans.items()}
+    separation = {s: scan.separation.describe() for s, scan in scans.items()}
+    exg_thresholds = {
+        s: scan.exg_threshold for s, scan in scans.items() if not scan.separation.by_geometry
+    }
     measured_pixels = sum(scan.measured_pixels for scan in scans.values())
     scans.clear()  # the station clouds are no longer needed
 
@@ -137,6 +153,8 @@ def reconstruct(
         timings_s=dict(timer.seconds),
         cpu_s=dict(timer.cpu_seconds),
         warnings=warnings,
+        separation=separation,
+        turntable=table.report if table is not None else None,
     )
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from devices.geometry import Matrix4, invert, rotation_angle_deg
@@ -31,6 +31,20 @@ class Reconstruction:
     timings_s: dict[str, float]
     cpu_s: dict[str, float]
     warnings: list[str]
+    separation: dict[int, str] = field(default_factory=dict)
+    """Per station, how its plants were told from the soil (colour, or geometry and why)."""
+    turntable: dict[str, Any] | None = None
+    """A plant-on-turntable session: the working volume and how the views were placed."""
+
+    def separation_lines(self) -> list[str]:
+        """One line per way of separating plants used, with its stations."""
+        by_line: dict[str, list[int]] = {}
+        for station, line in sorted(self.separation.items()):
+            by_line.setdefault(line, []).append(station)
+        return [
+            f"{line} (station{'s' if len(s) > 1 else ''} {', '.join(map(str, s))})"
+            for line, s in by_line.items()
+        ]
 
     def rows(self) -> list[PlantRow]:
         """The lines of ``plants.csv``."""
@@ -59,11 +73,12 @@ class Reconstruction:
             "plants": len(self.plants),
             "stations": {str(s): _station_entry(r) for s, r in sorted(self.registrations.items())},
             "points_kept": self.kept,
+            "plant_separation": {str(s): line for s, line in sorted(self.separation.items())},
             "exg_thresholds": {str(s): round(t, 4) for s, t in sorted(self.exg_thresholds.items())},
             "timings_s": {name: round(t, 4) for name, t in self.timings_s.items()},
             "cpu_s": {name: round(t, 4) for name, t in self.cpu_s.items()},
             "warnings": self.warnings,
-        }
+        } | ({"turntable": self.turntable} if self.turntable is not None else {})
 
 
 def _station_entry(registration: StationRegistration) -> dict[str, Any]:

@@ -22,7 +22,14 @@ from fieldapp.errors import FieldappError, FormatError
 from fieldapp.io.session import Capture, CaptureImages, Session
 from fieldapp.recon.backproject import backproject, ray_table
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.filters import excess_green, otsu_threshold
+from fieldapp.recon.depth_only import read_scan_capture
+from fieldapp.recon.filters import (
+    BY_COLOUR,
+    Separation,
+    choose_separation,
+    excess_green,
+    otsu_threshold,
+)
 from fieldapp.recon.settings import ReconstructionSettings
 from fieldapp.recon.station import T_view0_view, station_cloud
 
@@ -32,7 +39,9 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class StationScan:
     """One station's views joined in its view-0 camera frame: the green points, a sparse grid
-    of the other points (soil, for the ground), and what the excess-green test kept."""
+    of the other points (soil, for the ground), and what the excess-green test kept. When the
+    plants are separated by geometry (``separation``), ``green`` holds every point and
+    ``soil`` the whole sparse grid."""
 
     station: int
     green: Cloud
@@ -40,6 +49,7 @@ class StationScan:
     views: list[int]
     exg_threshold: float
     measured_pixels: int
+    separation: Separation = BY_COLOUR
 
 
 def captures_by_station(session: Session) -> dict[int, list[Capture]]:
@@ -63,7 +73,7 @@ def _read_images(
     images = []
     for capture in captures:
         try:
-            images.append(session.read_capture(capture))
+            images.append(read_scan_capture(session, capture))
         except FormatError as error:
             warnings.append(f"station {station} view {capture.view} skipped: {error}")
     return images
@@ -93,9 +103,10 @@ def read_station(
         return None
     measured = [np.isfinite(i.depth_m) for i in images]
     exg = [excess_green(i.color.reshape(-1, 3)).reshape(i.depth_m.shape) for i in images]
-    threshold = _threshold(
-        np.concatenate([e[m] for e, m in zip(exg, measured, strict=True)]), settings
-    )
+    measured_exg = np.concatenate([e[m] for e, m in zip(exg, measured, strict=True)])
+    has_colour = all(i.capture.color is not None for i in images)
+    separation = choose_separation(measured_exg if has_colour else None)
+    threshold = _threshold(measured_exg, settings) if not separation.by_geometry else np.inf
     crop, grid = (
         settings.crop,
         _soil_grid(images[0].depth_m.shape, settings.ground.soil_pixel_stride),
@@ -103,13 +114,18 @@ def read_station(
     green: dict[int, Cloud] = {}
     soil: dict[int, Cloud] = {}
     for image, image_exg in zip(images, exg, strict=True):
-        is_green = image_exg > threshold
+        is_green = np.ones_like(grid) if separation.by_geometry else image_exg > threshold
         view = image.capture.view
         green[view] = backproject(
             image.depth_m, image.color, rays, crop.radius_m, crop.min_depth_m, is_green
         )
         soil[view] = backproject(
-            image.depth_m, image.color, rays, crop.radius_m, crop.min_depth_m, grid & ~is_green
+            image.depth_m,
+            image.color,
+            rays,
+            crop.radius_m,
+            crop.min_depth_m,
+            grid if separation.by_geometry else grid & ~is_green,
         )
     return StationScan(
         station,
@@ -118,6 +134,7 @@ def read_station(
         sorted(green),
         threshold,
         int(sum(int(m.sum()) for m in measured)),
+        separation,
     )
 
 

@@ -1,0 +1,41 @@
+"""Reading depth-only captures (no colour image: the spec allows it) for the reconstruction.
+
+The reconstruction's stages carry a colour per point; a depth-only capture gets a neutral grey
+(so ``cloud.ply`` is grey there), and the plants are told from the soil by geometry
+(:func:`fieldapp.recon.filters.choose_separation`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fieldapp.errors import FormatError, Problem
+from fieldapp.io.images import ImageError, depth_units_to_m, read_depth_units
+from fieldapp.io.session import Capture, CaptureImages, Session
+
+NEUTRAL_GREY = 128
+
+
+def read_scan_capture(session: Session, capture: Capture) -> CaptureImages:
+    """A capture's images; a depth-only capture's colour is a neutral grey image. Raises
+    :class:`FormatError` naming the bad file."""
+    if capture.color is not None:
+        return session.read_capture(capture)
+    camera = session.calibration.depth_camera
+    try:
+        units = read_depth_units(session.path_of(capture.depth))
+    except ImageError as error:
+        raise FormatError([error.problem]) from None
+    if units.shape != (camera.height, camera.width):
+        raise FormatError(
+            [
+                Problem(
+                    str(session.path_of(capture.depth)),
+                    "depth",
+                    f"size {units.shape[1]} x {units.shape[0]} differs from the calibration's "
+                    f"{camera.width} x {camera.height}",
+                )
+            ]
+        )
+    grey = np.full((*units.shape, 3), NEUTRAL_GREY, dtype=np.uint8)
+    return CaptureImages(capture, depth_units_to_m(units, camera.depth_scale), grey)
