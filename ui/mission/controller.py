@@ -24,11 +24,19 @@ if TYPE_CHECKING:
     from fieldapp.io.writer import SessionWriter
     from fieldapp.mission import MissionPlan, MissionRunner
     from fieldapp.rig import Rig
+    from fieldapp.settings import BatterySettings
     from ui.devices.hub import DeviceHub
 
 log = logging.getLogger(__name__)
 
 ACTIVE = (MissionState.RUNNING, MissionState.PAUSED, MissionState.STOPPING)
+STOPPED_IN_SETUP = (
+    "STOP was pressed while the mission was being set up; nothing was captured. "
+    "Press Start again when ready"
+)
+DISCONNECTED_IN_SETUP = (
+    "the devices were disconnected before the mission started; press Connect, then Start again"
+)
 
 
 def new_session(
@@ -78,7 +86,10 @@ class MissionController(QtCore.QObject):
         self.hub = hub
         self.runner: MissionRunner | None = None
         self.folder: Path | None = None
+        self.battery: BatterySettings | None = None
+        """The battery levels missions check (the settings' ``battery``)."""
         self._workers = WorkerSet()
+        self._stop_before_start = False
 
     @property
     def state(self) -> MissionState:
@@ -92,11 +103,13 @@ class MissionController(QtCore.QObject):
     def start(self, plan: MissionPlan, folder: Path) -> None:
         """Start a new session of ``plan`` in ``folder``."""
         if not self.busy:
+            self._stop_before_start = False
             self._workers.run(lambda: new_session(self.hub, plan, folder), self._run, self._fail)
 
     def resume_session(self, folder: Path) -> None:
         """Capture what an interrupted session in ``folder`` still misses."""
         if not self.busy:
+            self._stop_before_start = False
             self._workers.run(lambda: reopened_session(self.hub, folder), self._run, self._fail)
 
     def pause(self) -> None:
@@ -113,7 +126,10 @@ class MissionController(QtCore.QObject):
             self.runner.abort()
 
     def stop(self) -> None:
-        """End now: the runner holds the table and stops the base (returns at once)."""
+        """End now: the runner holds the table and stops the base (returns at once). During
+        the set-up the mission is not started at all."""
+        if self._workers.busy:
+            self._stop_before_start = True
         if self.runner is not None and self.state in ACTIVE:
             self.runner.stop()
 
@@ -130,15 +146,27 @@ class MissionController(QtCore.QObject):
         return result
 
     def _run(self, prepared: tuple[MissionPlan, SessionWriter]) -> None:
-        from fieldapp.mission import MissionRunner
+        from fieldapp.errors import FieldappError
 
         plan, writer = prepared
         rig, stream = self.hub.rig, self.hub.stream
-        if rig is None or stream is None:
-            self._fail(RuntimeError("the devices were disconnected before the mission started"))
+        if self._stop_before_start:
+            self._fail(FieldappError(STOPPED_IN_SETUP))
             return
-        mission_rig = dataclasses.replace(rig, camera=StreamCamera(stream))
-        runner = MissionRunner(plan, mission_rig, writer)
+        if rig is None or stream is None:
+            self._fail(FieldappError(DISCONNECTED_IN_SETUP))
+            return
+        try:
+            self._start_runner(plan, writer, dataclasses.replace(rig, camera=StreamCamera(stream)))
+        except Exception as error:  # the page must not stay busy: say why and stay usable
+            log.exception("the mission could not start")
+            self.runner = None
+            self._fail(error)
+
+    def _start_runner(self, plan: MissionPlan, writer: SessionWriter, mission_rig: Rig) -> None:
+        from fieldapp.mission import MissionRunner
+
+        runner = MissionRunner(plan, mission_rig, writer, self.battery)
         runner.state_changed.connect(self._on_state)
         runner.station_reached.connect(self._on_station)
         runner.view_captured.connect(self._on_view)
