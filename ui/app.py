@@ -95,11 +95,11 @@ def run_gui(settings_path: Path | None = None, connect: bool = True) -> int:
     for notice in notices:
         window.context.notifier.post(notice)
     window.show()
-    if connect:
-        window.context.hub.connect_devices(settings.devices)
     probe = os.environ.get(STARTUP_PROBE_ENV)
     if probe:
         QtCore.QTimer.singleShot(0, lambda: _window_shown(Path(probe), window))
+    elif connect:  # once the window is up: opening the rig loads the simulators (Open3D)
+        QtCore.QTimer.singleShot(0, lambda: window.context.hub.connect_devices(settings.devices))
     return int(app.exec())
 
 

@@ -48,7 +48,7 @@ def connected_page(
 
 
 def test_start_pause_stop_resume_to_the_end(
-    make_window: Callable[..., MainWindow], wait_until: Wait
+    make_window: Callable[..., MainWindow], wait_until: Wait, never_within: Wait
 ) -> None:
     window, page = connected_page(make_window, wait_until)
     rig = window.context.hub.rig
@@ -62,7 +62,7 @@ def test_start_pause_stop_resume_to_the_end(
     assert wait_until(lambda: page.controller.state is MissionState.PAUSED, 10.0)
     assert page.pause_button.text().endswith("Continue")
     held = page.progress.captured
-    assert not wait_until(lambda: page.progress.captured > held, 0.6)  # nothing while paused
+    assert never_within(lambda: page.progress.captured > held, 0.6)  # nothing while paused
     page.pause_button.click()
     assert wait_until(lambda: page.controller.state is MissionState.RUNNING, 5.0)
 

@@ -15,7 +15,7 @@ from fieldapp.mission import MissionSetup, MissionState, MissionWarning, Outcome
 from fieldapp.mission.folder import STATUS_FILE
 from fieldapp.settings import BatterySettings
 
-from .conftest import small_plan
+from .conftest import HANG_S, small_plan
 
 Opener = Callable[..., MissionSetup]
 LIMITS = BatterySettings(warn_pct=40.0, critical_pct=20.0)
@@ -35,7 +35,7 @@ def set_battery(setup: MissionSetup, level_pct: float) -> None:
 def test_a_mission_does_not_start_at_the_critical_level(open_mission: Opener) -> None:
     setup = open_mission(small_plan(stations=(5,), views=1))
     set_battery(setup, 19.0)
-    result = setup.runner(LIMITS).start().wait(30)
+    result = setup.runner(LIMITS).start().wait(HANG_S)
     assert result is not None and result.outcome is Outcome.FAILED and result.captured == 0
     assert result.fault is not None and result.fault.device == "battery"
     assert "19 %" in result.fault.what and "before the mission started" in result.fault.what
@@ -51,7 +51,7 @@ def test_a_low_battery_warns_once_per_station_and_the_mission_completes(
     runner = setup.runner(LIMITS)
     warnings: list[MissionWarning] = []
     runner.warning.connect(warnings.append)
-    result = runner.start().wait(30)
+    result = runner.start().wait(HANG_S)
     assert result is not None and result.complete
     battery = [w for w in warnings if w.text.startswith("battery low")]
     assert len(battery) == 3  # before the start, then once at each of the two stations
@@ -68,7 +68,7 @@ def test_at_the_critical_level_the_current_view_is_saved_then_the_mission_stops(
     runner.view_captured.connect(
         lambda e: set_battery(setup, 12.0) if (e.station, e.view) == (5, after_view) else None
     )
-    result = runner.start().wait(30)
+    result = runner.start().wait(HANG_S)
     assert result is not None and result.outcome is Outcome.FAILED
     assert runner.state is MissionState.FAILED
     assert result.captured == after_view + 1

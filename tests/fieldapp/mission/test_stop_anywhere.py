@@ -36,12 +36,10 @@ from fieldapp.mission.folder import STATUS_FILE, missing_keys, start_session
 from fieldapp.mission.plan import MissionPlan
 from fieldapp.verify import verify_session
 
-from .conftest import small_plan
+from .conftest import HANG_S, small_plan
 
 TRIALS_PER_SEED = 50
 SEEDS = (0, 1, 2, 3)
-HANG_S = 30.0
-"""Only a hang detector: a trial that has not ended by then has failed (no timing asserted)."""
 TAPPED = {
     "base": ("goto", "follow_goal", "status", "reset"),
     "table": ("goto_deg", "status", "resume"),

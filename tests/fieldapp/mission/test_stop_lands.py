@@ -15,11 +15,9 @@ from devices.camera import CameraInfo, DepthCamera, Frame, Intrinsics
 from fieldapp.mission import MissionRunner, MissionSetup, MissionState, Outcome
 from fieldapp.mission.folder import STATUS_FILE
 
-from .conftest import small_plan
+from .conftest import HANG_S, small_plan
 
 Opener = Callable[..., MissionSetup]
-HANG_S = 30.0
-"""Only a hang detector."""
 
 
 class SteppingClock:
