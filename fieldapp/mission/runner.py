@@ -151,6 +151,15 @@ class MissionRunner:
         self._done.wait(timeout_s)
         return self.result
 
+    def join(self, timeout_s: float | None = None) -> bool:
+        """Wait for the mission's thread itself (after a forced end it may still be inside a
+        device call); True once it has returned (or never started)."""
+        with self._lock:
+            thread = self._thread
+        if thread is not None:
+            thread.join(timeout_s)
+        return thread is None or not thread.is_alive()
+
     # --- the mission's thread ---------------------------------------------------------------
 
     def _run(self) -> None:

@@ -30,6 +30,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 ACTIVE = (MissionState.RUNNING, MissionState.PAUSED, MissionState.STOPPING)
+LATE_THREAD_WAIT_S = 10.0
 STOPPED_IN_SETUP = (
     "STOP was pressed while the mission was being set up; nothing was captured. "
     "Press Start again when ready"
@@ -50,11 +51,18 @@ def new_session(
     return plan, start_session(folder, plan, calibration_in_force(plan, rig.world))
 
 
-def reopened_session(hub: DeviceHub, folder: Path) -> tuple[MissionPlan, SessionWriter]:
-    """The plan and session of an interrupted mission in ``folder`` (worker thread)."""
+def reopened_session(
+    hub: DeviceHub, folder: Path, previous: MissionRunner | None = None
+) -> tuple[MissionPlan, SessionWriter]:
+    """The plan and session of an interrupted mission in ``folder`` (worker thread). A
+    previous mission whose STOP ended it before its thread returned (a device call under way)
+    is given ``LATE_THREAD_WAIT_S`` to return first, so two writers never list the same
+    session at once."""
     from fieldapp.mission.calibration import calibration_in_force
     from fieldapp.mission.folder import read_plan, reopen_session
 
+    if previous is not None and not previous.join(LATE_THREAD_WAIT_S):
+        log.warning("the previous mission's thread is still in a device call; resuming anyway")
     rig = _rig(hub)
     plan = read_plan(folder)
     return plan, reopen_session(folder, lambda: calibration_in_force(plan, rig.world))
@@ -110,7 +118,10 @@ class MissionController(QtCore.QObject):
         """Capture what an interrupted session in ``folder`` still misses."""
         if not self.busy:
             self._stop_before_start = False
-            self._workers.run(lambda: reopened_session(self.hub, folder), self._run, self._fail)
+            previous = self.runner
+            self._workers.run(
+                lambda: reopened_session(self.hub, folder, previous), self._run, self._fail
+            )
 
     def pause(self) -> None:
         if self.runner is not None:

@@ -92,10 +92,9 @@ def test_stop_ends_the_mission_within_its_budget_even_when_a_device_call_hangs(
     assert setup.rig.sim_base is not None and setup.rig.sim_base.latched
     assert "still under way" in result.message
 
+    assert not runner.join(0.0)  # still inside the camera call: a resume waits for it
     camera.release.set()  # the hung call returns: the late thread refreshes the status only
-    assert runner._thread is not None
-    runner._thread.join(HANG_S)
-    assert not runner._thread.is_alive()
+    assert runner.join(HANG_S)
     assert len(results) == 1 and runner.state is MissionState.FINISHED
     late = status(setup)
     assert late["state"] == "finished" and late["outcome"] == "stopped"
