@@ -4,9 +4,11 @@ one must end stopped (or complete, when the STOP came after the last write) and 
 runner in a terminal state, ``mission-status.json`` saying the same, the base and the table at
 rest, the session folder verifying, and what the status lists as missing what the session misses.
 
-The moments are chosen by call, not by time: the k-th call the mission makes to a device or to
-the session writer (k drawn from the seeded generator) triggers the STOP before the call, from
-another thread while the call runs, or turns into a pause (then STOP while paused, or resume
+The moments are chosen by call, not by time: the k-th call the mission makes to a device, to
+the session writer or to the settle wait (k drawn from the seeded generator) triggers the STOP
+before the call, from another thread while the call runs (a STOP during the settle wait wakes
+the mission's thread while the stop helper starts: the race that used to leave the mission
+joining an unstarted helper), or turns into a pause (then STOP while paused, or resume
 and STOP at once). Some trials make the camera time out so the STOP lands at a retry. The rig
 (simulated base over ZeroMQ, simulated Grbl table on a pty, both instant) stays open across
 trials like the GUI's; the camera returns one pre-rendered frame, so a trial costs little more
@@ -131,6 +133,12 @@ class Trial:
         self.writer = writer
         self.runner = MissionRunner(plan, self.tapped_rig, Tap(writer, "writer",  # type: ignore[arg-type]
                                     TAPPED["writer"], self.hook))  # fmt: skip
+        sleep = self.runner.gate.sleep  # the settle wait: a STOP wakes the sleeping thread
+
+        def tapped_sleep(seconds: float) -> None:
+            self.hook("gate.sleep", lambda: sleep(seconds))
+
+        self.runner.gate.sleep = tapped_sleep  # type: ignore[method-assign]
 
     def hook(self, label: str, call: Callable[[], Any]) -> Any:
         self.calls += 1
@@ -174,13 +182,13 @@ def shared_rig(
 
 
 def moments(seed: int, count: int) -> list[Moment]:
-    """``count`` seeded moments over a 2-station, 2-view mission (about 30 tapped calls)."""
+    """``count`` seeded moments over a 2-station, 2-view mission (about 35 tapped calls)."""
     rng = np.random.default_rng(seed)
     result = []
     for _ in range(count):
         how = str(rng.choice(["before", "during", "during", "pause", "resume"]))
         timeout = int(rng.integers(1, 5)) if rng.random() < 0.25 else None
-        result.append(Moment(int(rng.integers(1, 34)), how, timeout))
+        result.append(Moment(int(rng.integers(1, 38)), how, timeout))
     return result
 
 
@@ -191,6 +199,8 @@ def check_consistent(trial: Trial, folder: Path, rig: MissionSetup) -> str:
     assert result is not None, f"{trial.moment}: no end ({runner.state}, calls {trial.labels})"
     if trial.stop_thread is not None:
         trial.stop_thread.join(HANG_S)
+    if runner._stopper is not None:  # a STOP after the end still halts the devices: let it
+        runner._stopper.join(HANG_S)  # finish before the next trial uses them
     assert runner.state is MissionState.FINISHED, (trial.moment, result)
     missing = missing_keys(runner.plan, trial.writer)
     if result.outcome is Outcome.COMPLETE:
@@ -223,7 +233,7 @@ def check_consistent(trial: Trial, folder: Path, rig: MissionSetup) -> str:
 def test_stop_at_random_moments_always_lands_stopped_and_consistent(
     seed: int, shared_rig: MissionSetup, tmp_path: Path
 ) -> None:
-    plan = small_plan(stations=(5, 4), views=2)
+    plan = small_plan(stations=(5, 4), views=2, settle_s=0.02)
     outcomes: dict[str, int] = {}
     hows: set[str] = set()
     stopped_labels: set[str] = set()
@@ -239,5 +249,6 @@ def test_stop_at_random_moments_always_lands_stopped_and_consistent(
     assert outcomes.get("stopped", 0) >= TRIALS_PER_SEED // 2, outcomes
     assert hows == {"before", "during", "pause", "resume"}
     # the STOPs fell on every kind of step: driving, turning, capturing, saving
-    for label in ("base.follow_goal", "table.goto_deg", "camera.capture", "writer.add_capture"):
+    steps = ("base.follow_goal", "table.goto_deg", "gate.sleep", "camera.capture")
+    for label in (*steps, "writer.add_capture"):
         assert label in stopped_labels, stopped_labels
