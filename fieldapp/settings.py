@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import platformdirs
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from fieldapp.io.jsonfile import field_path
 from fieldapp.recon.settings import ReconstructionSettings
@@ -71,8 +71,29 @@ class CameraQualitySettings(Section):
         return QualityThresholds(**self.model_dump())
 
 
+class BatterySettings(Section):
+    """The base's battery levels a mission checks before it starts and at every station.
+
+    At or below ``warn_pct`` the operator is warned (once per station); at or below
+    ``critical_pct`` a mission does not start, and a running one finishes the current view,
+    saves it and stops."""
+
+    warn_pct: float = Field(default=30.0, ge=0, le=100)
+    critical_pct: float = Field(default=15.0, ge=0, le=100)
+
+    @model_validator(mode="after")
+    def _critical_below_warning(self) -> BatterySettings:
+        if self.critical_pct > self.warn_pct:
+            raise ValueError(
+                f"critical_pct ({self.critical_pct:g}) must not be above warn_pct "
+                f"({self.warn_pct:g})"
+            )
+        return self
+
+
 class Settings(Section):
     devices: DeviceSettings = Field(default_factory=DeviceSettings)
+    battery: BatterySettings = Field(default_factory=BatterySettings)
     paths: PathSettings = Field(default_factory=PathSettings)
     reconstruction: ReconstructionSettings = Field(default_factory=ReconstructionSettings)
     camera_quality: CameraQualitySettings = Field(default_factory=CameraQualitySettings)

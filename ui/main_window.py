@@ -14,6 +14,7 @@ from ui.devices.hub import DeviceState, DeviceStatus
 from ui.notifications import NotificationPanel, notice_from_error
 from ui.pages import PageSpec
 from ui.status import SimulatedBadge, StatusBar
+from ui.stop_everywhere import StopEverywhere
 
 log = logging.getLogger(__name__)
 
@@ -78,7 +79,8 @@ class MainWindow(QtWidgets.QMainWindow):
         row.addWidget(self.sidebar)
         row.addWidget(body, 1)
         self.setCentralWidget(central)
-        self.status = StatusBar(self.context.settings.paths.sessions_dir)
+        settings = self.context.settings
+        self.status = StatusBar(settings.paths.sessions_dir, settings.battery)
         self.setStatusBar(self.status)
 
     def _header(self) -> QtWidgets.QWidget:
@@ -118,9 +120,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.connect_button.clicked.connect(self.toggle_connection)
         self.devices_button.clicked.connect(self.open_devices_dialog)
         self.stop_button.clicked.connect(self.emergency_stop)
-        self.stop_shortcut = QtGui.QShortcut(QtGui.QKeySequence(QtCore.Qt.Key.Key_Escape), self)
-        self.stop_shortcut.setContext(QtCore.Qt.ShortcutContext.ApplicationShortcut)
-        self.stop_shortcut.activated.connect(self.emergency_stop)
+        # Esc and STOP from every window, dialogs and wizards included (ui/stop_everywhere.py)
+        self.stop_everywhere = StopEverywhere(self, self.stop_button, self.emergency_stop)
         finished = getattr(self.pages.get("mission"), "session_finished", None)
         if finished is not None:
             finished.connect(self._session_finished)

@@ -93,6 +93,12 @@ class Notifier(QtCore.QObject):
         self.history: list[Notice] = []
 
     def post(self, notice: Notice) -> None:
+        """Show ``notice``; any command-line instruction in it is put in the GUI's words."""
+        from dataclasses import replace
+
+        from ui.wording import gui_text
+
+        notice = replace(notice, message=gui_text(notice.message), advice=gui_text(notice.advice))
         self.history.append(notice)
         logger = log.error if notice.level is Level.ERROR else log.info
         logger("%s: %s %s", notice.title, notice.message, notice.advice)

@@ -8,10 +8,10 @@ from pathlib import Path
 
 from PySide6 import QtCore, QtWidgets
 
+from fieldapp.settings import BatterySettings
 from ui.devices.hub import DEVICES, DeviceState, DeviceStatus
 
 LOW_DISK_GB = 5.0
-LOW_BATTERY_PCT = 25.0
 
 _COLOURS = {
     DeviceState.DISCONNECTED: "#8a8a8a",
@@ -76,9 +76,15 @@ class SimulatedBadge(QtWidgets.QLabel):
 class StatusBar(QtWidgets.QStatusBar):
     """Device states on the left, battery and disk on the right."""
 
-    def __init__(self, disk_path: Path, parent: QtWidgets.QWidget | None = None) -> None:
+    def __init__(
+        self,
+        disk_path: Path,
+        battery: BatterySettings | None = None,
+        parent: QtWidgets.QWidget | None = None,
+    ) -> None:
         super().__init__(parent)
         self.disk_path = disk_path
+        self.battery_levels = battery or BatterySettings()
         self.indicators = {name: DeviceIndicator(name) for name in DEVICES}
         for indicator in self.indicators.values():
             self.addWidget(indicator)
@@ -96,12 +102,23 @@ class StatusBar(QtWidgets.QStatusBar):
         self.indicators[status.name].show_status(status)
 
     def set_battery(self, percent: float | None) -> None:
+        """The base's level: orange at or below the warning level, red and bold at or below
+        the critical one (the settings' ``battery``), as the missions judge it."""
         if percent is None:
             self.battery.setText("Battery: -")
+            self.battery.setToolTip("")
             return
-        low = percent < LOW_BATTERY_PCT
-        colour = "#c62828" if low else "inherit"
-        self.battery.setText(f"<span style='color:{colour}'>Battery: {percent:.0f} %</span>")
+        levels = self.battery_levels
+        style = "color:inherit"
+        if percent <= levels.critical_pct:
+            style = "color:#c62828; font-weight:bold"
+        elif percent <= levels.warn_pct:
+            style = "color:#ef6c00"
+        self.battery.setText(f"<span style='{style}'>Battery: {percent:.0f} %</span>")
+        self.battery.setToolTip(
+            f"the base's battery; missions warn at {levels.warn_pct:.0f} % and stop at "
+            f"{levels.critical_pct:.0f} % (settings: battery)"
+        )
 
     @QtCore.Slot()
     def refresh_disk(self) -> None:

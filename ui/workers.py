@@ -27,16 +27,24 @@ class WorkerSet:
         on_error: Callable[[BaseException], None] | None = None,
     ) -> WorkerBase[Any]:
         """Call ``function()`` on a worker thread; ``on_done(result)`` or ``on_error(error)``
-        then runs on the GUI thread."""
+        then runs on the GUI thread, the worker already counted as finished (:attr:`busy`)."""
         worker: WorkerBase[Any] = create_worker(function, _ignore_errors=True)
-        if on_done is not None:
-            worker.returned.connect(on_done)
-        worker.errored.connect(on_error or _log_error)
         self._running.add(worker)
 
         def forget(*_: object) -> None:
             self._running.discard(worker)
 
+        def done(result: Any) -> None:
+            forget()  # the owner's callback sees itself idle: its buttons come back
+            if on_done is not None:
+                on_done(result)
+
+        def failed(error: BaseException) -> None:
+            forget()
+            (on_error or _log_error)(error)
+
+        worker.returned.connect(done)
+        worker.errored.connect(failed)
         worker.finished.connect(forget)
         worker.start()
         return worker

@@ -61,7 +61,7 @@ class SimulatedMotionBackend:
 
     def update(self) -> BackendSnapshot:
         now_s = self._clock()
-        self.model.step((now_s - self._last_s) * self.time_scale)
+        self.model.step((now_s - self._last_s) * self.time_scale, idle_speedup=self.time_scale)
         self._last_s = now_s
         model = self.model
         return BackendSnapshot(model.pose, model.progress, model.battery_pct, model.error)

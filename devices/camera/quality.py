@@ -17,7 +17,6 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -92,6 +91,8 @@ def crop_region(
     depth_m: NDArray[np.float32], intrinsics: Intrinsics, limits: QualityThresholds
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """(in range: valid pixels within the radius, region: those closed, holes filled)."""
+    import cv2  # here, not at the top: importing it costs the GUI's start-up
+
     with np.errstate(invalid="ignore"):
         near = np.asarray(range_m(depth_m, intrinsics) <= limits.crop_radius_m)
     mask = near.astype(np.uint8)

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -22,14 +21,17 @@ class ImageError(Exception):
         super().__init__(str(problem))
 
 
-def _decode(path: Path, field: str, flags: int) -> NDArray[Any]:
+def _decode(path: Path, field: str) -> NDArray[Any]:
+    """The image as stored (``IMREAD_UNCHANGED``)."""
+    import cv2  # here, not at the top: importing OpenCV costs the GUI's start-up
+
     try:
         data = path.read_bytes()
     except FileNotFoundError:
         raise ImageError(Problem(str(path), field, "file is missing")) from None
     except OSError as error:
         raise ImageError(Problem(str(path), field, f"cannot read: {error.strerror}")) from None
-    image = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
     if image is None:
         raise ImageError(Problem(str(path), field, "not a decodable image (truncated or corrupt?)"))
     return np.asarray(image)
@@ -37,7 +39,7 @@ def _decode(path: Path, field: str, flags: int) -> NDArray[Any]:
 
 def read_depth_units(path: Path, field: str = "depth") -> NDArray[np.uint16]:
     """Read a depth PNG as stored: (H, W) uint16 in 1/depth_scale metres, 0 = no measurement."""
-    image = _decode(path, field, cv2.IMREAD_UNCHANGED)
+    image = _decode(path, field)
     if image.ndim != 2:
         raise ImageError(
             Problem(
@@ -51,7 +53,9 @@ def read_depth_units(path: Path, field: str = "depth") -> NDArray[np.uint16]:
 
 def read_color(path: Path, field: str = "color") -> NDArray[np.uint8]:
     """Read a colour image (PNG or JPEG) as (H, W, 3) uint8 RGB."""
-    image = _decode(path, field, cv2.IMREAD_UNCHANGED)
+    import cv2
+
+    image = _decode(path, field)
     if image.dtype != np.uint8:
         raise ImageError(Problem(str(path), field, f"colour must be 8-bit, got {image.dtype}"))
     if image.ndim != 3 or image.shape[2] not in (3, 4):
@@ -62,7 +66,7 @@ def read_color(path: Path, field: str = "color") -> NDArray[np.uint8]:
 
 def read_ir(path: Path, field: str = "ir") -> NDArray[np.uint16]:
     """Read an IR PNG: (H, W) uint16."""
-    image = _decode(path, field, cv2.IMREAD_UNCHANGED)
+    image = _decode(path, field)
     if image.ndim != 2 or image.dtype != np.uint16:
         raise ImageError(Problem(str(path), field, "IR must be a single-channel 16-bit PNG"))
     return image
@@ -84,6 +88,8 @@ def depth_units_to_m(units: NDArray[np.uint16], depth_scale: float) -> NDArray[n
 
 def encode_png(image: NDArray[Any], rgb: bool = False) -> bytes:
     """PNG bytes of a (H, W) uint16/uint8 image, or of an (H, W, 3) RGB image when ``rgb``."""
+    import cv2
+
     if rgb:
         image = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2BGR)
     ok, buffer = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 1])

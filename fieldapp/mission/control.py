@@ -81,6 +81,12 @@ class Gate:
         if self.abort_requested:
             raise Aborted("the operator ended the mission")
 
+    def raise_if_stopped(self) -> None:
+        """Raise :class:`Aborted` once a stop was asked for (not on an abort: the current step
+        finishes)."""
+        if self.stop_requested:
+            raise Aborted("the operator stopped the mission")
+
     def sleep(self, seconds: float) -> None:
         """Wait ``seconds`` unless a stop comes first (then raise :class:`Aborted`)."""
         if self._stopped.wait(seconds):

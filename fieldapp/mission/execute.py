@@ -12,12 +12,13 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Generator, Iterator
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 from devices.base.protocol import Pose
 from devices.camera import Frame
 from fieldapp.io.session import BasePose
 from fieldapp.io.writer import SessionWriter
+from fieldapp.mission.battery import BatteryWatch, check_before_start
 from fieldapp.mission.control import Gate, MissionFault
 from fieldapp.mission.events import (
     Fault,
@@ -37,6 +38,7 @@ from fieldapp.mission.steps import (
     turn_to,
 )
 from fieldapp.rig import Rig
+from fieldapp.settings import BatterySettings
 
 log = logging.getLogger(__name__)
 
@@ -45,12 +47,14 @@ THUMBNAIL_STRIDE = 8
 
 @dataclass
 class MissionContext:
-    """What a mission runs with: the plan, the open rig, the session it writes, the controls."""
+    """What a mission runs with: the plan, the open rig, the session it writes, the controls,
+    the battery levels to check."""
 
     plan: MissionPlan
     rig: Rig
     writer: SessionWriter
     gate: Gate
+    battery: BatterySettings = field(default_factory=BatterySettings)
 
 
 def visits(plan: MissionPlan, todo: list[tuple[int, int]]) -> list[tuple[StationPlan, list[int]]]:
@@ -70,7 +74,13 @@ def run_mission(context: MissionContext, todo: list[tuple[int, int]]) -> Iterato
     """Capture ``todo``; yields every event. Raises :class:`MissionFault` or
     :class:`~fieldapp.mission.control.Aborted`."""
     plan, rig, gate = context.plan, context.rig, context.gate
-    for warning in (prepare_base(rig.base), prepare_table(rig.table)):
+    gate.checkpoint()  # a STOP before the start: the devices are not touched
+    battery = BatteryWatch(rig.base, context.battery)
+    for warning in (
+        check_before_start(rig.base, context.battery),
+        prepare_base(rig.base, gate),
+        prepare_table(rig.table, gate),
+    ):
         if warning is not None:
             yield warning
     clock = ProgressClock(len(plan.capture_keys()), len(plan.capture_keys()) - len(todo))
@@ -81,10 +91,17 @@ def run_mission(context: MissionContext, todo: list[tuple[int, int]]) -> Iterato
         pose = status.pose
         log.info("station %d reached at %s", station.number, pose)
         yield StationReached(station.number, pose.x_m, pose.y_m, pose.yaw_deg, attempts)
+        yield from _some(battery.check(station.number))
         for view in views:
             gate.checkpoint()
             yield (yield from capture_one(context, station.number, view, pose))
             yield clock.progress(f"station {station.number} view {view}", captured=True)
+            yield from _some(battery.check(station.number, view))
+
+
+def _some(warning: MissionWarning | None) -> Iterator[MissionWarning]:
+    if warning is not None:
+        yield warning
 
 
 def capture_one(

@@ -16,6 +16,7 @@ from fieldapp.mission.folder import missing_keys, read_plan, reopen_session, sta
 from fieldapp.mission.plan import MissionPlan
 from fieldapp.mission.runner import MissionRunner
 from fieldapp.rig import Rig, open_rig
+from fieldapp.settings import BatterySettings
 
 if TYPE_CHECKING:
     from devices.sim.world import SimWorld
@@ -38,8 +39,9 @@ class MissionSetup:
     def missing(self) -> list[tuple[int, int]]:
         return missing_keys(self.plan, self.writer)
 
-    def runner(self) -> MissionRunner:
-        return MissionRunner(self.plan, self.rig, self.writer)
+    def runner(self, battery: BatterySettings | None = None) -> MissionRunner:
+        """A runner for what the session misses; ``battery``: the levels it checks."""
+        return MissionRunner(self.plan, self.rig, self.writer, battery)
 
     def close(self) -> None:
         self.rig.close()

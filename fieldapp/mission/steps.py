@@ -76,14 +76,15 @@ def drive_to(
             raise _fault(gate, "base", f"station {station.number}: {problem}", advice)
         yield MissionWarning(f"station {station.number}: {problem}; trying again", station.number)
         gate.sleep(plan.retries.base_link_wait_s if "link" in problem else 0.0)
-        _ready_for_goal(base)
+        _ready_for_goal(base, gate)
     raise AssertionError("unreachable")  # pragma: no cover
 
 
-def _ready_for_goal(base: BaseClient) -> None:
+def _ready_for_goal(base: BaseClient, gate: Gate) -> None:
     """Before another goal: after a lost link the base is latched (stopped by its watchdog),
     so the latch is cleared; a goal of an earlier attempt still moving (its request arrived
-    after all) is cancelled."""
+    after all) is cancelled. A STOP that came meanwhile is never undone (see
+    :func:`_reset_unless_stopped`)."""
     try:
         status = base.status()
     except BaseOffline:
@@ -93,16 +94,26 @@ def _ready_for_goal(base: BaseClient) -> None:
         base.cancel(status.goal_id)
     elif status.state is BaseState.STOPPED and status.error == "link lost":
         log.info("base latched after a lost link: resetting before the next goal")
-        base.reset()
+        _reset_unless_stopped(base, gate)
 
 
-def prepare_base(base: BaseClient) -> MissionWarning | None:
+def _reset_unless_stopped(base: BaseClient, gate: Gate) -> None:
+    """Clear the base's stop latch, unless the operator stopped the mission: a STOP that came
+    between the check and the reset is applied again, so the base stays latched."""
+    gate.raise_if_stopped()
+    base.reset()
+    if gate.stop_requested:
+        base.stop()
+        gate.raise_if_stopped()
+
+
+def prepare_base(base: BaseClient, gate: Gate) -> MissionWarning | None:
     """Before a mission: the base answers; a stop latch left set is cleared (with a warning)."""
     try:
         status = base.status()
         if status.state is not BaseState.STOPPED:
             return None
-        base.reset()
+        _reset_unless_stopped(base, gate)
     except BaseOffline as error:
         advice = f"check the Wi-Fi link to the base and the base's bridge; {RESUME_ADVICE}"
         raise MissionFault(Fault("base", f"link lost: {error}", advice)) from error
@@ -121,6 +132,7 @@ def turn_to(
     """Turn the table to ``angle_deg``; returns the angle reached."""
     attempts = plan.retries.table + 1
     for attempt in range(1, attempts + 1):
+        gate.raise_if_stopped()  # a hold sent before the move would not stop it
         try:
             return table.goto_deg(angle_deg)
         except TableMissedTarget as error:
@@ -137,8 +149,9 @@ def turn_to(
     raise AssertionError("unreachable")  # pragma: no cover
 
 
-def prepare_table(table: GrblTable, timeout_s: float = 60.0) -> MissionWarning | None:
-    """Before a mission: no alarm, a known position; a held move is carried to its end."""
+def prepare_table(table: GrblTable, gate: Gate, timeout_s: float = 60.0) -> MissionWarning | None:
+    """Before a mission: no alarm, a known position; a held move is carried to its end (not
+    after a STOP: the table stays held)."""
     try:
         status = table.status()
         if status.state == "Alarm":
@@ -148,9 +161,13 @@ def prepare_table(table: GrblTable, timeout_s: float = 60.0) -> MissionWarning |
                                "home the table (`fieldapp table --port PORT home`)"))  # fmt: skip
         if status.state not in ("Hold", "Door"):
             return None
+        gate.raise_if_stopped()
         table.resume()
         deadline_s = time.monotonic() + timeout_s
         while table.status().state != "Idle":
+            if gate.stop_requested:
+                table.hold()  # the STOP's hold may have come before the resume
+                gate.raise_if_stopped()
             if time.monotonic() > deadline_s:
                 raise MissionFault(Fault("table", "a held move did not finish", "check the table"))
             time.sleep(0.05)
@@ -182,6 +199,7 @@ def capture_view(
     best: Shot | None = None
     station, view = where
     while True:
+        gate.raise_if_stopped()
         try:
             shot = _shoot(camera, plan, limits, timeouts + lows + 1)
         except CameraTimeout as error:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linear_sum_assignment
 
 
 def match_positions(
@@ -27,6 +26,8 @@ def match_positions(
     matches: list[int | None] = [None] * len(observed)
     if len(known) == 0 or len(observed) == 0:
         return matches
+    from scipy.optimize import linear_sum_assignment  # here: SciPy costs the GUI's start-up
+
     distance = np.linalg.norm(observed[:, None, :] - known[None, :, :], axis=2)
     # Pairs beyond the bound cost more than any set of admissible pairs: the assignment first
     # maximises the number of admissible pairs, then minimises their total distance.

@@ -18,6 +18,10 @@ from fieldapp.settings import Settings
 from .thread_guard import ThreadGuard
 
 LEAK_GRACE_S = 5.0
+HANG_S = 90.0
+"""The longest a wait for a state may take before the test fails: a hang detector, never a
+speed requirement (the suite passes on a saturated machine; a passing wait returns as soon as
+its state holds)."""
 
 
 def _python_threads() -> set[threading.Thread]:
@@ -85,8 +89,19 @@ def settings(tmp_path: Path) -> Settings:
     return settings
 
 
-def _wait_until(condition: Callable[[], bool], timeout_s: float = 20.0) -> bool:
-    """Process Qt events until ``condition()`` holds; False on timeout."""
+def _wait_until(condition: Callable[[], bool], timeout_s: float = HANG_S) -> bool:
+    """Process Qt events until ``condition()`` holds; False after ``HANG_S`` (a shorter
+    ``timeout_s`` is raised to it: a slow machine is not a failure)."""
+    return _process_events(condition, max(timeout_s, HANG_S))
+
+
+def _never_within(condition: Callable[[], bool], seconds: float) -> bool:
+    """Process Qt events for ``seconds``; True when ``condition()`` never held (checks that
+    something does NOT happen: a slow machine can only make it pass more easily)."""
+    return not _process_events(condition, seconds)
+
+
+def _process_events(condition: Callable[[], bool], timeout_s: float) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
@@ -101,8 +116,16 @@ WaitUntil = Callable[..., bool]
 
 @pytest.fixture
 def wait_until() -> WaitUntil:
-    """``wait_until(condition, timeout_s=20)``: process events until the condition holds."""
+    """``wait_until(condition)``: process events until the condition holds (hang limit
+    ``HANG_S``)."""
     return _wait_until
+
+
+@pytest.fixture
+def never_within() -> WaitUntil:
+    """``never_within(condition, seconds)``: process events for ``seconds``; True when the
+    condition never held."""
+    return _never_within
 
 
 @pytest.fixture

@@ -72,7 +72,11 @@ def make_preview(
 
 
 def test_frames_are_shown_with_rates_and_quality(
-    make_preview: Callable[[], LivePreview], stream: FrameStream, world: SimWorld, wait_until: Wait
+    make_preview: Callable[[], LivePreview],
+    stream: FrameStream,
+    world: SimWorld,
+    wait_until: Wait,
+    never_within: Wait,
 ) -> None:
     preview = make_preview()
     preview.attach(stream, world.intrinsics)
@@ -87,7 +91,7 @@ def test_frames_are_shown_with_rates_and_quality(
     assert all("✔" in value.text() for _, value in preview.quality_values)
     preview.freeze.setChecked(True)
     frozen = preview.frames_shown
-    assert not wait_until(lambda: preview.frames_shown > frozen, 0.4)
+    assert never_within(lambda: preview.frames_shown > frozen, 0.4)
     preview.freeze.setChecked(False)
     assert wait_until(lambda: preview.frames_shown > frozen, 2.0)
 
@@ -217,3 +221,50 @@ def test_depth_colour_indices_follow_the_fixed_levels() -> None:
     lut = depth_lut(np.full((255, 3), 200, np.uint8))
     assert lut.shape == (256, 4) and tuple(lut[0]) == (0, 0, 0, 255)
     assert (lut[1:, :3] == 200).all() and (lut[:, 3] == 255).all()
+
+
+def test_nothing_is_decoded_or_painted_while_the_preview_is_not_seen(
+    make_preview: Callable[[], LivePreview], stream: FrameStream, world: SimWorld, wait_until: Wait
+) -> None:
+    preview = make_preview()
+    preview.attach(stream, world.intrinsics)
+    assert wait_until(lambda: preview.frames_shown >= 2, 10.0)
+    assert preview.displaying and preview.monitor.running
+
+    preview.hide()  # another page shown
+    assert not preview.displaying and not preview.monitor.running
+    preview.show()
+    assert preview.displaying and preview.monitor.running
+    shown = preview.frames_shown
+    assert wait_until(lambda: preview.frames_shown > shown, 10.0)
+
+    preview.showMinimized()  # the window minimised: still "visible" to Qt, not to anyone
+    assert wait_until(lambda: not preview.displaying, 5.0)
+    assert not preview.monitor.running
+    preview.showNormal()
+    assert wait_until(lambda: preview.displaying, 5.0) and preview.monitor.running
+
+    preview.hide()
+    preview.attach(stream, world.intrinsics)  # a new rig while hidden: still nothing shown
+    assert not preview.displaying and not preview.monitor.running
+    preview.show()
+    assert preview.displaying
+
+
+def test_the_live_page_stops_when_another_page_is_shown(
+    make_window: Callable[..., object], wait_until: Wait
+) -> None:
+    from ui.main_window import MainWindow
+
+    window = make_window()
+    assert isinstance(window, MainWindow)
+    window.show_page("live")
+    live = window.pages["live"]
+    preview = live if isinstance(live, LivePreview) else live.findChild(LivePreview)
+    assert isinstance(preview, LivePreview)
+    window.toggle_connection()
+    assert wait_until(lambda: preview.frames_shown >= 1, 20.0)
+    window.show_page("mission")
+    assert not preview.displaying and not preview.monitor.running
+    window.show_page("live")
+    assert preview.displaying

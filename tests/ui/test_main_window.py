@@ -113,12 +113,12 @@ def test_window_remembers_page_and_folders(
 
 
 def test_notices_keep_the_newest_four(
-    make_window: Callable[..., MainWindow], wait_until: Callable[..., bool]
+    make_window: Callable[..., MainWindow], never_within: Callable[..., bool]
 ) -> None:
     window = make_window()
     for n in range(6):
         window.context.notifier.warn(f"warning {n}", "text", "advice")
-    wait_until(lambda: False, 0.1)
+    never_within(lambda: False, 0.1)  # let the panel lay the cards out
     titles = [c.notice.title for c in window.notices.cards()]
     assert sorted(titles) == ["warning 2", "warning 3", "warning 4", "warning 5"]
     assert len(window.context.notifier.history) == 6

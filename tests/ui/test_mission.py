@@ -48,7 +48,7 @@ def connected_page(
 
 
 def test_start_pause_stop_resume_to_the_end(
-    make_window: Callable[..., MainWindow], wait_until: Wait
+    make_window: Callable[..., MainWindow], wait_until: Wait, never_within: Wait
 ) -> None:
     window, page = connected_page(make_window, wait_until)
     rig = window.context.hub.rig
@@ -62,7 +62,7 @@ def test_start_pause_stop_resume_to_the_end(
     assert wait_until(lambda: page.controller.state is MissionState.PAUSED, 10.0)
     assert page.pause_button.text().endswith("Continue")
     held = page.progress.captured
-    assert not wait_until(lambda: page.progress.captured > held, 0.6)  # nothing while paused
+    assert never_within(lambda: page.progress.captured > held, 0.6)  # nothing while paused
     page.pause_button.click()
     assert wait_until(lambda: page.controller.state is MissionState.RUNNING, 5.0)
 
@@ -155,3 +155,92 @@ def test_plan_editor_validates_saves_and_loads(
     assert "bad.yaml" in editor.error.text() and "x_m" in editor.error.text()
     editor.load(path)
     assert editor.valid and editor.plan().name == "small" and editor.path == path
+
+
+def usable(page: MissionPage) -> bool:
+    """The operator can act: Start, Resume and the plan editor are enabled."""
+    return (
+        page.start_button.isEnabled()
+        and page.resume_button.isEnabled()
+        and page.editor.isEnabled()
+        and not page.controller.busy
+    )
+
+
+@pytest.mark.parametrize("kind", ["empty", "missing", "broken plan"])
+def test_a_bad_resume_folder_leaves_the_page_usable_and_speaks_gui(
+    make_window: Callable[..., MainWindow], wait_until: Wait, tmp_path: Path, kind: str
+) -> None:
+    window, page = connected_page(make_window, wait_until)
+    folder = tmp_path / "chosen"
+    if kind != "missing":
+        folder.mkdir()
+    if kind == "broken plan":
+        (folder / "mission-plan.yaml").write_text("stations: [oops\n")
+    page.resume(folder)
+    assert wait_until(lambda: bool(window.notices.cards()) and usable(page), 20.0)
+    notice = window.context.notifier.history[-1]
+    assert notice.title == "Mission not started"
+    text = f"{notice.message} {notice.advice}"
+    assert "`fieldapp" not in text and "fieldapp mission" not in text, text
+    if kind == "empty":
+        assert "choose another folder" in text
+    assert page.controller.state is MissionState.IDLE
+    page.start_button.click()  # and the operator can carry on at once
+    assert wait_until(lambda: page.result is not None or page.progress.captured >= 1, 30.0)
+    window.emergency_stop()
+    assert wait_until(lambda: page.result is not None, 20.0)
+    assert usable(page)
+
+
+def test_a_failed_connect_leaves_a_clear_way_on(
+    make_window: Callable[..., MainWindow], wait_until: Wait
+) -> None:
+    from fieldapp.rig import RigError
+
+    def refuse(_devices: object) -> object:
+        raise RigError("table on /dev/ttyUSB0: no such port (try `fieldapp table --port "
+                       "/dev/ttyUSB0 status`)")  # fmt: skip
+
+    window = make_window(opener=refuse)
+    page = window.pages["mission"]
+    assert isinstance(page, MissionPage)
+    window.toggle_connection()
+    assert wait_until(lambda: bool(window.notices.cards()), 20.0)
+    notice = window.context.notifier.history[-1]
+    assert "`fieldapp" not in f"{notice.message} {notice.advice}"
+    assert window.connect_button.isEnabled() and window.connect_button.text() == "Connect"
+    assert not page.start_button.isEnabled() and "press Connect" in page.hint_label.text()
+    assert page.editor.isEnabled()
+
+
+def test_stop_while_the_mission_is_being_set_up_starts_nothing(
+    make_window: Callable[..., MainWindow], wait_until: Wait
+) -> None:
+    window, page = connected_page(make_window, wait_until)
+    page.start_button.click()
+    assert page.controller.busy and page.controller.runner is None  # setting up on a worker
+    window.emergency_stop()
+    assert wait_until(lambda: usable(page), 20.0)
+    assert page.controller.runner is None
+    assert "STOP was pressed" in window.context.notifier.history[-1].message
+
+
+def test_a_mission_thread_that_dies_is_shown_and_leaves_the_page_usable(
+    make_window: Callable[..., MainWindow], wait_until: Wait, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    window, page = connected_page(make_window, wait_until)
+
+    def die(*_args: object, **_kwargs: object) -> None:
+        raise MemoryError("injected: the mission's thread dies")
+
+    monkeypatch.setattr("fieldapp.mission.execute.capture_one", die)
+    page.start_button.click()
+    assert wait_until(lambda: page.result is not None, 30.0)
+    assert page.result is not None and page.result.outcome is Outcome.FAILED
+    assert page.controller.state is MissionState.FAILED
+    notice = window.context.notifier.history[-1]
+    assert "injected" in notice.message or "injected" in notice.advice
+    assert usable(page)
+    window.toggle_connection()  # Disconnect is not refused
+    assert wait_until(lambda: not window.context.hub.connected, 20.0)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import logging
 from collections.abc import Callable
 from pathlib import Path
@@ -12,17 +13,29 @@ from devices.camera.stream import FrameStream
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import load_calibration
 from fieldapp.settings import Settings
-from ui.calibration.intrinsics_wizard import IntrinsicsWizard
-from ui.calibration.session_wizards import GroundWizard, StationsWizard, ViewsWizard
 
 log = logging.getLogger(__name__)
 
-WIZARDS: list[tuple[str, str, Callable[..., QtWidgets.QWizard]]] = [
-    ("intrinsics", "1. Camera intrinsics (IR checkerboard)", IntrinsicsWizard),
-    ("views", "2. View to view (turntable step)", ViewsWizard),
-    ("stations", "3. Station to station (boards between stations)", StationsWizard),
-    ("ground", "4. Ground plane (field frame)", GroundWizard),
+WIZARDS: list[tuple[str, str, str]] = [
+    ("intrinsics", "1. Camera intrinsics (IR checkerboard)", "intrinsics_wizard:IntrinsicsWizard"),
+    ("views", "2. View to view (turntable step)", "session_wizards:ViewsWizard"),
+    (
+        "stations",
+        "3. Station to station (boards between stations)",
+        "session_wizards:StationsWizard",
+    ),
+    ("ground", "4. Ground plane (field frame)", "session_wizards:GroundWizard"),
 ]
+"""(key, button label, ``module:class`` under ``ui.calibration``): a wizard's module (and the
+solvers it needs: OpenCV, SciPy) is imported when the wizard is opened, not at start-up."""
+
+
+def wizard_factory(where: str) -> Callable[..., QtWidgets.QWizard]:
+    module, name = where.split(":")
+    factory: Callable[..., QtWidgets.QWizard] = getattr(
+        importlib.import_module(f"ui.calibration.{module}"), name
+    )
+    return factory
 
 
 def summary(path: Path) -> str:
@@ -89,7 +102,7 @@ class CalibratePage(QtWidgets.QWidget):
 
     def open_wizard(self, key: str) -> QtWidgets.QWizard:
         """Open the wizard ``key`` (intrinsics, views, stations, ground), non-modal."""
-        factory = {k: f for k, _, f in WIZARDS}[key]
+        factory = wizard_factory({k: where for k, _, where in WIZARDS}[key])
         stream = self.stream() if callable(self.stream) else self.stream
         wizard = factory(
             Path(self.path.text().strip()), stream=stream, serial=self.serial, parent=self

@@ -6,6 +6,11 @@ colour or IR image; the depth and 3D point under the cursor; the camera's and th
 frame rates and the frames dropped; the capture-quality figures (measured on a thread,
 :mod:`ui.live.quality_monitor`); the current frame's points in 3D. Freeze holds the frame;
 Save writes it (depth PNG in mm, colour, IR, JSON) on a worker.
+
+Nothing is decoded, measured or painted while the operator cannot see the page: the poll
+timer and the quality thread stop when the preview is hidden (another page shown) or its window
+minimised, and start again when it is seen (:attr:`LivePreview.displaying`). The stream itself
+keeps running: a mission reads its frames.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pyqtgraph as pg
 from numpy.typing import NDArray
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from devices.camera import CameraError
 from devices.camera.frames import Frame, Intrinsics
@@ -146,6 +151,7 @@ class LivePreview(QtWidgets.QWidget):
         self.timer = QtCore.QTimer(self)
         self.timer.setInterval(POLL_MS)
         self.timer.timeout.connect(self.poll)
+        self._watched_window: QtWidgets.QWidget | None = None
         context.hub.rig_changed.connect(self._rig_changed)
 
     # --- layout -----------------------------------------------------------------------------
@@ -223,17 +229,63 @@ class LivePreview(QtWidgets.QWidget):
     # --- the stream -------------------------------------------------------------------------
 
     def attach(self, stream: FrameStream | None, intrinsics: Intrinsics | None) -> None:
-        """Show ``stream`` (``None``: nothing) and measure its quality."""
+        """Show ``stream`` (``None``: nothing) and measure its quality (while seen)."""
         self.monitor.stop()
+        self.timer.stop()
         self.stream, self.intrinsics = stream, intrinsics
         self._stream_failed = False
         if stream is None or intrinsics is None:
-            self.timer.stop()
             self.stream_label.setText("No camera: press Connect.")
             return
         self.stream_label.setText("Waiting for the first frame...")
-        self.monitor.start(stream, intrinsics)
-        self.timer.start()
+        self._update_activity()
+
+    # --- only while seen ----------------------------------------------------------------------
+
+    @property
+    def seen(self) -> bool:
+        """The operator can see the preview: shown, on the current page, window not minimised."""
+        return self.isVisible() and not self.window().isMinimized()
+
+    @property
+    def displaying(self) -> bool:
+        """Frames are being decoded and painted, quality measured."""
+        return self.timer.isActive()
+
+    def _update_activity(self) -> None:
+        """Poll and measure exactly while a working stream is seen."""
+        stream, intrinsics = self.stream, self.intrinsics
+        working = stream is not None and intrinsics is not None and not self._stream_failed
+        want = working and self.seen
+        if want and stream is not None and intrinsics is not None and not self.timer.isActive():
+            self.monitor.start(stream, intrinsics)
+            self.timer.start()
+        elif not want and self.timer.isActive():
+            self.timer.stop()
+            self.monitor.stop()
+
+    def showEvent(self, event: QtGui.QShowEvent) -> None:
+        super().showEvent(event)
+        self._watch_window()
+        self._update_activity()
+
+    def hideEvent(self, event: QtGui.QHideEvent) -> None:
+        super().hideEvent(event)
+        self._update_activity()
+
+    def _watch_window(self) -> None:
+        """Follow the window's minimised state (a minimised window hides no child)."""
+        window = self.window()
+        if window is not self._watched_window:
+            if self._watched_window is not None:
+                self._watched_window.removeEventFilter(self)
+            window.installEventFilter(self)
+            self._watched_window = window
+
+    def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:
+        if event.type() == QtCore.QEvent.Type.WindowStateChange:
+            self._update_activity()
+        return False
 
     def _rig_changed(self, rig: Rig | None) -> None:
         stream = self.context.hub.stream

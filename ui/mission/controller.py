@@ -24,11 +24,20 @@ if TYPE_CHECKING:
     from fieldapp.io.writer import SessionWriter
     from fieldapp.mission import MissionPlan, MissionRunner
     from fieldapp.rig import Rig
+    from fieldapp.settings import BatterySettings
     from ui.devices.hub import DeviceHub
 
 log = logging.getLogger(__name__)
 
 ACTIVE = (MissionState.RUNNING, MissionState.PAUSED, MissionState.STOPPING)
+LATE_THREAD_WAIT_S = 10.0
+STOPPED_IN_SETUP = (
+    "STOP was pressed while the mission was being set up; nothing was captured. "
+    "Press Start again when ready"
+)
+DISCONNECTED_IN_SETUP = (
+    "the devices were disconnected before the mission started; press Connect, then Start again"
+)
 
 
 def new_session(
@@ -42,11 +51,18 @@ def new_session(
     return plan, start_session(folder, plan, calibration_in_force(plan, rig.world))
 
 
-def reopened_session(hub: DeviceHub, folder: Path) -> tuple[MissionPlan, SessionWriter]:
-    """The plan and session of an interrupted mission in ``folder`` (worker thread)."""
+def reopened_session(
+    hub: DeviceHub, folder: Path, previous: MissionRunner | None = None
+) -> tuple[MissionPlan, SessionWriter]:
+    """The plan and session of an interrupted mission in ``folder`` (worker thread). A
+    previous mission whose STOP ended it before its thread returned (a device call under way)
+    is given ``LATE_THREAD_WAIT_S`` to return first, so two writers never list the same
+    session at once."""
     from fieldapp.mission.calibration import calibration_in_force
     from fieldapp.mission.folder import read_plan, reopen_session
 
+    if previous is not None and not previous.join(LATE_THREAD_WAIT_S):
+        log.warning("the previous mission's thread is still in a device call; resuming anyway")
     rig = _rig(hub)
     plan = read_plan(folder)
     return plan, reopen_session(folder, lambda: calibration_in_force(plan, rig.world))
@@ -78,7 +94,10 @@ class MissionController(QtCore.QObject):
         self.hub = hub
         self.runner: MissionRunner | None = None
         self.folder: Path | None = None
+        self.battery: BatterySettings | None = None
+        """The battery levels missions check (the settings' ``battery``)."""
         self._workers = WorkerSet()
+        self._stop_before_start = False
 
     @property
     def state(self) -> MissionState:
@@ -92,12 +111,17 @@ class MissionController(QtCore.QObject):
     def start(self, plan: MissionPlan, folder: Path) -> None:
         """Start a new session of ``plan`` in ``folder``."""
         if not self.busy:
+            self._stop_before_start = False
             self._workers.run(lambda: new_session(self.hub, plan, folder), self._run, self._fail)
 
     def resume_session(self, folder: Path) -> None:
         """Capture what an interrupted session in ``folder`` still misses."""
         if not self.busy:
-            self._workers.run(lambda: reopened_session(self.hub, folder), self._run, self._fail)
+            self._stop_before_start = False
+            previous = self.runner
+            self._workers.run(
+                lambda: reopened_session(self.hub, folder, previous), self._run, self._fail
+            )
 
     def pause(self) -> None:
         if self.runner is not None:
@@ -113,7 +137,10 @@ class MissionController(QtCore.QObject):
             self.runner.abort()
 
     def stop(self) -> None:
-        """End now: the runner holds the table and stops the base (returns at once)."""
+        """End now: the runner holds the table and stops the base (returns at once). During
+        the set-up the mission is not started at all."""
+        if self._workers.busy:
+            self._stop_before_start = True
         if self.runner is not None and self.state in ACTIVE:
             self.runner.stop()
 
@@ -130,15 +157,27 @@ class MissionController(QtCore.QObject):
         return result
 
     def _run(self, prepared: tuple[MissionPlan, SessionWriter]) -> None:
-        from fieldapp.mission import MissionRunner
+        from fieldapp.errors import FieldappError
 
         plan, writer = prepared
         rig, stream = self.hub.rig, self.hub.stream
-        if rig is None or stream is None:
-            self._fail(RuntimeError("the devices were disconnected before the mission started"))
+        if self._stop_before_start:
+            self._fail(FieldappError(STOPPED_IN_SETUP))
             return
-        mission_rig = dataclasses.replace(rig, camera=StreamCamera(stream))
-        runner = MissionRunner(plan, mission_rig, writer)
+        if rig is None or stream is None:
+            self._fail(FieldappError(DISCONNECTED_IN_SETUP))
+            return
+        try:
+            self._start_runner(plan, writer, dataclasses.replace(rig, camera=StreamCamera(stream)))
+        except Exception as error:  # the page must not stay busy: say why and stay usable
+            log.exception("the mission could not start")
+            self.runner = None
+            self._fail(error)
+
+    def _start_runner(self, plan: MissionPlan, writer: SessionWriter, mission_rig: Rig) -> None:
+        from fieldapp.mission import MissionRunner
+
+        runner = MissionRunner(plan, mission_rig, writer, self.battery)
         runner.state_changed.connect(self._on_state)
         runner.station_reached.connect(self._on_station)
         runner.view_captured.connect(self._on_view)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -23,6 +24,7 @@ from ui.mission.plan_map import ACTIVE, DONE, LOW, PlanMap
 from ui.mission.progress import ProgressPanel
 from ui.mission.setup_panel import SetupPanel
 from ui.notifications import Level, Notice, notice_from_error
+from ui.wording import gui_text
 
 if TYPE_CHECKING:
     from devices.base.protocol import Pose
@@ -40,6 +42,11 @@ STATE_COLOURS = {
     MissionState.FAILED: "#c62828",
 }
 BIG = "QPushButton { font-size:15px; font-weight:bold; padding:6px 16px; }"
+BUTTON_TIPS = {
+    True: "Capture the plan into a new session folder",
+    False: "Capture what an interrupted session still misses",
+}
+START_ADVICE = "Check the plan and the folder, then press Start or Resume session... again."
 
 
 def ask(parent: QtWidgets.QWidget, title: str, text: str) -> bool:
@@ -57,6 +64,7 @@ class MissionPage(QtWidgets.QWidget):
         super().__init__(parent)
         self.context = context
         self.controller = MissionController(context.hub, self)
+        self.controller.battery = context.settings.battery
         self.result: MissionResult | None = None
         self.station_views: dict[int, set[int]] = {}
         self._build()
@@ -93,10 +101,12 @@ class MissionPage(QtWidgets.QWidget):
         self.resume_button = QtWidgets.QPushButton("Resume session...")
         for button in (self.start_button, self.pause_button, self.abort_button, self.resume_button):
             button.setStyleSheet(BIG)
-        self.start_button.setToolTip("Capture the plan into a new session folder")
+        self.start_button.setToolTip(BUTTON_TIPS[True])
         self.abort_button.setToolTip("End the mission after the current step")
-        self.resume_button.setToolTip("Capture what an interrupted session still misses")
+        self.resume_button.setToolTip(BUTTON_TIPS[False])
         self.state_label = QtWidgets.QLabel()
+        self.hint_label = QtWidgets.QLabel()
+        self.hint_label.setStyleSheet("color:#ef6c00")
         self.folder_label = QtWidgets.QLabel()
         self.folder_label.setTextInteractionFlags(
             QtCore.Qt.TextInteractionFlag.TextSelectableByMouse
@@ -106,6 +116,7 @@ class MissionPage(QtWidgets.QWidget):
             row.addWidget(button)
         row.addSpacing(12)
         row.addWidget(self.state_label)
+        row.addWidget(self.hint_label)
         row.addWidget(self.folder_label, 1)
         self._show_state(MissionState.IDLE)
         return row
@@ -200,8 +211,13 @@ class MissionPage(QtWidgets.QWidget):
         self._update_buttons()
 
     def _failed_to_start(self, error: BaseException) -> None:
+        """Nothing started: say why and what to do; Start, Resume and the plan are usable."""
         self.folder_label.setText("")
-        self.context.notifier.post(notice_from_error("Mission not started", error))
+        notice = notice_from_error("Mission not started", error)
+        if not notice.advice:
+            notice = replace(notice, advice=START_ADVICE)
+        self.context.notifier.post(notice)
+        self.progress.add_line(f"not started: {gui_text(notice.message)}")
         self._update_buttons()
 
     def _view_captured(self, event: ViewCaptured) -> None:
@@ -215,7 +231,7 @@ class MissionPage(QtWidgets.QWidget):
     def _finished(self, result: MissionResult) -> None:
         self.result = result
         for line in result.lines():
-            self.progress.add_line(line)
+            self.progress.add_line(gui_text(line))
         level = Level.INFO if result.outcome is Outcome.COMPLETE else Level.WARNING
         if result.outcome is Outcome.FAILED:
             level = Level.ERROR
@@ -226,12 +242,16 @@ class MissionPage(QtWidgets.QWidget):
         self.progress.finish(
             f"{result.outcome.value}: {result.captured} captured, {len(result.missing)} missing"
         )
+        summary = result.lines()[:2]
+        if result.fault is not None:  # the reason, whatever it is: a fault, a dead thread
+            summary = [summary[0], f"{result.fault.device}: {result.fault.what}"]
         self.context.notifier.post(
-            Notice(level, f"Mission {result.outcome.value}", "; ".join(result.lines()[:2]), advice)
+            Notice(level, f"Mission {result.outcome.value}", "; ".join(summary), advice)
         )
         if self.controller.folder is not None:
             self.context.ui_state.set_last_folder("sessions", self.controller.folder)
-            self.session_finished.emit(self.controller.folder)
+            if result.captured:  # a session with nothing in it has nothing to show
+                self.session_finished.emit(self.controller.folder)
         self._update_buttons()
 
     def _show_pose(self, pose: Pose) -> None:
@@ -266,6 +286,10 @@ class MissionPage(QtWidgets.QWidget):
         busy = self.controller.busy
         self.start_button.setEnabled(connected and not busy)
         self.resume_button.setEnabled(connected and not busy)
+        hint = "" if connected or busy else "Devices not connected: press Connect (top right)."
+        for button in (self.start_button, self.resume_button):
+            button.setToolTip(hint or BUTTON_TIPS[button is self.start_button])
+        self.hint_label.setText(hint)
         self.pause_button.setEnabled(active)
         self.abort_button.setEnabled(active)
         self.editor.setEnabled(not busy)

@@ -15,7 +15,6 @@ from fieldapp.io.session import Session, load_session
 from fieldapp.recon.progress import Progress
 from fieldapp.settings import Settings
 from ui.results.data import PlotResults, load_results_dir
-from ui.results.export import export_results
 from ui.results.history import HistoryPanel
 from ui.results.manual import ManualPanel
 from ui.results.runner import Outcome, ReconstructionRunner, default_results_dir
@@ -128,6 +127,8 @@ class ResultsPanel(QtWidgets.QWidget):
             raise FieldappError("nothing to export: reconstruct or open results first")
         growth = {t: self._growth(t) for t in ("height", "width")}
         calibration = self.session.calibration.to_document() if self.session else None
+        from ui.results.export import export_results  # matplotlib: only when exporting
+
         return partial(
             export_results, self.results, folder, self.manual.evaluation, growth, calibration
         )

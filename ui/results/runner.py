@@ -17,7 +17,6 @@ from superqt.utils import GeneratorWorker, create_worker
 
 from fieldapp.errors import FieldappError
 from fieldapp.io.session import Session
-from fieldapp.recon.process import reconstruct_in_process
 from fieldapp.recon.progress import Progress
 from fieldapp.recon.settings import ReconstructionSettings
 from ui.results.data import PlotResults, load_results_dir
@@ -51,6 +50,8 @@ def reconstruction_steps(
 ) -> Generator[Progress, None, Outcome]:
     """The reconstruction in its own process, then its files read back for display. Closing
     this generator cancels the child process."""
+    from fieldapp.recon.process import reconstruct_in_process  # the pipeline, when run
+
     yield from reconstruct_in_process(session.folder, settings, results_dir)
     plot = load_results_dir(results_dir)
     plot.session_folder = session.folder

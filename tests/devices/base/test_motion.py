@@ -7,7 +7,7 @@ import math
 import pytest
 
 from devices.base.backend import NavProgress
-from devices.base.motion import MotionFault, MotionLimits, MotionModel, wrap_deg
+from devices.base.motion import BatteryDrain, MotionFault, MotionLimits, MotionModel, wrap_deg
 from devices.base.protocol import Pose
 
 
@@ -73,13 +73,13 @@ def test_speed_never_exceeds_the_limit() -> None:
 
 
 def test_battery_drains_with_distance_and_time() -> None:
-    limits = MotionLimits(battery_drain_pct_per_m=1.0, battery_drain_pct_per_s=0.0)
+    limits = MotionLimits(battery=BatteryDrain(pct_per_m=1.0, pct_per_s=0.0))
     model = MotionModel(limits, seed=0)
     model.set_goal(Pose(2.0, 0.0, 0.0))
     _run(model)
     travelled_m = math.hypot(model.pose.x_m, model.pose.y_m)
     assert model.battery_pct == pytest.approx(100.0 - travelled_m, abs=1e-6)
-    idle = MotionModel(MotionLimits(battery_drain_pct_per_s=0.5))
+    idle = MotionModel(MotionLimits(battery=BatteryDrain(pct_per_s=0.5, pct_per_m=0.0)))
     idle.step(10.0)
     assert idle.battery_pct == pytest.approx(95.0)
 

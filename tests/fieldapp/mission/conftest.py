@@ -13,6 +13,10 @@ from fieldapp.mission import MissionPlan, MissionSetup, new_mission
 from fieldapp.mission.plan import RetryLimits, ViewPlan, grid_stations
 from fieldapp.settings import DeviceSettings
 
+HANG_S = 90.0
+"""The longest a mission test waits for an end or an event before failing: a hang detector,
+never a speed requirement (the suite passes on a saturated machine)."""
+
 
 def small_plan(
     stations: tuple[int, ...] = (5, 4), views: int | ViewPlan = 2, **fields: Any

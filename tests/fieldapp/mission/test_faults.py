@@ -18,7 +18,7 @@ from fieldapp.mission.folder import STATUS_FILE
 from fieldapp.mission.plan import RetryLimits
 from fieldapp.settings import CameraQualitySettings
 
-from .conftest import small_plan
+from .conftest import HANG_S, small_plan
 
 Opener = Callable[..., MissionSetup]
 
@@ -68,7 +68,7 @@ def run(
     runner.warning.connect(lambda w: warnings.append(w.text))
     if on_warning is not None:
         runner.warning.connect(on_warning)
-    result = runner.start().wait(60)
+    result = runner.start().wait(HANG_S)
     assert result is not None
     assert runner.state is (MissionState.FAILED if result.outcome is Outcome.FAILED
                             else MissionState.FINISHED)  # fmt: skip
@@ -160,7 +160,7 @@ def test_an_unplugged_table_stops_the_mission(open_mission: Opener) -> None:
 def run_with_unplug(setup: MissionSetup, server: Any) -> tuple[MissionResult, list[str]]:
     runner = setup.runner()
     runner.view_captured.connect(lambda e: server.unplug())
-    result = runner.start().wait(60)
+    result = runner.start().wait(HANG_S)
     assert result is not None
     return result, []
 
@@ -190,7 +190,7 @@ def test_a_capture_below_quality_is_taken_again(open_mission: Opener) -> None:
     runner.view_captured.connect(views.append)
     warnings: list[str] = []
     runner.warning.connect(lambda w: warnings.append(w.text))
-    result = runner.start().wait(60)
+    result = runner.start().wait(HANG_S)
     assert result is not None and result.complete
     assert len(warnings) == 1 and "below quality" in warnings[0] and "crop region" in warnings[0]
     assert views[0].quality_ok and views[0].attempts == 2

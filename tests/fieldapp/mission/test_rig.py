@@ -12,8 +12,10 @@ from devices.base.protocol import BaseState, Pose
 from fieldapp.rig import Rig, RigError, open_rig, telemetry_endpoint
 from fieldapp.settings import DeviceSettings
 
+from .conftest import HANG_S
 
-def wait_until(predicate: Callable[[], bool], timeout_s: float = 5.0) -> None:
+
+def wait_until(predicate: Callable[[], bool], timeout_s: float = HANG_S) -> None:
     deadline_s = time.monotonic() + timeout_s
     while not predicate():
         if time.monotonic() > deadline_s:

@@ -26,7 +26,7 @@ from fieldapp.mission.folder import PLAN_FILE, STATUS_FILE
 from fieldapp.mission.plan import ViewPlan, load_plan
 from fieldapp.verify import verify_session
 
-from .conftest import small_plan
+from .conftest import HANG_S, small_plan
 
 Opener = Callable[..., MissionSetup]
 
@@ -49,7 +49,7 @@ def test_a_small_mission_captures_every_view_with_what_the_devices_reported(
     setup = open_mission(plan)
     runner = setup.runner()
     events = record(runner)
-    result = runner.start().wait(60)
+    result = runner.start().wait(HANG_S)
     assert result is not None and result.outcome is Outcome.COMPLETE, result
     assert runner.state is MissionState.FINISHED
     assert events["states"] == [MissionState.RUNNING, MissionState.FINISHED]
@@ -101,12 +101,12 @@ def test_pause_holds_at_a_step_boundary_and_resume_carries_on(open_mission: Open
     runner.view_captured.connect(lambda e: runner.pause() if e.view == 0 else None)
     runner.state_changed.connect(lambda s: paused.set() if s is MissionState.PAUSED else None)
     runner.start()
-    assert paused.wait(30)
+    assert paused.wait(HANG_S)
     time.sleep(0.3)
     assert runner.state is MissionState.PAUSED
     assert len(events["views"]) == 1 and len(load_session(setup.folder).captures) == 1
     runner.resume()
-    result = runner.wait(30)
+    result = runner.wait(HANG_S)
     assert result is not None and result.complete
     assert events["states"] == [
         MissionState.RUNNING, MissionState.PAUSED, MissionState.RUNNING, MissionState.FINISHED
@@ -120,7 +120,7 @@ def test_abort_ends_at_the_next_step_boundary_and_says_what_is_missing(
     runner = setup.runner()
     events = record(runner)
     runner.view_captured.connect(lambda e: runner.abort())
-    result = runner.start().wait(30)
+    result = runner.start().wait(HANG_S)
     assert result is not None and result.outcome is Outcome.ABORTED and result.fault is None
     assert events["states"] == [
         MissionState.RUNNING, MissionState.STOPPING, MissionState.FINISHED
@@ -142,15 +142,15 @@ def test_stop_holds_the_table_mid_move_and_stops_the_base_then_resume_completes(
     first = threading.Event()
     runner.view_captured.connect(lambda e: first.set())
     runner.start()
-    assert first.wait(30)
+    assert first.wait(HANG_S)
     sim_table = setup.rig.sim_table
     assert sim_table is not None
-    deadline_s = time.monotonic() + 10
+    deadline_s = time.monotonic() + HANG_S
     while not sim_table.state.startswith("Run"):  # the table turns towards view 1 (20 deg)
         assert time.monotonic() < deadline_s, sim_table.state
         time.sleep(0.01)
     runner.stop()
-    result = runner.wait(20)
+    result = runner.wait(HANG_S)
     assert result is not None and result.outcome is Outcome.STOPPED, result
     assert runner.state is MissionState.FINISHED and result.missing == [(5, 1)]
     assert sim_table.state == "Hold:0" and 0.0 < sim_table.angle_deg < 20.0
@@ -158,7 +158,7 @@ def test_stop_holds_the_table_mid_move_and_stops_the_base_then_resume_completes(
 
     again = setup.runner()
     warnings = record(again)["warnings"]
-    result = again.start().wait(30)
+    result = again.start().wait(HANG_S)
     assert result is not None and result.complete, result
     texts = " ".join(w.text for w in warnings)
     assert "stop latch was set" in texts and "table was held" in texts
@@ -170,7 +170,7 @@ def test_resume_of_a_folder_captures_only_what_is_missing(open_mission: Opener) 
     setup = open_mission(small_plan(stations=(5, 4), views=2))
     runner = setup.runner()
     runner.view_captured.connect(lambda e: runner.abort() if e.station == 4 else None)
-    first = runner.start().wait(30)
+    first = runner.start().wait(HANG_S)
     assert first is not None and first.missing == [(4, 0)]  # station 4 turns back: 1, then 0
     setup.close()
     before = {(c.station, c.view): c.captured_at for c in load_session(setup.folder).captures}
@@ -178,7 +178,7 @@ def test_resume_of_a_folder_captures_only_what_is_missing(open_mission: Opener) 
         assert resumed.missing() == [(4, 0)]
         again = resumed.runner()
         views = record(again)["views"]
-        result = again.start().wait(30)
+        result = again.start().wait(HANG_S)
     assert result is not None and result.complete
     assert [(e.station, e.view) for e in views] == [(4, 0)]
     after = {(c.station, c.view): c.captured_at for c in load_session(setup.folder).captures}

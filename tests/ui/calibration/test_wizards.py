@@ -70,7 +70,7 @@ def test_intrinsics_refuses_images_without_the_board(qtbot, boards_session, tmp_
     assert page.add_images(images) == [p.name for p in images]
     assert "Board not found" in page.status.text() and not page.isComplete()
     assert page.preview.wait()
-    qtbot.waitUntil(lambda: page.preview.image is not None)
+    qtbot.waitUntil(lambda: page.preview.image is not None, timeout=90_000)  # a hang limit
     assert not page.preview.found and "BOARD NOT FOUND" in page.preview.state.text()
     assert not page.take()
     assert "nothing taken" in page.status.text()

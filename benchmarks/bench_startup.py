@@ -1,0 +1,86 @@
+"""Start-up time of the field GUI: from process start to the first window shown.
+
+Runs ``python -m fieldapp gui`` (the real command, offscreen unless ``DISPLAY`` is set) ``--runs``
+times with ``FIELDAPP_STARTUP_PROBE`` set: once the event loop has shown and painted the window,
+the application writes the monotonic time and closes (``ui/app.py``). CLOCK_MONOTONIC is one
+clock for every process on Linux, so the time is measured from just before the process is
+spawned. The process's CPU time is reported too: on a busy machine the wall time mostly
+measures the wait for a core, the CPU time what the start-up costs. Each run has its own empty
+settings and config folders (a first start). Prints every run, the median and the worst, the
+1-minute load average before and after, and which heavy modules (Open3D, SciPy, matplotlib,
+Dask, OpenCV) were loaded by then (target: none; start-up within 3 s on a quiet 2-core
+machine).
+
+    .venv/bin/python benchmarks/bench_startup.py --runs 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+TARGET_S = 3.0
+
+
+def one_start(folder: Path) -> tuple[float, float, list[str]]:
+    """(seconds to the first window, CPU seconds the process used, heavy modules loaded)."""
+    probe = folder / "probe.json"
+    env = dict(os.environ)
+    env.update(
+        FIELDAPP_STARTUP_PROBE=str(probe),
+        XDG_CONFIG_HOME=str(folder / "config"),
+        XDG_DATA_HOME=str(folder / "data"),
+    )
+    if "DISPLAY" not in env:
+        env["QT_QPA_PLATFORM"] = "offscreen"
+    command = [sys.executable, "-m", "fieldapp", "gui", "--settings", str(folder / "s.yaml")]
+    cpu_before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started_s = time.monotonic()
+    subprocess.run(command, env=env, check=True, capture_output=True, timeout=300)
+    cpu_after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu_s = (cpu_after.ru_utime - cpu_before.ru_utime) + (cpu_after.ru_stime - cpu_before.ru_stime)
+    shown = json.loads(probe.read_text())
+    return shown["shown_s"] - started_s, cpu_s, shown["heavy_modules"]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=5)
+    args = parser.parse_args()
+    load_before = os.getloadavg()[0]
+    times_s, cpus_s = [], []
+    heavy: set[str] = set()
+    for run in range(1, args.runs + 1):
+        with tempfile.TemporaryDirectory() as tmp:
+            elapsed_s, cpu_s, modules = one_start(Path(tmp))
+        times_s.append(elapsed_s)
+        cpus_s.append(cpu_s)
+        heavy.update(modules)
+        print(
+            f"run {run}: first window after {elapsed_s:.2f} s, CPU {cpu_s:.2f} s "
+            f"(heavy modules: {', '.join(modules) or 'none'})"
+        )
+    load_after = os.getloadavg()[0]
+    print(
+        f"median {statistics.median(times_s):.2f} s, best {min(times_s):.2f} s, worst "
+        f"{max(times_s):.2f} s over {args.runs} runs (target {TARGET_S:.0f} s); "
+        f"{os.cpu_count()} CPUs, load average {load_before:.1f} -> {load_after:.1f}"
+    )
+    print(
+        f"CPU time per start (the whole process, closing included): median "
+        f"{statistics.median(cpus_s):.2f} s, about the wall time on an idle machine"
+    )
+    print(f"heavy modules loaded before the first window: {sorted(heavy) or 'none'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
