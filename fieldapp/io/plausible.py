@@ -29,6 +29,8 @@ DEPTH_SCALE_RANGE = (100.0, 100_000.0)
 MAX_DISTORTION_SHIFT = 0.25
 """Largest shift the distortion model may apply inside the image, as a fraction of its
 diagonal (a Kinect v2's factory model: about 0.03)."""
+MIN_VIEW_STEP_DEG = 1.0
+"""The turntable's step: at most 360 views per turn."""
 MAX_TRANSLATION_M = {"view_step": 10.0, "stations": 100_000.0, "ground": 100_000.0}
 
 
@@ -149,6 +151,16 @@ def calibration_problems(path: Path, calibration: Calibration) -> list[Problem]:
     problems = camera_problems(path, calibration.depth_camera)
     matrices: list[tuple[str, str, NDArray[np.float64]]] = []
     if calibration.view_step is not None:
+        angle_deg = calibration.view_step.angle_deg
+        if abs(angle_deg) < MIN_VIEW_STEP_DEG:
+            problems.append(
+                Problem(
+                    str(path),
+                    "view_step.angle_deg",
+                    f"{angle_deg:g} degrees is less than a turntable's step can be "
+                    f"({MIN_VIEW_STEP_DEG:g}: at most {round(360 / MIN_VIEW_STEP_DEG)} views)",
+                )
+            )
         matrices.append(("view_step", "view_step.matrix", calibration.view_step.matrix))
     if calibration.stations is not None:
         for station, matrix in calibration.stations.to_reference.items():

@@ -24,7 +24,7 @@ from fieldapp.io.images import (
     read_ir,
 )
 from fieldapp.io.jsonfile import load_model
-from fieldapp.io.plausible import calibration_problems
+from fieldapp.io.plausible import MIN_VIEW_STEP_DEG, calibration_problems
 
 SESSION_FORMAT = "fieldapp-session/1"
 SESSION_FILE = "session.json"
@@ -243,11 +243,31 @@ def load_session(folder: Path, allow_empty: bool = False) -> Session:
     try:
         calibration = load_calibration(folder / document.calibration)
         problems += session_calibration_problems(folder / document.calibration, calibration)
+        problems += view_problems(folder, document, calibration)
     except FormatError as error:
         problems += error.problems
     if problems or calibration is None:
         raise FormatError(problems)
     return Session(folder, document, calibration)
+
+
+def view_problems(
+    folder: Path, document: SessionDocument, calibration: Calibration
+) -> list[Problem]:
+    """Every capture's view must be one of a turn's (view k: the table at k x the step)."""
+    if calibration.view_step is None or abs(calibration.view_step.angle_deg) < MIN_VIEW_STEP_DEG:
+        return []
+    views = calibration.view_step.views_per_turn
+    return [
+        Problem(
+            str(folder / SESSION_FILE),
+            f"captures[{index}].view",
+            f"view {capture.view} is beyond the {views} views of a turn "
+            f"(view_step.angle_deg {calibration.view_step.angle_deg:g})",
+        )
+        for index, capture in enumerate(document.captures)
+        if capture.view >= views
+    ]
 
 
 def session_calibration_problems(path: Path, calibration: Calibration) -> list[Problem]:

@@ -217,3 +217,29 @@ def test_json_numbers_out_of_range_and_deep_nesting_are_one_line(small_session, 
     assert lines_with(verify(folder, capsys)[1], str(path), "out of the range of a number")
     path.write_text("[" * 100_000 + "]" * 100_000)
     assert lines_with(verify(folder, capsys)[1], str(path), "nested too deeply")
+
+
+def test_a_view_beyond_the_turn_is_named_instead_of_looped_over(small_session, tmp_path, capsys):
+    # found by the fuzz test: Eq. 9 applied 10**12 times hung verify and reconstruct
+    folder = copy_of(small_session, tmp_path)
+    path = folder / "session.json"
+    document = json.loads(path.read_text())
+    document["captures"][1]["view"] = 10**12
+    path.write_text(json.dumps(document))
+    for command in (verify, reconstruct):
+        code, err = command(folder, capsys)
+        assert code == 1
+        assert lines_with(err, f"{path}: captures[1].view:", "beyond the 8 views of a turn"), err
+
+
+def test_a_vanishing_view_step_is_named(small_session, tmp_path, capsys):
+    # found by the fuzz test: 1e-9 degrees made 3.6e11 expected views and hung verify
+    folder = copy_of(small_session, tmp_path)
+    path = folder / "calibration.json"
+    document = json.loads(path.read_text())
+    document["view_step"]["angle_deg"] = 1e-9
+    path.write_text(json.dumps(document))
+    for command in (verify, reconstruct):
+        code, err = command(folder, capsys)
+        assert code == 1
+        assert lines_with(err, f"{path}: view_step.angle_deg:", "less than a turntable"), err
