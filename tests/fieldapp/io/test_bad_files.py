@@ -243,3 +243,11 @@ def test_a_vanishing_view_step_is_named(small_session, tmp_path, capsys):
         code, err = command(folder, capsys)
         assert code == 1
         assert lines_with(err, f"{path}: view_step.angle_deg:", "less than a turntable"), err
+
+
+def test_an_output_folder_that_is_a_file_is_one_line(small_session, tmp_path, capsys):
+    out = tmp_path / "out"
+    out.write_text("not a folder")
+    code, err = run(["reconstruct", str(small_session), "--out", str(out), "--quiet"], capsys)
+    assert code == 1
+    assert lines_with(err, f"{out}: cannot write the results"), err
