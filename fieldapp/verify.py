@@ -8,7 +8,7 @@ from pathlib import Path
 
 from fieldapp.errors import FormatError, Problem
 from fieldapp.io.images import ImageError, read_color, read_depth_units, read_ir
-from fieldapp.io.session import Capture, Session, image_size_problems, load_session
+from fieldapp.io.session import Capture, Session, load_session
 
 
 @dataclass
@@ -43,18 +43,16 @@ class VerifyReport:
 
 
 def capture_file_problems(session: Session, capture: Capture) -> list[Problem]:
-    """Decode a capture's files and check their kinds and sizes."""
-    try:
-        depth = read_depth_units(session.path_of(capture.depth))
-        color = read_color(session.path_of(capture.color)) if capture.color else None
-        if capture.ir:
-            ir = read_ir(session.path_of(capture.ir))
-            if ir.shape != depth.shape:
-                return [Problem(str(session.path_of(capture.ir)), "ir", "size differs from depth")]
-    except ImageError as error:
-        return [error.problem]
-    color_hw = color.shape[:2] if color is not None else None
-    return image_size_problems(session, capture, depth.shape, color_hw)
+    """Check each of a capture's files: a regular file, its recorded checksum, its header's
+    kind and size (before decoding), then decodable. One problem per bad file."""
+    readers = {"depth": read_depth_units, "color": read_color, "ir": read_ir}
+    problems = []
+    for name, relative in capture.files().items():
+        try:
+            readers[name](session.path_of(relative), name, session.expected(capture, name))
+        except ImageError as error:
+            problems.append(error.problem)
+    return problems
 
 
 def verify_session(folder: Path) -> VerifyReport:

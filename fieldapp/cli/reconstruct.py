@@ -27,6 +27,7 @@ def register(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from rich.progress import Progress as Bar
 
+    from fieldapp.errors import FormatError
     from fieldapp.io.session import load_session
     from fieldapp.recon.outputs import write_outputs
     from fieldapp.recon.pipeline import reconstruct
@@ -36,7 +37,15 @@ def run(args: argparse.Namespace) -> int:
     settings = load_settings(args.settings).reconstruction
     if args.no_icp:
         settings.registration.enabled = False
-    session = load_session(args.session)
+    try:
+        session = load_session(args.session)
+    except FormatError as error:
+        for problem in error.problems:
+            print(f"problem: {problem}", file=sys.stderr)
+        print(
+            f"{args.session}: not reconstructed ({len(error.problems)} problems)", file=sys.stderr
+        )
+        return 1
     steps = reconstruct(session, settings)
     with Bar(disable=args.quiet, transient=True) as bar:
         task = bar.add_task("reconstructing", total=1.0)
@@ -49,13 +58,17 @@ def run(args: argparse.Namespace) -> int:
             bar.update(
                 task, completed=event.fraction, description=f"{event.stage}: {event.message}"
             )
-    write_outputs(
-        args.out,
-        result.rows(),
-        result.cloud,
-        {p.id: p.cloud for p in result.plants},
-        result.report(),
-    )
+    try:
+        write_outputs(
+            args.out,
+            result.rows(),
+            result.cloud,
+            {p.id: p.cloud for p in result.plants},
+            result.report(),
+        )
+    except OSError as error:
+        print(f"{args.out}: cannot write the results: {error.strerror or error}", file=sys.stderr)
+        return 1
     for warning in result.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     for line in result.separation_lines():

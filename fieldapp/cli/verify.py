@@ -13,8 +13,9 @@ def register(subparsers: Any) -> None:
         "verify",
         help="check a capture session folder against the session format",
         description="Check a session folder completely: session.json and calibration.json "
-        "against the spec, every referenced image present, decodable and of the right kind and "
-        "size, every matrix rigid. Exit 0 when usable; otherwise one line per problem.",
+        "against the spec, a physically possible calibration, every referenced image a regular "
+        "file inside the folder, matching its recorded SHA-256, decodable and of the right kind "
+        "and size, every matrix rigid. Exit 0 when usable; otherwise one line per problem.",
     )
     parser.add_argument("session", type=Path, help="the session folder")
     parser.set_defaults(handler=run)

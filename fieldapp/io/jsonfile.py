@@ -14,6 +14,7 @@ from pydantic_core import PydanticCustomError
 
 from devices.geometry import rigidity_problem
 from fieldapp.errors import FormatError, Problem
+from fieldapp.io.files import UnreadableFile, read_regular_file
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
@@ -32,25 +33,30 @@ def _reject_constant(name: str) -> float:
     raise ValueError(f"{name} is not a JSON number")
 
 
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{text} is out of the range of a number")
+    return value
+
+
 def read_json(path: Path) -> Any:
     """Parse ``path`` as strict JSON (no NaN/Infinity); raise :class:`FormatError` if it is not."""
     try:
-        if path.stat().st_size > MAX_JSON_BYTES:
-            raise FormatError([Problem(str(path), "", "file is too large to be a session file")])
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FormatError([Problem(str(path), "", "file is missing")]) from None
+        text = read_regular_file(path, MAX_JSON_BYTES, "a session file").decode("utf-8")
+    except UnreadableFile as error:
+        raise FormatError([Problem(str(path), "", str(error))]) from None
     except UnicodeDecodeError:
         raise FormatError([Problem(str(path), "", "not UTF-8 text")]) from None
-    except OSError as error:
-        raise FormatError([Problem(str(path), "", f"cannot read: {error.strerror}")]) from None
     try:
-        return json.loads(text, parse_constant=_reject_constant)
+        return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
     except json.JSONDecodeError as error:
         where = f"line {error.lineno} column {error.colno}"
         raise FormatError([Problem(str(path), where, f"malformed JSON: {error.msg}")]) from None
     except ValueError as error:
         raise FormatError([Problem(str(path), "", f"malformed JSON: {error}")]) from None
+    except RecursionError:
+        raise FormatError([Problem(str(path), "", "malformed JSON: nested too deeply")]) from None
 
 
 def validate_document(path: Path, document: Any, model: type[ModelT]) -> ModelT:

@@ -14,8 +14,17 @@ from pydantic import AfterValidator, Field, StrictInt
 
 from fieldapp.errors import FormatError, Problem
 from fieldapp.io.calibration import Calibration, FiniteFloat, SpecModel, load_calibration
-from fieldapp.io.images import ImageError, depth_units_to_m, read_color, read_depth_units, read_ir
+from fieldapp.io.files import resolves_inside
+from fieldapp.io.images import (
+    Expected,
+    ImageError,
+    depth_units_to_m,
+    read_color,
+    read_depth_units,
+    read_ir,
+)
 from fieldapp.io.jsonfile import load_model
+from fieldapp.io.plausible import MIN_VIEW_STEP_DEG, calibration_problems
 
 SESSION_FORMAT = "fieldapp-session/1"
 SESSION_FILE = "session.json"
@@ -37,6 +46,11 @@ def _relative_path(value: str) -> str:
 RelativePath = Annotated[str, AfterValidator(_relative_path)]
 """A path inside the session folder, forward slashes, never absolute or with ``..``."""
 
+Sha256Hex = Annotated[str, Field(pattern=r"^[0-9a-fA-F]{64}$")]
+"""A SHA-256 digest as 64 hex digits."""
+
+FILE_FIELDS = ("depth", "color", "ir")
+
 
 class BasePose(SpecModel):
     """The base's pose as it reported it (map frame, metres, degrees)."""
@@ -47,10 +61,12 @@ class BasePose(SpecModel):
 
 
 class Capture(SpecModel):
-    """One capture: a depth and (optionally) a colour image of view ``view`` at station
-    ``station``. A depth-only capture (a sensor or recording without colour) has no ``color``.
+    """One capture: a depth image of view ``view`` at station ``station``, and a colour image
+    registered to it unless the capture is depth-only.
 
-    Extra fields are kept, e.g. ``target`` (the calibration board a capture sees).
+    ``sha256`` names the SHA-256 of each file (``{"depth": hex, "color": hex}``) when the
+    writer recorded them. Extra fields are kept, e.g. ``target`` (the calibration board a
+    capture sees).
     """
 
     station: StrictInt = Field(ge=0)
@@ -61,6 +77,16 @@ class Capture(SpecModel):
     captured_at: datetime | None = None
     base_pose: BasePose | None = None
     ir: RelativePath | None = None
+    sha256: dict[str, Sha256Hex] | None = None
+
+    def checksum(self, name: str) -> str | None:
+        """The recorded SHA-256 of file ``name`` ("depth", "color", "ir"), if any."""
+        return (self.sha256 or {}).get(name)
+
+    def files(self) -> dict[str, str]:
+        """The capture's files by field name ("depth", "color", "ir"), relative paths."""
+        named = {name: getattr(self, name) for name in FILE_FIELDS}
+        return {name: path for name, path in named.items() if path}
 
     @property
     def key(self) -> tuple[int, int, str | None]:
@@ -124,20 +150,30 @@ class Session:
     def path_of(self, relative: str) -> Path:
         return self.folder / relative
 
+    def expected(self, capture: Capture, name: str) -> Expected:
+        """What file ``name`` of ``capture`` must be: the calibration's size, its checksum."""
+        camera = self.calibration.depth_camera
+        hw_from = "the calibration's" if name == "depth" else "the depth image's"
+        return Expected((camera.height, camera.width), hw_from, capture.checksum(name))
+
     def read_capture(self, capture: Capture, with_ir: bool = False) -> CaptureImages:
-        """Decode one capture's images; raises :class:`FormatError` naming the bad file."""
+        """Decode one capture's images, each checked for size and checksum before decoding;
+        raises :class:`FormatError` naming the bad file."""
         camera = self.calibration.depth_camera
         if capture.color is None:
             raise FormatError([depth_only_problem(self, capture)])
         try:
-            units = read_depth_units(self.path_of(capture.depth))
-            color = read_color(self.path_of(capture.color))
-            ir = read_ir(self.path_of(capture.ir)) if (with_ir and capture.ir) else None
+            units = read_depth_units(
+                self.path_of(capture.depth), expected=self.expected(capture, "depth")
+            )
+            color = read_color(
+                self.path_of(capture.color), expected=self.expected(capture, "color")
+            )
+            ir = None
+            if with_ir and capture.ir:
+                ir = read_ir(self.path_of(capture.ir), expected=self.expected(capture, "ir"))
         except ImageError as error:
             raise FormatError([error.problem]) from None
-        problems = image_size_problems(self, capture, units.shape, color.shape[:2])
-        if problems:
-            raise FormatError(problems)
         return CaptureImages(capture, depth_units_to_m(units, camera.depth_scale), color, ir)
 
     def iter_captures(self, with_ir: bool = False) -> Iterator[CaptureImages]:
@@ -173,49 +209,26 @@ def depth_only_problem(session: Session, capture: Capture) -> Problem:
     )
 
 
-def image_size_problems(
-    session: Session,
-    capture: Capture,
-    depth_hw: tuple[int, ...],
-    color_hw: tuple[int, ...] | None,
-) -> list[Problem]:
-    camera = session.calibration.depth_camera
-    expected = (camera.height, camera.width)
-    problems = []
-    if tuple(depth_hw) != expected:
-        problems.append(
-            Problem(
-                str(session.path_of(capture.depth)),
-                "depth",
-                f"size {depth_hw[1]} x {depth_hw[0]} differs from the calibration's "
-                f"{camera.width} x {camera.height}",
-            )
-        )
-    if color_hw is not None and capture.color and tuple(color_hw) != tuple(depth_hw):
-        problems.append(
-            Problem(
-                str(session.path_of(capture.color)),
-                "color",
-                f"size {color_hw[1]} x {color_hw[0]} differs from the depth image's "
-                f"{depth_hw[1]} x {depth_hw[0]}",
-            )
-        )
-    return problems
-
-
 def structure_problems(folder: Path, document: SessionDocument) -> list[Problem]:
-    """What is wrong with a valid document as a whole: escaping paths, duplicates."""
+    """What is wrong with a valid document as a whole: paths escaping the folder through
+    links, checksums of files the capture lacks, duplicates."""
     session_file = str(folder / SESSION_FILE)
     problems = []
     root = folder.resolve()
+    if resolves_inside(folder / document.calibration, root) is False:
+        problems.append(Problem(session_file, "calibration", "path escapes the folder"))
     seen: dict[tuple[int, int, str | None], int] = {}
     for index, capture in enumerate(document.captures):
-        for name in ("depth", "color", "ir"):
-            relative = getattr(capture, name)
-            if relative and not (folder / relative).resolve().is_relative_to(root):
+        files = capture.files()
+        for name, relative in files.items():
+            if resolves_inside(folder / relative, root) is False:
                 problems.append(
                     Problem(session_file, f"captures[{index}].{name}", "path escapes the folder")
                 )
+        for name in sorted(set(capture.sha256 or {}) & set(FILE_FIELDS) - set(files)):
+            problems.append(
+                Problem(session_file, f"captures[{index}].sha256.{name}", "names no file")
+            )
         if capture.key in seen:
             problems.append(
                 Problem(
@@ -244,6 +257,7 @@ def load_session(folder: Path, allow_empty: bool = False) -> Session:
     try:
         calibration = load_calibration(folder / document.calibration)
         problems += session_calibration_problems(folder / document.calibration, calibration)
+        problems += view_problems(folder, document, calibration)
     except FormatError as error:
         problems += error.problems
     if problems or calibration is None:
@@ -251,9 +265,29 @@ def load_session(folder: Path, allow_empty: bool = False) -> Session:
     return Session(folder, document, calibration)
 
 
+def view_problems(
+    folder: Path, document: SessionDocument, calibration: Calibration
+) -> list[Problem]:
+    """Every capture's view must be one of a turn's (view k: the table at k x the step)."""
+    if calibration.view_step is None or abs(calibration.view_step.angle_deg) < MIN_VIEW_STEP_DEG:
+        return []
+    views = calibration.view_step.views_per_turn
+    return [
+        Problem(
+            str(folder / SESSION_FILE),
+            f"captures[{index}].view",
+            f"view {capture.view} is beyond the {views} views of a turn "
+            f"(view_step.angle_deg {calibration.view_step.angle_deg:g})",
+        )
+        for index, capture in enumerate(document.captures)
+        if capture.view >= views
+    ]
+
+
 def session_calibration_problems(path: Path, calibration: Calibration) -> list[Problem]:
-    """A session's calibration must say how views and stations join."""
-    problems = []
+    """A session's calibration must be physically possible and say how views and stations
+    join."""
+    problems = calibration_problems(path, calibration)
     if calibration.view_step is None:
         problems.append(Problem(str(path), "view_step", "missing (needed to join the views)"))
     if calibration.stations is None:

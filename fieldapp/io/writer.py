@@ -1,9 +1,9 @@
 """Writing a session as it is captured: every capture lands durably or not at all.
 
 A capture's images are written first (each atomically), then ``session.json`` is rewritten
-atomically with the capture added. A crash at any point leaves a folder whose ``session.json``
-lists only complete captures; stray image files of an unlisted capture are overwritten when
-that capture is taken again.
+atomically with the capture added and the SHA-256 of each of its files. A crash at any point
+leaves a folder whose ``session.json`` lists only complete captures; stray image files of an
+unlisted capture are overwritten when that capture is taken again.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Calibration, save_calibration
 from fieldapp.io.durable import write_bytes_durably, write_json_durably
-from fieldapp.io.images import depth_m_to_units, encode_png
+from fieldapp.io.images import depth_m_to_units, encode_png, sha256_hex
 from fieldapp.io.session import (
     SESSION_FILE,
     SESSION_FORMAT,
@@ -111,14 +111,13 @@ class SessionWriter:
             if self.has(station, view, target):
                 raise FieldappError(f"station {station} view {view} is already captured")
             paths = capture_paths(station, view, target)
-            folder = self.session.folder
-            write_bytes_durably(
-                folder / paths["depth"], encode_png(depth_m_to_units(depth_m, camera.depth_scale))
-            )
+            encoded = {"depth": encode_png(depth_m_to_units(depth_m, camera.depth_scale))}
             if color is not None:
-                write_bytes_durably(folder / paths["color"], encode_png(color, rgb=True))
+                encoded["color"] = encode_png(color, rgb=True)
             if ir is not None:
-                write_bytes_durably(folder / paths["ir"], encode_png(ir))
+                encoded["ir"] = encode_png(ir)
+            for name, data in encoded.items():
+                write_bytes_durably(self.session.folder / paths[name], data)
             fields: dict[str, Any] = {"target": target} if target else {}
             capture = Capture(
                 station=station,
@@ -129,6 +128,7 @@ class SessionWriter:
                 angle_deg=angle_deg,
                 captured_at=now_iso(),
                 base_pose=base_pose,
+                sha256={name: sha256_hex(data) for name, data in encoded.items()},
                 **fields,
                 **extra,
             )

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fieldapp.errors import FormatError, Problem
+from fieldapp.errors import FormatError
 from fieldapp.io.images import ImageError, depth_units_to_m, read_depth_units
 from fieldapp.io.session import Capture, CaptureImages, Session
 
@@ -23,19 +23,10 @@ def read_scan_capture(session: Session, capture: Capture) -> CaptureImages:
         return session.read_capture(capture)
     camera = session.calibration.depth_camera
     try:
-        units = read_depth_units(session.path_of(capture.depth))
+        units = read_depth_units(
+            session.path_of(capture.depth), expected=session.expected(capture, "depth")
+        )
     except ImageError as error:
         raise FormatError([error.problem]) from None
-    if units.shape != (camera.height, camera.width):
-        raise FormatError(
-            [
-                Problem(
-                    str(session.path_of(capture.depth)),
-                    "depth",
-                    f"size {units.shape[1]} x {units.shape[0]} differs from the calibration's "
-                    f"{camera.width} x {camera.height}",
-                )
-            ]
-        )
     grey = np.full((*units.shape, 3), NEUTRAL_GREY, dtype=np.uint8)
     return CaptureImages(capture, depth_units_to_m(units, camera.depth_scale), grey)

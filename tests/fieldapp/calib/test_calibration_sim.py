@@ -154,6 +154,8 @@ def _copy(session: Path, tmp_path: Path) -> Path:
     document["captures"] = [
         c for c in document["captures"] if c["station"] == 5 and c["view"] in (0, 1)
     ]
+    for capture in document["captures"]:  # the tests repaint images: no recorded checksums
+        capture.pop("sha256", None)
     (target / "session.json").write_text(json.dumps(document))
     return target
 
