@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from fieldapp.cli import main
-from fieldapp.io import images
 
 DEPTH = "frames/s05/v0/depth.png"
 
@@ -74,13 +73,13 @@ def test_a_png_claiming_100000_squared_pixels_is_refused_before_decoding(
     bomb = png_header_only(100_000, 100_000)
     (folder / DEPTH).write_bytes(bomb)
     decoded: list[bytes] = []
-    real_imdecode = images.cv2.imdecode
+    real_imdecode = cv2.imdecode
 
     def spy(buffer, flags):
         decoded.append(bytes(buffer))
         return real_imdecode(buffer, flags)
 
-    monkeypatch.setattr(images.cv2, "imdecode", spy)
+    monkeypatch.setattr(cv2, "imdecode", spy)  # images.py imports OpenCV where it decodes
     for command in (verify, reconstruct):
         code, err = command(folder, capsys)
         found = lines_with(err, str(folder / DEPTH), "100000 x 100000")
