@@ -55,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
         result.cloud,
         {p.id: p.cloud for p in result.plants},
         result.report(),
+        **result.output_extras(),
     )
     for warning in result.warnings:
         print(f"warning: {warning}", file=sys.stderr)
