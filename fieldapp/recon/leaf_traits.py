@@ -62,22 +62,22 @@ def measure_leaf(
     _along, radial = axis.split(points_m)
     sources = np.flatnonzero(radial <= radial.min() + SOURCE_BAND_M)
     distance = geodesic_m(points_m, sources)
-    levels = np.floor(distance / LEVEL_M).astype(np.intp)
-    centres, widths = [], []
-    for level in np.unique(levels):
-        members = points_m[levels == level]
-        if len(members) >= 3:
-            centres.append(members.mean(axis=0))
-    centres_m = np.array(centres) if centres else points_m.mean(axis=0, keepdims=True)
+    sections = [s for s in _level_sets(points_m, distance) if len(s) >= 3]
+    centres_m = (
+        np.array([s.mean(axis=0) for s in sections])
+        if sections
+        else points_m.mean(axis=0, keepdims=True)
+    )
     tip = points_m[int(np.argmax(distance))]
     extension = _collar(centres_m, axis, stem_radius_m)
     collar = extension[0]
     midrib = np.vstack([extension, centres_m, tip])
-    used = [level for level in np.unique(levels) if (levels == level).sum() >= 3]
-    for i, level in enumerate(used):
-        members = points_m[levels == level]
-        tangent = centres_m[min(i + 1, len(centres_m) - 1)] - centres_m[max(i - 1, 0)]
-        widths.append(section_width_m(members, tangent))
+    widths = [
+        section_width_m(
+            members, centres_m[min(i + 1, len(centres_m) - 1)] - centres_m[max(i - 1, 0)]
+        )
+        for i, members in enumerate(sections)
+    ]
     width = _running_median(np.array(widths))
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(midrib, axis=0), axis=1))])
     first = width[0] if len(width) else 0.0
@@ -92,6 +92,16 @@ def measure_leaf(
         insertion_height_m=float(collar[2] - axis.foot_m[2]),
         midrib_m=midrib,
     )
+
+
+def _level_sets(
+    points_m: NDArray[np.float64], distance: NDArray[np.float64]
+) -> list[NDArray[np.float64]]:
+    """The points (K, 3) of each :data:`LEVEL_M` level set of ``distance``, nearest first."""
+    levels = np.floor(distance / LEVEL_M).astype(np.intp)
+    order = np.argsort(levels, kind="stable")
+    _, starts = np.unique(levels[order], return_index=True)
+    return np.split(points_m[order], starts[1:])
 
 
 def geodesic_m(points_m: NDArray[np.float64], sources: NDArray[np.intp]) -> NDArray[np.float64]:
@@ -147,21 +157,26 @@ def section_width_m(members_m: NDArray[np.float64], tangent: NDArray[np.float64]
     q = q - np.outer(q @ t, t)
     _, _, vt = np.linalg.svd(q, full_matrices=False)
     across, height = q @ vt[0], q @ vt[1]
-    low, high = np.percentile(across, [EDGE_QUANTILE, 100.0 - EDGE_QUANTILE])
-    span = float(high - low) / (1.0 - 2.0 * EDGE_QUANTILE / 100.0)
-    curve = np.polynomial.polynomial.polyfit(across, height, 2)
-    x = np.linspace(float(across.min()), float(across.max()), 32)
-    y = np.polynomial.polynomial.polyval(x, curve)
+    ordered = np.sort(across)
+    edge = round(EDGE_QUANTILE / 100.0 * (len(ordered) - 1))
+    span = float(ordered[-1 - edge] - ordered[edge]) / (1.0 - 2.0 * edge / (len(ordered) - 1))
+    design = np.stack([np.ones_like(across), across, across * across], axis=1)
+    curve = np.linalg.solve(design.T @ design + 1e-12 * np.eye(3), design.T @ height)
+    x = np.linspace(float(ordered[0]), float(ordered[-1]), 32)
+    y = curve[0] + curve[1] * x + curve[2] * x * x
     chord = float(x[-1] - x[0])
     arc = float(np.hypot(np.diff(x), np.diff(y)).sum())
     return span * (arc / chord if chord > 0 else 1.0)
 
 
-def _running_median(values: NDArray[np.float64]) -> NDArray[np.float64]:
-    if len(values) < 3:
+def _running_median(values: NDArray[np.float64], half: int = 1) -> NDArray[np.float64]:
+    """``values`` (K,) through a running median of ``2 * half + 1`` (ends repeated): a section
+    spoilt by a touching leaf or the stem's noise does not make the leaf's width."""
+    if len(values) < 2 * half + 1:
         return values
-    padded = np.concatenate([[values[0]], values, [values[-1]]])
-    return np.median(np.stack([padded[:-2], padded[1:-1], padded[2:]]), axis=0)  # type: ignore[no-any-return]
+    padded = np.concatenate([np.full(half, values[0]), values, np.full(half, values[-1])])
+    windows = np.stack([padded[i : i + len(values)] for i in range(2 * half + 1)])
+    return np.median(windows, axis=0)  # type: ignore[no-any-return]
 
 
 def angle_from_axis_deg(

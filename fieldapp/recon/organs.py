@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 ORGAN_NONE, ORGAN_STEM, ORGAN_LEAF, ORGAN_WHORL = 0, 1, 2, 3
@@ -63,6 +63,13 @@ MIN_LEAF_EXTENT_M = 0.04
 
 TOUCH_M = 0.012
 """A component reaching within this of the cylinder leaves the stem (is a leaf's base)."""
+
+SHELL_GAP_M = 0.005
+SHELL_LINK_M = 0.006
+SHELL_REACH_M = 0.06
+"""Leaves grow back into the stem's cylinder down to the stem's radius plus
+:data:`SHELL_GAP_M`, along links of :data:`SHELL_LINK_M`, at most :data:`SHELL_REACH_M` along
+them."""
 
 FRAGMENT_JOIN_M = 0.06
 """A fragment joins the nearest leaf within this distance; farther, it stays unassigned."""
@@ -172,6 +179,7 @@ def segment_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -
     outside = np.flatnonzero(radial > cut)
     labels = _components(points_m[outside])
     leaves = _leaves_from_components(points_m, outside, labels, radial, cut)
+    leaves = _grow_into_shell(points_m, leaves, radial, stem_radius + SHELL_GAP_M, cut)
     starts = [float(along[leaf][np.argmin(radial[leaf])]) for leaf in leaves]
     leaves = [leaves[i] for i in np.argsort(starts, kind="stable")]
     organ = np.where(radial <= cut, ORGAN_STEM, ORGAN_NONE).astype(np.uint8)
@@ -183,6 +191,44 @@ def segment_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -
         top_insertion = max(starts)
         organ[(organ == ORGAN_STEM) & (along > top_insertion)] = ORGAN_WHORL
     return Organs(organ, leaf_id, axis, stem_radius, cut, leaves)
+
+
+def _grow_into_shell(
+    points_m: NDArray[np.float64],
+    leaves: list[NDArray[np.intp]],
+    radial: NDArray[np.float64],
+    inner_m: float,
+    cut_m: float,
+) -> list[NDArray[np.intp]]:
+    """Leaves grown back into the stem's cylinder down to ``inner_m`` from the axis: each point
+    of that shell joins the leaf it is nearest to along :data:`SHELL_LINK_M` links (within
+    :data:`SHELL_REACH_M`). A leaf standing up beside the whorl runs for centimetres inside the
+    cylinder before it leaves it."""
+    if not leaves:
+        return leaves
+    shell = np.flatnonzero((radial > inner_m) & (radial <= cut_m))
+    bases = [leaf[radial[leaf] <= cut_m + SHELL_REACH_M] for leaf in leaves]
+    region = np.concatenate([*bases, shell])
+    owner = np.concatenate(
+        [np.full(len(b), k) for k, b in enumerate(bases)] + [np.full(len(shell), -1)]
+    )
+    if len(shell) == 0 or len(region) == len(shell):
+        return leaves
+    region_points = points_m[region]
+    pairs = cKDTree(region_points).query_pairs(SHELL_LINK_M, output_type="ndarray")
+    length = np.linalg.norm(region_points[pairs[:, 0]] - region_points[pairs[:, 1]], axis=1)
+    graph = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(region),) * 2)
+    starts = np.flatnonzero(owner >= 0)
+    distance, _, source = dijkstra(
+        graph.tocsr(), directed=False, indices=starts, min_only=True, return_predecessors=True
+    )
+    grown = list(leaves)
+    in_shell = np.arange(len(region)) >= len(region) - len(shell)
+    reached = in_shell & (distance <= SHELL_REACH_M)
+    for k in range(len(leaves)):
+        joined = region[reached & (owner[np.maximum(source, 0)] == k)]
+        grown[k] = np.unique(np.concatenate([leaves[k], joined]))
+    return grown
 
 
 def voxel_means(
