@@ -60,6 +60,19 @@ def pair_leaves(
     ]
 
 
+def pair_leaves_by_id(
+    found: list[dict[str, Any]], reference: list[dict[str, Any]]
+) -> list[tuple[int, int]]:
+    """Pairs of leaves with the same ``leaf_id`` (numbered from the bottom): how hand
+    measurements, which rarely note azimuths, are paired."""
+    index = {int(leaf["leaf_id"]): j for j, leaf in enumerate(reference)}
+    return [
+        (i, index[int(leaf["leaf_id"])])
+        for i, leaf in enumerate(found)
+        if int(leaf["leaf_id"]) in index
+    ]
+
+
 @dataclass(frozen=True)
 class PlantOrganPair:
     """One plant and its reference: the plant-level values and the paired leaves."""
@@ -79,10 +92,13 @@ def pair_plant(
     found: dict[str, Any],
     found_leaves: list[dict[str, Any]],
     expected: dict[str, Any],
+    by_id: bool = False,
 ) -> PlantOrganPair:
-    """Pair ``found_leaves`` with the reference's ``expected["leaves"]``."""
+    """Pair ``found_leaves`` with the reference's ``expected["leaves"]``: by where they leave
+    the stem, or ``by_id`` by their numbers from the bottom."""
     reference_leaves = list(expected.get("leaves") or [])
-    pairs = pair_leaves(found_leaves, reference_leaves)
+    pairing = pair_leaves_by_id if by_id else pair_leaves
+    pairs = pairing(found_leaves, reference_leaves)
     return PlantOrganPair(
         plant=plant,
         reference=reference,
