@@ -84,19 +84,17 @@ def test_each_leaf_instance_holds_one_true_leaf(measured: list) -> None:
 
 
 def test_leaf_traits_against_the_truth(measured: list) -> None:
-    """Bounds of the mesh-sampled plants (12 seeds): the issue's targets for width, area and
-    azimuth; length and angle a little looser than on rendered sessions (the sampled mesh has
-    the leaf's inside of the stem and no occlusion, the collar is found farther out): measured
-    1.33 cm and 5.5 degrees. The end-to-end test checks the issue's targets."""
+    """The issue's targets on the mesh-sampled plants (12 seeds; measured: length RMSE 0.82 cm,
+    width 0.15 cm, angle 3.0 degrees)."""
     pairs = _leaf_pairs(measured)
     diff = {
         key: np.array([f[key] - t[key] for f, t in pairs])
         for key in ("length_cm", "max_width_cm", "area_cm2", "angle_from_stem_deg")
     }
     rmse = {key: float(np.sqrt(np.mean(d**2))) for key, d in diff.items()}
-    assert rmse["length_cm"] <= 1.5
+    assert rmse["length_cm"] <= 1.0
     assert rmse["max_width_cm"] <= 0.3
-    assert rmse["angle_from_stem_deg"] <= 6.0
+    assert rmse["angle_from_stem_deg"] <= 5.0
     mape = np.mean([abs(f["area_cm2"] - t["area_cm2"]) / t["area_cm2"] for f, t in pairs])
     assert mape <= 0.08
     azimuth = [azimuth_difference_deg(f["azimuth_deg"], t["azimuth_deg"]) for f, t in pairs]
