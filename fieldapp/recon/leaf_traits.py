@@ -155,8 +155,8 @@ def section_width_m(members_m: NDArray[np.float64], tangent: NDArray[np.float64]
     t = tangent / norm
     q = members_m - members_m.mean(axis=0)
     q = q - np.outer(q @ t, t)
-    _, _, vt = np.linalg.svd(q, full_matrices=False)
-    across, height = q @ vt[0], q @ vt[1]
+    _, vectors = np.linalg.eigh(q.T @ q)
+    across, height = q @ vectors[:, 2], q @ vectors[:, 1]
     ordered = np.sort(across)
     edge = round(EDGE_QUANTILE / 100.0 * (len(ordered) - 1))
     span = float(ordered[-1 - edge] - ordered[edge]) / (1.0 - 2.0 * edge / (len(ordered) - 1))

@@ -147,19 +147,16 @@ def _stem_like(points_m: NDArray[np.float64]) -> NDArray[np.bool_]:
     if n < 6:
         return np.zeros(n, dtype=bool)
     pairs = cKDTree(points_m).query_pairs(SHAPE_RADIUS_M, output_type="ndarray")
-    first = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(n)])
-    second = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(n)])
-    count = np.bincount(first, minlength=n).astype(np.float64)
-    others = points_m[second]
-    mean = np.stack([np.bincount(first, others[:, i], n) for i in range(3)], 1) / count[:, None]
-    outer = others[:, :, None] * others[:, None, :]
-    moments = (
-        np.stack(
-            [np.bincount(first, outer[:, i, j], n) for i in range(3) for j in range(3)], 1
-        ).reshape(n, 3, 3)
-        / count[:, None, None]
-    )
-    covariance = moments - mean[:, :, None] * mean[:, None, :]
+    rows = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(n)])
+    cols = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(n)])
+    neighbours = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)).tocsr()
+    count = np.asarray(neighbours.sum(axis=1)).ravel()
+    x, y, z = points_m.T
+    sums = neighbours @ np.stack([x, y, z, x * x, y * y, z * z, x * y, x * z, y * z], axis=1)
+    sums /= count[:, None]
+    mean = sums[:, :3]
+    second = sums[:, [3, 6, 7, 6, 4, 8, 7, 8, 5]].reshape(n, 3, 3)
+    covariance = second - mean[:, :, None] * mean[:, None, :]
     eigenvalues, eigenvectors = np.linalg.eigh(covariance)
     l2, l1 = eigenvalues[:, 1], eigenvalues[:, 2]
     linearity = (l1 - l2) / np.maximum(l1, 1e-12)
@@ -237,8 +234,10 @@ def voxel_means(
     """The mean point (V, 3) of every occupied ``voxel_m`` voxel and each point's voxel (N,):
     the graphs are built on these, a few per square centimetre of leaf."""
     cells = np.floor(points_m / voxel_m).astype(np.int64)
-    _, inverse = np.unique(cells, axis=0, return_inverse=True)
-    inverse = inverse.ravel()
+    cells -= cells.min(axis=0)
+    span = cells.max(axis=0) + 1
+    keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+    _, inverse = np.unique(keys, return_inverse=True)
     count = np.bincount(inverse).astype(np.float64)
     means = np.stack([np.bincount(inverse, points_m[:, i]) for i in range(3)], 1) / count[:, None]
     return means, inverse.astype(np.intp)
