@@ -153,3 +153,14 @@ def test_bad_leaf_cells_are_named(tmp_path: Path, text: str, where: str) -> None
     with pytest.raises(FormatError) as error:
         read_table(path, ("plant_id", "leaf_id"))
     assert where in str(error.value) and str(path) in str(error.value)
+
+
+def test_the_html_report_lists_plants_organs_and_leaves(tmp_path: Path) -> None:
+    from fieldapp.evaluate.report import organs_section
+
+    results = _results(tmp_path / "out")
+    text = organs_section(results)
+    assert text.count("<tr>") == 1 + 2 + 1 + 3  # plants header + 2, leaves header + 3
+    assert "<td>19.00</td>" in text and "3 leaves" in text
+    (results / "leaves.csv").unlink()
+    assert "not measured" in organs_section(results)
