@@ -64,6 +64,11 @@ MIN_LEAF_EXTENT_M = 0.04
 TOUCH_M = 0.012
 """A component reaching within this of the cylinder leaves the stem (is a leaf's base)."""
 
+BASE_LINK_M = 0.015
+MIN_BASE_POINTS = 15
+"""A branch's base points (within :data:`TOUCH_M` of the cylinder) linked within
+:data:`BASE_LINK_M`; two groups of :data:`MIN_BASE_POINTS` or more are two leaves."""
+
 SHELL_GAP_M = 0.005
 SHELL_LINK_M = 0.006
 SHELL_REACH_M = 0.06
@@ -255,6 +260,42 @@ def _components(points_m: NDArray[np.float64]) -> NDArray[np.intp]:
     return labels[inverse].astype(np.intp)  # type: ignore[no-any-return]
 
 
+def _split_at_bases(
+    points_m: NDArray[np.float64],
+    members: NDArray[np.intp],
+    radial: NDArray[np.float64],
+    cut_m: float,
+) -> list[NDArray[np.intp]]:
+    """One branch per base: a branch leaving the stem at two places (two leaves touching
+    further out) is split, each point going to the base it is nearest to along the branch."""
+    base = members[radial[members] < cut_m + TOUCH_M]
+    groups = _components_linked(points_m[base], BASE_LINK_M)
+    sizes = np.bincount(groups)
+    kept = np.flatnonzero(sizes >= MIN_BASE_POINTS)
+    if len(kept) < 2:
+        return [members]
+    means, inverse = voxel_means(points_m[members])
+    pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
+    length = np.linalg.norm(means[pairs[:, 0]] - means[pairs[:, 1]], axis=1)
+    graph = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(means),) * 2)
+    position = {int(v): i for i, v in enumerate(members)}
+    distances = []
+    for group in kept:
+        starts = np.unique(inverse[[position[int(v)] for v in base[groups == group]]])
+        distances.append(dijkstra(graph.tocsr(), directed=False, indices=starts, min_only=True))
+    owner = np.argmin(np.stack(distances), axis=0)[inverse]
+    return [members[owner == k] for k in range(len(kept)) if np.any(owner == k)]
+
+
+def _components_linked(points_m: NDArray[np.float64], link_m: float) -> NDArray[np.intp]:
+    """(N,) component of every point, points closer than ``link_m`` linked."""
+    pairs = cKDTree(points_m).query_pairs(link_m, output_type="ndarray")
+    graph = coo_matrix(
+        (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points_m),) * 2
+    )
+    return connected_components(graph, directed=False)[1].astype(np.intp)  # type: ignore[no-any-return]
+
+
 def _leaves_from_components(
     points_m: NDArray[np.float64],
     outside: NDArray[np.intp],
@@ -273,7 +314,7 @@ def _leaves_from_components(
         extent = float(np.ptp(points_m[members], axis=0).max())
         reaches = float(radial[members].min()) < cut_m + TOUCH_M
         if reaches and len(members) >= MIN_LEAF_POINTS and extent >= MIN_LEAF_EXTENT_M:
-            leaves.append(members)
+            leaves += _split_at_bases(points_m, members, radial, cut_m)
         else:
             pieces.append(members)
     if not leaves:
