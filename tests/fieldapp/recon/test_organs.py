@@ -172,3 +172,22 @@ def test_the_simulator_truth_of_a_plant_built_by_hand() -> None:
 def test_simulated_seedlings_have_five_to_eight_leaves() -> None:
     counts = [organ_truth(make_plant(seed, 0, (0, 0), 0.0))["leaf_count"] for seed in range(40)]
     assert min(counts) >= 5 and max(counts) <= 8
+
+
+@pytest.mark.parametrize(
+    "points",
+    [
+        np.random.default_rng(0).random((3000, 3)) * [0.3, 0.3, 0.4],
+        np.c_[np.random.default_rng(1).random((2000, 2)) * 0.3, np.full(2000, 0.05)],
+        np.random.default_rng(2).random((5, 3)) * 0.1,
+        np.array([[0.0, 0.0, 0.1]]),
+        np.tile([[0.0, 0.0, 0.1]], (300, 1)),
+    ],
+    ids=["box", "flat", "five", "one", "repeated"],
+)
+def test_whatever_a_segmentation_hands_over_is_measured_without_failing(points) -> None:
+    organs = measure_organs(points, np.zeros(3))
+    assert len(organs.organs.organ) == len(points)
+    assert organs.leaf_count == len(organs.organs.leaves)
+    with pytest.raises(ValueError, match="without points"):
+        measure_organs(np.zeros((0, 3)), np.zeros(3))
