@@ -26,6 +26,8 @@ LEAF_RGB = np.array([0.14, 0.36, 0.06], dtype=np.float32)
 STEM_RGB = np.array([0.45, 0.55, 0.25], dtype=np.float32)
 LEAF_IR = 0.55
 """Near-infrared albedo of green leaves (high: the red edge)."""
+STEM_PART = -1
+"""``PlantMesh.organ_of_vertex`` of the stem's vertices."""
 
 
 @dataclass(frozen=True)
@@ -35,6 +37,8 @@ class PlantMesh:
     - ``vertices_m``: (V, 3) float64; ``triangles``: (T, 3) int32.
     - ``albedo_rgb``: (V, 3) float32 0-1; ``albedo_ir``: (V,) float32.
     - ``base_m``: (3,) the stem's foot on the ground.
+    - ``organ_of_vertex``: (V,) int16, :data:`STEM_PART` for the stem, k for leaf k (0 lowest);
+      ``None`` when unknown. The organ truth (:mod:`devices.sim.organ_truth`) is read from it.
     """
 
     vertices_m: NDArray[np.float64]
@@ -42,6 +46,7 @@ class PlantMesh:
     albedo_rgb: NDArray[np.float32]
     albedo_ir: NDArray[np.float32]
     base_m: NDArray[np.float64]
+    organ_of_vertex: NDArray[np.int16] | None = None
 
     @property
     def height_m(self) -> float:
@@ -84,6 +89,9 @@ def make_plant(seed: int, day: int, base_xy_m: tuple[float, float], ground_z_m: 
     vertices = np.concatenate([p[0] for p in parts])
     triangles = np.concatenate(_offset_triangles([p[1] for p in parts])).astype(np.int32)
     albedo = np.concatenate([p[2] for p in parts])
+    organ = np.concatenate(
+        [np.full(len(p[0]), k - 1 if k else STEM_PART, np.int16) for k, p in enumerate(parts)]
+    )
     leaning = (
         rotation_z(np.degrees(lean_dir)) @ rotation_x(lean_deg) @ rotation_z(-np.degrees(lean_dir))
     )
@@ -98,6 +106,7 @@ def make_plant(seed: int, day: int, base_xy_m: tuple[float, float], ground_z_m: 
         albedo_rgb=(albedo * shade).astype(np.float32),
         albedo_ir=np.full(len(vertices), LEAF_IR, np.float32),
         base_m=base,
+        organ_of_vertex=organ,
     )
 
 
@@ -109,7 +118,9 @@ def settle_on_ground(mesh: PlantMesh, ground_z_m: NDArray[np.float64]) -> PlantM
     floor = ground_z_m + 0.005
     lift = above_foot & (vertices[:, 2] < floor)
     vertices[lift, 2] = floor[lift]
-    return PlantMesh(vertices, mesh.triangles, mesh.albedo_rgb, mesh.albedo_ir, mesh.base_m)
+    return PlantMesh(
+        vertices, mesh.triangles, mesh.albedo_rgb, mesh.albedo_ir, mesh.base_m, mesh.organ_of_vertex
+    )
 
 
 def _offset_triangles(parts: list[NDArray[np.int64]]) -> list[NDArray[np.int64]]:

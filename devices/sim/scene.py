@@ -7,13 +7,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import open3d as o3d
 from numpy.typing import NDArray
 
 from devices.sim.boards import PlacedBoard
+from devices.sim.organ_truth import organ_truth
 from devices.sim.plants import PlantMesh, make_plant, settle_on_ground
 from devices.sim.soil import Soil, SoilSpec
 
@@ -44,7 +45,8 @@ class Body:
 
 @dataclass(frozen=True)
 class PlantTruth:
-    """A plant's base (``x_m``, ``y_m``, ground height ``z_m`` there) and traits."""
+    """A plant's base (``x_m``, ``y_m``, ground height ``z_m`` there) and traits; ``organs``:
+    the stem's diameter and every leaf (:func:`devices.sim.organ_truth.organ_truth`)."""
 
     name: str
     x_m: float
@@ -52,6 +54,7 @@ class PlantTruth:
     z_m: float
     height_cm: float
     width_cm: float
+    organs: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -78,7 +81,10 @@ class Scene:
             Body(name, "plant", mesh.vertices_m, mesh.triangles, mesh.albedo_rgb, mesh.albedo_ir)
         )
         x, y, z = (float(v) for v in mesh.base_m)
-        self.plants.append(PlantTruth(name, x, y, z, 100 * mesh.height_m, 100 * mesh.width_m))
+        organs = organ_truth(mesh) if mesh.organ_of_vertex is not None else None
+        self.plants.append(
+            PlantTruth(name, x, y, z, 100 * mesh.height_m, 100 * mesh.width_m, organs)
+        )
 
     def add_sphere(self, name: str, x_m: float, y_m: float, diameter_mm: float) -> None:
         """A foam sphere resting on the soil at (``x_m``, ``y_m``)."""

@@ -1,6 +1,8 @@
 """``truth.json``: what was really there and where the camera really stood.
 
-Issue 3's fields (``plants``, ``spheres``, ``T_field_camera`` of view 0 of every station) plus
+Issue 3's fields (``plants`` with, per plant, the organ truth of
+:mod:`devices.sim.organ_truth`: ``stem_diameter_mm``, ``leaf_count``, ``leaf_area_cm2`` and
+``leaves``; ``spheres``, ``T_field_camera`` of view 0 of every station) plus
 ``boards`` (geometry, pose, corners), ``captures`` (true pose and angle of every capture),
 ``intrinsics`` and the rig's nominal geometry.
 """
@@ -60,6 +62,7 @@ def truth_document(
                 "z_m": p.z_m,
                 "height_cm": p.height_cm,
                 "width_cm": p.width_cm,
+                **(p.organs or {}),
             }
             for p in scene.plants
         ],

@@ -86,7 +86,14 @@ def reconstruct_session(
         folder = results_folder(Path(out_dir), session_id)
         result = run_reconstruction(session, parsed)
         plant_clouds = {p.id: p.cloud for p in result.plants}
-        write_outputs(folder, result.rows(), result.cloud, plant_clouds, result.report())
+        write_outputs(
+            folder,
+            result.rows(),
+            result.cloud,
+            plant_clouds,
+            result.report(),
+            **result.output_extras(),
+        )
     except (FieldappError, OSError, ValueError) as error:
         log.warning("%s: %s", session_dir, error)
         return summary.failed(session_id, f"{type(error).__name__}: {error}")

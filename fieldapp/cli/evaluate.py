@@ -1,4 +1,5 @@
-"""``fieldapp evaluate traits|spheres RESULTS_DIR``: the paper's two accuracy checks."""
+"""``fieldapp evaluate traits|organs|spheres RESULTS_DIR``: the paper's two accuracy checks
+and the organ traits'."""
 
 from __future__ import annotations
 
@@ -31,6 +32,25 @@ def register(subparsers: Any) -> None:
     )
     traits.add_argument("--out", type=Path, help="folder for CSV and PNG (RESULTS/evaluation)")
     traits.set_defaults(handler=run_traits)
+    organs = checks.add_parser(
+        "organs",
+        help="leaf count, leaf traits and stem diameter against hand measurements or a truth",
+        description="Leaves paired within paired plants (by azimuth and insertion height "
+        "against a truth, by leaf number against hand measurements); n, R2, RMSE, MAPE, bias "
+        "and Bland-Altman limits of every leaf trait, of the leaf count, leaf area and stem "
+        "diameter; leaves found but not in the reference and the reverse.",
+    )
+    organs.add_argument("results", type=Path, help="the reconstruction's output folder")
+    organ_reference = organs.add_mutually_exclusive_group(required=True)
+    organ_reference.add_argument(
+        "--manual-leaves", type=Path, help="hand-measured leaves, leaves.csv's columns"
+    )
+    organ_reference.add_argument("--truth", type=Path, help="a simulator's truth.json")
+    organs.add_argument(
+        "--max-distance-m", type=float, default=0.15, help="--truth: pairing bound (0.15 m)"
+    )
+    organs.add_argument("--out", type=Path, help="folder for the CSV (RESULTS/evaluation)")
+    organs.set_defaults(handler=run_organs)
     spheres = checks.add_parser(
         "spheres",
         help="distance of the points of reference spheres to their ideal spheres",
@@ -88,6 +108,66 @@ def run_traits(args: argparse.Namespace) -> int:
         print(f"warning: {warning}")
     out = args.out or args.results / "evaluation"
     written = write_trait_evaluation(out, evaluation)
+    print(f"{len(written)} files -> {out}")
+    return 0
+
+
+def run_organs(args: argparse.Namespace) -> int:
+    from fieldapp.evaluate.organ_files import (
+        leaves_by_plant,
+        read_table,
+        summary_lines,
+        write_organ_evaluation,
+    )
+    from fieldapp.evaluate.organs import PlantOrganPair, evaluate_organs, pair_plant
+    from fieldapp.evaluate.references import load_truth, pair_with_truth
+    from fieldapp.results.files import read_plants_csv
+
+    if args.max_distance_m <= 0:
+        raise FieldappError("--max-distance-m must be positive")
+    plants = {int(r["plant"]): r for r in read_table(args.results / "plants.csv", ("plant",))}
+    found = leaves_by_plant(read_table(args.results / "leaves.csv", ("plant_id", "leaf_id")))
+    pairs: list[PlantOrganPair] = []
+    if args.truth is not None:
+        truth = {p.name: p.model_dump() for p in load_truth(args.truth).plants}
+        pairing = pair_with_truth(
+            read_plants_csv(args.results / "plants.csv"),
+            list(load_truth(args.truth).plants),
+            args.max_distance_m,
+        )
+        for p in pairing.pairs:
+            leaves = found.get(p.plant, [])
+            pairs.append(
+                pair_plant(p.plant, p.reference, plants[p.plant], leaves, truth[p.reference])
+            )
+    else:
+        manual = leaves_by_plant(read_table(args.manual_leaves, ("plant_id", "leaf_id")))
+        for plant_id, leaves in sorted(manual.items()):
+            if plant_id not in plants:
+                print(f"warning: plant {plant_id} of {args.manual_leaves} is not in plants.csv")
+                continue
+            areas = [leaf.get("area_cm2") for leaf in leaves]
+            known = [float(a) for a in areas if a is not None]
+            expected = {
+                "leaf_count": len(leaves),
+                "leaf_area_cm2": sum(known) if len(known) == len(areas) else None,
+                "leaves": leaves,
+            }
+            pairs.append(
+                pair_plant(
+                    plant_id,
+                    str(plant_id),
+                    plants[plant_id],
+                    found.get(plant_id, []),
+                    expected,
+                    by_id=True,
+                )
+            )
+    evaluation = evaluate_organs(pairs)
+    for line in summary_lines(evaluation):
+        print(line)
+    out = args.out or args.results / "evaluation"
+    written = write_organ_evaluation(out, evaluation)
     print(f"{len(written)} files -> {out}")
     return 0
 

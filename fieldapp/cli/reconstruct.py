@@ -65,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
             result.cloud,
             {p.id: p.cloud for p in result.plants},
             result.report(),
+            **result.output_extras(),
         )
     except OSError as error:
         print(f"{args.out}: cannot write the results: {error.strerror or error}", file=sys.stderr)

@@ -1,6 +1,6 @@
 """One self-contained HTML report of a reconstruction (images embedded as base64 PNG):
-session summary, calibration used, registration quality, plant table, top-down map, figures,
-warnings."""
+session summary, calibration used, registration quality, plant table, organs (plants and
+leaves), top-down map, figures, warnings."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ import numpy as np
 from fieldapp import __version__
 from fieldapp.evaluate.traits import TraitEvaluation
 from fieldapp.results.files import PlantRecord, read_plants_csv, read_report
+from fieldapp.results.organ_tables import LEAF_TRAITS, read_table
 
 MAP_POINTS = 60_000
 
@@ -149,6 +150,38 @@ def evaluation_section(evaluation: TraitEvaluation | None) -> str:
     return "<h2>Accuracy against the reference</h2>" + _table(header, rows) + "".join(images)
 
 
+def organs_section(results_dir: Path) -> str:
+    """The organ traits per plant and every leaf, when the folder has ``leaves.csv``."""
+    if not (results_dir / "leaves.csv").is_file():
+        return "<p>Organs were not measured in this run (no leaves.csv).</p>"
+    plant_columns = [
+        "leaf_count",
+        "leaf_area_cm2",
+        "stem_diameter_mm",
+        "height_max_cm",
+        "height_p99_cm",
+        "height_whorl_cm",
+    ]
+    plants = read_table(results_dir / "plants.csv", ("plant",))
+    plant_rows = [[row["plant"], *(_cell(row.get(c)) for c in plant_columns)] for row in plants]
+    leaves = read_table(results_dir / "leaves.csv", ("plant_id", "leaf_id"))
+    leaf_rows = [
+        [row["plant_id"], row["leaf_id"], *(_cell(row.get(t)) for t in LEAF_TRAITS)]
+        for row in leaves
+    ]
+    return (
+        _table(["plant", *plant_columns], plant_rows)
+        + f"<p>{len(leaves)} leaves (definitions: docs/TRAITS.md)</p>"
+        + _table(["plant", "leaf", *LEAF_TRAITS], leaf_rows)
+    )
+
+
+def _cell(value: Any) -> str:
+    if value is None:
+        return "-"
+    return str(value) if isinstance(value, int) else f"{value:.2f}"
+
+
 def build_report(results_dir: Path, inputs: ReportInputs) -> str:
     """The HTML text of the report of ``results_dir``."""
     from fieldapp.evaluate.figures import trait_bars_png
@@ -180,6 +213,8 @@ def build_report(results_dir: Path, inputs: ReportInputs) -> str:
         registration_section(report),
         "<h2>Plants</h2>",
         plants_section(plants),
+        "<h2>Organs</h2>",
+        organs_section(results_dir),
         "<h2>Top-down map</h2>",
         map_section(results_dir, plants, warnings),
         "<h2>Figures</h2>",

@@ -1,7 +1,8 @@
 """The reconstruction's files, exactly as the session-format spec names them, written durably.
 
-``plants.csv`` (plant,x_m,y_m,height_cm,width_cm,points), ``cloud.ply`` (field frame, colour),
-``plants/<plant>.ply`` and ``report.json``.
+``plants.csv`` (plant,x_m,y_m,height_cm,width_cm,points, then the organ traits),
+``leaves.csv`` (one row per leaf), ``cloud.ply`` (field frame, colour, and per point the plant,
+organ and leaf when organs were measured), ``plants/<plant>.ply`` and ``report.json``.
 """
 
 from __future__ import annotations
@@ -13,15 +14,48 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fieldapp.io.durable import write_bytes_durably, write_json_durably
 from fieldapp.recon.cloud import Cloud
 
-CSV_COLUMNS = ["plant", "x_m", "y_m", "height_cm", "width_cm", "points"]
+ORGAN_COLUMNS = [
+    "leaf_count",
+    "leaf_area_cm2",
+    "stem_diameter_mm",
+    "projected_area_cm2",
+    "hull_volume_cm3",
+    "height_max_cm",
+    "height_p99_cm",
+    "height_whorl_cm",
+]
+"""Organ traits (docs/TRAITS.md), after the paper's columns."""
 
-_PLY_VERTEX = np.dtype(
-    [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
-)
+CSV_COLUMNS = ["plant", "x_m", "y_m", "height_cm", "width_cm", "points", *ORGAN_COLUMNS]
+
+LEAF_COLUMNS = [
+    "plant_id",
+    "leaf_id",
+    "length_cm",
+    "max_width_cm",
+    "area_cm2",
+    "angle_from_stem_deg",
+    "azimuth_deg",
+    "insertion_height_cm",
+]
+"""``leaves.csv``, as the session-format spec names them."""
+
+_PLY_BASE = [
+    ("x", "<f4"),
+    ("y", "<f4"),
+    ("z", "<f4"),
+    ("red", "u1"),
+    ("green", "u1"),
+    ("blue", "u1"),
+]
+_PLY_LABELS = [("plant_id", "<i4"), ("organ", "u1"), ("leaf_id", "u1")]
+_PLY_TYPES = {"float": "<f4", "uchar": "u1", "int": "<i4", "double": "<f8", "ushort": "<u2"}
+_PLY_NAMES = {"<f4": "float", "u1": "uchar", "<i4": "int"}
 
 
 @dataclass(frozen=True)
@@ -34,32 +68,87 @@ class PlantRow:
     height_cm: float
     width_cm: float
     points: int
+    leaf_count: int | None = None
+    leaf_area_cm2: float | None = None
+    stem_diameter_mm: float | None = None
+    projected_area_cm2: float | None = None
+    hull_volume_cm3: float | None = None
+    height_max_cm: float | None = None
+    height_p99_cm: float | None = None
+    height_whorl_cm: float | None = None
 
 
-def ply_bytes(cloud: Cloud) -> bytes:
-    """A binary little-endian PLY of ``cloud``: float x, y, z and uchar red, green, blue."""
-    vertices = np.empty(len(cloud), dtype=_PLY_VERTEX)
+@dataclass(frozen=True)
+class LeafRow:
+    """One line of ``leaves.csv``: a leaf of plant ``plant_id``, ``leaf_id`` from the bottom."""
+
+    plant_id: int
+    leaf_id: int
+    length_cm: float
+    max_width_cm: float
+    area_cm2: float
+    angle_from_stem_deg: float
+    azimuth_deg: float
+    insertion_height_cm: float
+
+
+@dataclass(frozen=True)
+class PointLabels:
+    """Per point of a cloud: ``plant_id`` (N,) int32 (0: none), ``organ`` (N,) uint8
+    (:mod:`fieldapp.recon.organs` codes), ``leaf_id`` (N,) uint8 (0: not a leaf)."""
+
+    plant_id: NDArray[np.int32]
+    organ: NDArray[np.uint8]
+    leaf_id: NDArray[np.uint8]
+
+
+def ply_bytes(cloud: Cloud, labels: PointLabels | None = None) -> bytes:
+    """A binary little-endian PLY of ``cloud``: float x, y, z, uchar red, green, blue and, with
+    ``labels``, int plant_id, uchar organ, uchar leaf_id."""
+    fields = _PLY_BASE + (_PLY_LABELS if labels is not None else [])
+    vertices = np.empty(len(cloud), dtype=np.dtype(fields))
     for axis, name in enumerate("xyz"):
         vertices[name] = cloud.points[:, axis]
     for channel, name in enumerate(("red", "green", "blue")):
         vertices[name] = cloud.colors[:, channel]
+    if labels is not None:
+        for name, _ in _PLY_LABELS:
+            vertices[name] = getattr(labels, name)
+    properties = "".join(f"property {_PLY_NAMES[kind]} {name}\n" for name, kind in fields)
     header = (
         "ply\nformat binary_little_endian 1.0\ncomment fieldapp reconstruction, field frame, m\n"
-        f"element vertex {len(cloud)}\n"
-        "property float x\nproperty float y\nproperty float z\n"
-        "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n"
+        f"element vertex {len(cloud)}\n{properties}end_header\n"
     )
     return header.encode("ascii") + vertices.tobytes()
 
 
 def read_ply(path: Path) -> Cloud:
     """Read a PLY written by :func:`ply_bytes` (for tests and tools)."""
+    return read_labelled_ply(path)[0]
+
+
+def read_labelled_ply(path: Path) -> tuple[Cloud, PointLabels | None]:
+    """Read a PLY written by :func:`ply_bytes`: the cloud and its labels when it has them."""
     data = path.read_bytes()
     end = data.index(b"end_header\n") + len(b"end_header\n")
-    vertices = np.frombuffer(data[end:], dtype=_PLY_VERTEX)
+    fields = []
+    for line in data[:end].decode("ascii").splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[0] == "property":
+            if parts[1] not in _PLY_TYPES:
+                raise ValueError(f"{path}: PLY property type {parts[1]!r} is not supported")
+            fields.append((parts[2], _PLY_TYPES[parts[1]]))
+    vertices = np.frombuffer(data[end:], dtype=np.dtype(fields))
     points = np.stack([vertices[a] for a in "xyz"], axis=1).astype(np.float64)
     colors = np.stack([vertices[c] for c in ("red", "green", "blue")], axis=1)
-    return Cloud(points, colors.astype(np.uint8))
+    labels = None
+    if all(name in (vertices.dtype.names or ()) for name, _ in _PLY_LABELS):
+        labels = PointLabels(
+            vertices["plant_id"].astype(np.int32),
+            vertices["organ"].astype(np.uint8),
+            vertices["leaf_id"].astype(np.uint8),
+        )
+    return Cloud(points, colors.astype(np.uint8)), labels
 
 
 def csv_text(rows: list[PlantRow]) -> str:
@@ -75,7 +164,26 @@ def csv_text(rows: list[PlantRow]) -> str:
                 f"{row.height_cm:.2f}",
                 f"{row.width_cm:.2f}",
                 row.points,
+                *(_optional(getattr(row, name)) for name in ORGAN_COLUMNS),
             ]
+        )
+    return buffer.getvalue()
+
+
+def _optional(value: float | None) -> str:
+    """A blank cell for a trait not measured, an integer as is, else two decimals."""
+    if value is None:
+        return ""
+    return str(value) if isinstance(value, int) else f"{value:.2f}"
+
+
+def leaves_csv_text(rows: list[LeafRow]) -> str:
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(LEAF_COLUMNS)
+    for row in rows:
+        writer.writerow(
+            [row.plant_id, row.leaf_id] + [f"{getattr(row, name):.2f}" for name in LEAF_COLUMNS[2:]]
         )
     return buffer.getvalue()
 
@@ -86,20 +194,29 @@ def write_outputs(
     cloud: Cloud,
     plant_clouds: dict[int, Cloud],
     report: dict[str, Any],
+    leaves: list[LeafRow] | None = None,
+    labels: PointLabels | None = None,
+    plant_labels: dict[int, PointLabels] | None = None,
 ) -> list[Path]:
     """Write every output file into ``folder`` (created); returns the paths written. Plant
-    clouds left in ``plants/`` by an earlier run with more plants are removed."""
+    clouds left in ``plants/`` by an earlier run with more plants are removed. ``leaves``
+    (``leaves.csv``, written when given) and the per-point ``labels`` of ``cloud`` and
+    ``plant_labels`` of each plant cloud come from the organ step."""
     written = [folder / "cloud.ply"]
     stale = folder / "plants"
     if stale.is_dir():
         for old in stale.glob("*.ply"):
             if old.stem.isdigit() and int(old.stem) not in plant_clouds:
                 old.unlink()
-    write_bytes_durably(written[0], ply_bytes(cloud))
+    write_bytes_durably(written[0], ply_bytes(cloud, labels))
     for plant, plant_cloud in plant_clouds.items():
         path = folder / "plants" / f"{plant}.ply"
-        write_bytes_durably(path, ply_bytes(plant_cloud))
+        write_bytes_durably(path, ply_bytes(plant_cloud, (plant_labels or {}).get(plant)))
         written.append(path)
     write_bytes_durably(folder / "plants.csv", csv_text(rows).encode("utf-8"))
+    written.append(folder / "plants.csv")
+    if leaves is not None:
+        write_bytes_durably(folder / "leaves.csv", leaves_csv_text(leaves).encode("utf-8"))
+        written.append(folder / "leaves.csv")
     write_json_durably(folder / "report.json", report)
-    return [*written, folder / "plants.csv", folder / "report.json"]
+    return [*written, folder / "report.json"]

@@ -20,6 +20,7 @@ from fieldapp.io.session import Session
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
 from fieldapp.recon.levelling import T_field_reference_initial, level_stations
+from fieldapp.recon.organ_traits import foot_m, measure_organs
 from fieldapp.recon.plants import find_plants
 from fieldapp.recon.progress import Progress, StageTimer, progress
 from fieldapp.recon.register import StationRegistration, register_stations
@@ -41,7 +42,7 @@ def reconstruct(
     session: Session, settings: ReconstructionSettings
 ) -> Generator[Progress, None, Reconstruction]:
     """Reconstruct ``session``: local reconstruction of each station, levelling, plant
-    filtering, global registration, plants and their traits."""
+    filtering, global registration, plants and their traits, organs and theirs."""
     timer, warnings = StageTimer(), _missing_warnings(session)
     calibration = session.calibration
     if calibration.view_step is None or calibration.stations is None:
@@ -136,6 +137,8 @@ def reconstruct(
     # 7-8. Plants and their traits.
     with timer.stage("plants"):
         plants = find_plants(cloud, soil, settings.plants, settings.ground.local_ground_radius_m)
+    with timer.stage("organs"):
+        organs = {p.id: measure_organs(p.cloud.points, foot_m(p.traits)) for p in plants}
     yield progress("traits", 1.0, f"{len(plants)} plants")
     if not plants:
         warnings.append("no plant found")
@@ -155,6 +158,7 @@ def reconstruct(
         warnings=warnings,
         separation=separation,
         turntable=table.report if table is not None else None,
+        organs=organs,
     )
 
 

@@ -102,7 +102,14 @@ def _child(
                 result = done.value
                 break
         plant_clouds = {plant.id: plant.cloud for plant in result.plants}
-        write_outputs(Path(results_dir), result.rows(), result.cloud, plant_clouds, result.report())
+        write_outputs(
+            Path(results_dir),
+            result.rows(),
+            result.cloud,
+            plant_clouds,
+            result.report(),
+            **result.output_extras(),
+        )
         sender.send(("done", {"plants": len(result.plants), "warnings": list(result.warnings)}))
     except FieldappError as error:
         sender.send(("error", str(error)))

@@ -6,9 +6,13 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+from scipy.spatial import cKDTree
+
 from devices.geometry import Matrix4, invert, rotation_angle_deg
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.outputs import PlantRow
+from fieldapp.recon.organ_traits import PlantOrgans
+from fieldapp.recon.outputs import LeafRow, PlantRow, PointLabels
 from fieldapp.recon.plants import Plant
 from fieldapp.recon.register import StationRegistration
 
@@ -31,6 +35,8 @@ class Reconstruction:
     timings_s: dict[str, float]
     cpu_s: dict[str, float]
     warnings: list[str]
+    organs: dict[int, PlantOrgans] = field(default_factory=dict)
+    """The organ step's result per plant id (empty when organs were not measured)."""
     separation: dict[int, str] = field(default_factory=dict)
     """Per station, how its plants were told from the soil (colour, or geometry and why)."""
     turntable: dict[str, Any] | None = None
@@ -56,9 +62,67 @@ class Reconstruction:
                 height_cm=p.traits.height_m * 100.0,
                 width_cm=p.traits.width_m * 100.0,
                 points=p.traits.points,
+                **_organ_columns(self.organs.get(p.id)),
             )
             for p in self.plants
         ]
+
+    def leaf_rows(self) -> list[LeafRow]:
+        """The lines of ``leaves.csv``: every leaf of every plant, plant by plant."""
+        return [
+            LeafRow(
+                plant_id=plant_id,
+                leaf_id=leaf.leaf_id,
+                length_cm=100.0 * leaf.length_m,
+                max_width_cm=100.0 * leaf.max_width_m,
+                area_cm2=1e4 * leaf.area_m2,
+                angle_from_stem_deg=leaf.angle_from_stem_deg,
+                azimuth_deg=leaf.azimuth_deg,
+                insertion_height_cm=100.0 * leaf.insertion_height_m,
+            )
+            for plant_id, organs in sorted(self.organs.items())
+            for leaf in organs.leaves
+        ]
+
+    def plant_labels(self) -> dict[int, PointLabels]:
+        """Per plant id, the plant, organ and leaf of each of its points."""
+        return {
+            p.id: PointLabels(
+                np.full(len(p.cloud), p.id, np.int32),
+                self.organs[p.id].organs.organ,
+                self.organs[p.id].organs.leaf_id,
+            )
+            for p in self.plants
+            if p.id in self.organs
+        }
+
+    def cloud_labels(self) -> PointLabels:
+        """The plant, organ and leaf of each point of :attr:`cloud` (0 where it is in no
+        plant): a plant's points are copies of the cloud's, found by position."""
+        n = len(self.cloud)
+        labels = PointLabels(np.zeros(n, np.int32), np.zeros(n, np.uint8), np.zeros(n, np.uint8))
+        if n == 0 or not self.plants:
+            return labels
+        tree = cKDTree(self.cloud.points)
+        for plant_id, plant_labels in self.plant_labels().items():
+            plant = next(p for p in self.plants if p.id == plant_id)
+            distance, index = tree.query(plant.cloud.points, distance_upper_bound=1e-7)
+            found = np.isfinite(distance)
+            labels.plant_id[index[found]] = plant_id
+            labels.organ[index[found]] = plant_labels.organ[found]
+            labels.leaf_id[index[found]] = plant_labels.leaf_id[found]
+        return labels
+
+    def output_extras(self) -> dict[str, Any]:
+        """The organ step's outputs as :func:`fieldapp.recon.outputs.write_outputs` takes them
+        (nothing when organs were not measured)."""
+        if not self.organs:
+            return {}
+        return {
+            "leaves": self.leaf_rows(),
+            "labels": self.cloud_labels(),
+            "plant_labels": self.plant_labels(),
+        }
 
     def T_reference_station(self, station: int) -> Matrix4:
         """Where ``station`` (view 0) ended up relative to the anchoring station."""
@@ -79,6 +143,26 @@ class Reconstruction:
             "cpu_s": {name: round(t, 4) for name, t in self.cpu_s.items()},
             "warnings": self.warnings,
         } | ({"turntable": self.turntable} if self.turntable is not None else {})
+
+
+def _organ_columns(organs: PlantOrgans | None) -> dict[str, Any]:
+    """The organ columns of a plant's ``plants.csv`` row, in their units."""
+    if organs is None:
+        return {}
+    return {
+        "leaf_count": organs.leaf_count,
+        "leaf_area_cm2": 1e4 * organs.leaf_area_m2,
+        "stem_diameter_mm": _scaled(organs.stem_diameter_m, 1000.0),
+        "projected_area_cm2": 1e4 * organs.projected_area_m2,
+        "hull_volume_cm3": 1e6 * organs.hull_volume_m3,
+        "height_max_cm": 100.0 * organs.height_max_m,
+        "height_p99_cm": 100.0 * organs.height_p99_m,
+        "height_whorl_cm": _scaled(organs.height_whorl_m, 100.0),
+    }
+
+
+def _scaled(value: float | None, factor: float) -> float | None:
+    return None if value is None else factor * value
 
 
 def _station_entry(registration: StationRegistration) -> dict[str, Any]:

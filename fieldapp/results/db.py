@@ -1,5 +1,6 @@
 """The season's results: plots, sessions, reconstruction runs, plants (one id all season) and
-their traits, hand measurements; one SQLite file (WAL, so readers never wait for a writer).
+their traits, their leaves (by plant and leaf number, so a leaf's growth can be followed), hand
+measurements; one SQLite file (WAL, so readers never wait for a writer).
 
 A run is written in one transaction: a crash at any point leaves the database as it was.
 """
@@ -20,6 +21,7 @@ import numpy as np
 
 from fieldapp.results.files import ManualRecord, PlantRecord
 from fieldapp.results.identity import match_positions
+from fieldapp.results.organ_tables import LEAF_TRAITS, PLANT_ORGAN_TRAITS
 from fieldapp.results.schema import ResultsDBError, connect, migrate, schema_version
 from fieldapp.results.sources import (
     RunSource,
@@ -65,6 +67,18 @@ class Observation:
     y_m: float
     height_cm: float
     width_cm: float
+
+
+@dataclass(frozen=True)
+class LeafObservation:
+    """One leaf of a plant on one date: ``traits`` by :data:`LEAF_TRAITS` name."""
+
+    plant_number: int
+    leaf_id: int
+    date: dt.date
+    session_id: str
+    run_id: int
+    traits: dict[str, float | None]
 
 
 class ResultsDB:
@@ -136,6 +150,7 @@ class ResultsDB:
             run_id = _insert_run(db, session_row, run, "complete", "")
             plant_ids = _identify(db, _plot_id(db, plot), run_id, run.plants, max_distance_m)
             _insert_traits(db, run_id, run.plants, plant_ids)
+            _insert_organs(db, run_id, run, plant_ids)
         log.info(
             "run %d: %s, %d plants of plot %s", run_id, session.session_id, len(run.plants), plot
         )
@@ -235,6 +250,54 @@ class ResultsDB:
             (plot,),
         )
         return [Observation(r[0], r[1], dt.date.fromisoformat(r[2]), *r[3:]) for r in rows]
+
+    def leaf_history(self, plot: str) -> list[LeafObservation]:
+        """Every leaf's traits by date (per session, its latest complete run), by plant and
+        leaf number: how a leaf grows."""
+        _plot_id(self.connection, plot, create=False)
+        rows = self.connection.execute(
+            "SELECT plants.number, leaves.leaf_id, sessions.date, sessions.session_id, runs.id, "
+            f"{', '.join('leaves.' + t for t in LEAF_TRAITS)} "
+            "FROM leaves JOIN runs ON runs.id = leaves.run_id "
+            "JOIN sessions ON sessions.id = runs.session_id "
+            "JOIN plants ON plants.id = leaves.plant_id "
+            "JOIN plots ON plots.id = sessions.plot_id "
+            "WHERE plots.name = ? AND runs.id = (SELECT MAX(r.id) FROM runs r "
+            "WHERE r.session_id = sessions.id AND r.status = 'complete') "
+            "ORDER BY plants.number, leaves.leaf_id, sessions.date, sessions.session_id",
+            (plot,),
+        )
+        return [
+            LeafObservation(
+                r[0],
+                r[1],
+                dt.date.fromisoformat(r[2]),
+                r[3],
+                r[4],
+                dict(zip(LEAF_TRAITS, r[5:], strict=True)),
+            )
+            for r in rows
+        ]
+
+    def organ_history(self, plot: str) -> list[tuple[int, dt.date, dict[str, Any]]]:
+        """Per plant number and date: leaf count, leaf area and stem diameter (latest complete
+        run of each session; ``None`` where not measured)."""
+        _plot_id(self.connection, plot, create=False)
+        rows = self.connection.execute(
+            "SELECT plants.number, sessions.date, traits.leaf_count, traits.leaf_area_cm2, "
+            "traits.stem_diameter_mm FROM traits JOIN runs ON runs.id = traits.run_id "
+            "JOIN sessions ON sessions.id = runs.session_id "
+            "JOIN plants ON plants.id = traits.plant_id "
+            "JOIN plots ON plots.id = sessions.plot_id "
+            "WHERE plots.name = ? AND runs.id = (SELECT MAX(r.id) FROM runs r "
+            "WHERE r.session_id = sessions.id AND r.status = 'complete') "
+            "ORDER BY plants.number, sessions.date, sessions.session_id",
+            (plot,),
+        )
+        return [
+            (r[0], dt.date.fromisoformat(r[1]), dict(zip(PLANT_ORGAN_TRAITS, r[2:], strict=True)))
+            for r in rows
+        ]
 
     def manual(self, plot: str) -> list[tuple[int, dt.date, float | None, float | None]]:
         """Hand measurements of ``plot``: (plant number, date, height_cm, width_cm)."""
@@ -374,3 +437,28 @@ def _insert_traits(
             for p, (pid, distance) in zip(plants, plant_ids, strict=True)
         ],
     )
+
+
+def _insert_organs(
+    db: sqlite3.Connection,
+    run_id: int,
+    run: RunSource,
+    plant_ids: list[tuple[int, float | None]],
+) -> None:
+    """The run's organ traits: plant-level columns of ``traits`` and one ``leaves`` row per
+    leaf, under each plant's season id."""
+    season = {p.plant: pid for p, (pid, _) in zip(run.plants, plant_ids, strict=True)}
+    for plant, organs in run.organs.items():
+        db.execute(
+            "UPDATE traits SET leaf_count = ?, leaf_area_cm2 = ?, stem_diameter_mm = ? "
+            "WHERE run_id = ? AND plant_id = ?",
+            (*(organs.get(t) for t in PLANT_ORGAN_TRAITS), run_id, season[plant]),
+        )
+        db.executemany(
+            f"INSERT INTO leaves (run_id, plant_id, leaf_id, {', '.join(LEAF_TRAITS)}) "
+            f"VALUES (?, ?, ?, {', '.join('?' for _ in LEAF_TRAITS)})",
+            [
+                (run_id, season[plant], int(leaf["leaf_id"]), *(leaf.get(t) for t in LEAF_TRAITS))
+                for leaf in organs["leaves"]
+            ],
+        )

@@ -79,6 +79,23 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         "CREATE INDEX traits_by_plant ON traits(plant_id)",
         "CREATE INDEX sessions_by_plot ON sessions(plot_id, date)",
     ),
+    (
+        "ALTER TABLE traits ADD COLUMN leaf_count INTEGER",
+        "ALTER TABLE traits ADD COLUMN leaf_area_cm2 REAL",
+        "ALTER TABLE traits ADD COLUMN stem_diameter_mm REAL",
+        """CREATE TABLE leaves (
+            run_id INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
+            plant_id INTEGER NOT NULL REFERENCES plants(id),
+            leaf_id INTEGER NOT NULL,
+            length_cm REAL,
+            max_width_cm REAL,
+            area_cm2 REAL,
+            angle_from_stem_deg REAL,
+            azimuth_deg REAL,
+            insertion_height_cm REAL,
+            PRIMARY KEY (run_id, plant_id, leaf_id))""",
+        "CREATE INDEX leaves_by_plant ON leaves(plant_id, leaf_id)",
+    ),
 )
 
 SCHEMA_VERSION = len(MIGRATIONS)

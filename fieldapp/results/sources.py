@@ -1,5 +1,5 @@
 """What a run is recorded from: the session (id, date, calibration) and the reconstruction's
-output folder (plants, report), read and checked before the database is touched."""
+output folder (plants, organs, report), read and checked before the database is touched."""
 
 from __future__ import annotations
 
@@ -7,13 +7,14 @@ import datetime as dt
 import hashlib
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from fieldapp import __version__
-from fieldapp.errors import FieldappError
+from fieldapp.errors import FieldappError, FormatError, Problem
 from fieldapp.results.files import PlantRecord, read_plants_csv, read_report
+from fieldapp.results.organ_tables import PLANT_ORGAN_TRAITS, read_table
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,9 @@ class RunSource:
     report: dict[str, Any]
     settings: dict[str, Any]
     software_version: str
+    organs: dict[int, dict[str, Any]] = field(default_factory=dict)
+    """Per plant of ``plants.csv``: its organ columns (``leaf_count``, ``leaf_area_cm2``,
+    ``stem_diameter_mm``, ``None`` where blank) and ``leaves``, the rows of ``leaves.csv``."""
 
     @property
     def timings_s(self) -> dict[str, float]:
@@ -71,7 +75,44 @@ def read_run(
     if software_version is None:
         reported_version = report.get("software_version")
         software_version = reported_version if isinstance(reported_version, str) else __version__
-    return RunSource(results_dir, plants, report, dict(settings), software_version)
+    organs = read_organs(results_dir)
+    return RunSource(results_dir, plants, report, dict(settings), software_version, organs)
+
+
+def read_organs(results_dir: Path) -> dict[int, dict[str, Any]]:
+    """The organ traits of a results folder, by plant; empty when it has no ``leaves.csv``
+    (a run from before organs were measured)."""
+    if not (results_dir / "leaves.csv").is_file():
+        return {}
+    columns = read_table(results_dir / "plants.csv", ("plant",))
+    organs: dict[int, dict[str, Any]] = {
+        int(row["plant"]): {t: row.get(t) for t in PLANT_ORGAN_TRAITS} | {"leaves": []}
+        for row in columns
+    }
+    for leaf in read_table(results_dir / "leaves.csv", ("plant_id", "leaf_id")):
+        plant = int(leaf["plant_id"])
+        if plant not in organs:
+            raise FormatError(
+                [
+                    Problem(
+                        str(results_dir / "leaves.csv"),
+                        "column plant_id",
+                        f"plant {plant} is not in plants.csv",
+                    )
+                ]
+            )
+        if any(other["leaf_id"] == leaf["leaf_id"] for other in organs[plant]["leaves"]):
+            raise FormatError(
+                [
+                    Problem(
+                        str(results_dir / "leaves.csv"),
+                        "column leaf_id",
+                        f"plant {plant} has leaf {leaf['leaf_id']} twice",
+                    )
+                ]
+            )
+        organs[plant]["leaves"].append(leaf)
+    return organs
 
 
 def read_session_source(

@@ -14,6 +14,7 @@ from fieldapp.errors import FormatError, Problem
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.outputs import read_ply
 from fieldapp.results.files import PlantRecord, read_plants_csv, read_report
+from fieldapp.results.organ_tables import read_table
 
 
 @dataclass
@@ -28,6 +29,8 @@ class PlotResults:
     report: dict[str, Any]
     session_folder: Path | None = None
     warnings: list[str] = field(default_factory=list)
+    leaves: dict[int, list[dict[str, Any]]] = field(default_factory=dict)
+    """Per plant, its ``leaves.csv`` rows from the bottom (empty: organs not measured)."""
 
     def plant(self, plant_id: int) -> PlantRecord:
         for record in self.plants:
@@ -56,6 +59,10 @@ def load_results_dir(folder: Path) -> PlotResults:
         if path.is_file():
             plant_clouds[record.plant] = _read_cloud(path)
     warnings = [str(w) for w in report.get("warnings", []) or []]
+    leaves: dict[int, list[dict[str, Any]]] = {}
+    if (folder / "leaves.csv").is_file():
+        for row in read_table(folder / "leaves.csv", ("plant_id", "leaf_id")):
+            leaves.setdefault(int(row["plant_id"]), []).append(row)
     return PlotResults(
         str(report.get("session", folder.name)),
         folder,
@@ -64,6 +71,7 @@ def load_results_dir(folder: Path) -> PlotResults:
         plant_clouds,
         report,
         warnings=warnings,
+        leaves=leaves,
     )
 
 

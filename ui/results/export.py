@@ -14,7 +14,8 @@ from fieldapp.evaluate.figures import growth_png, map_png, trait_bars_png, trait
 from fieldapp.evaluate.report import ReportInputs, build_report
 from fieldapp.evaluate.traits import TraitEvaluation, metrics_csv, pairs_csv
 from fieldapp.io.durable import write_bytes_durably
-from fieldapp.recon.outputs import PlantRow, csv_text, write_outputs
+from fieldapp.recon.outputs import ORGAN_COLUMNS, PlantRow, csv_text, write_outputs
+from fieldapp.results.organ_tables import read_table
 from ui.results.data import PlotResults
 
 MAP_POINTS = 60_000
@@ -28,10 +29,17 @@ def export_results(
     calibration: dict[str, Any] | None = None,
 ) -> list[Path]:
     """Write everything about ``results`` into ``folder``; returns the files written."""
+    organs = _organ_columns(results.results_dir)
     rows = [
-        PlantRow(p.plant, p.x_m, p.y_m, p.height_cm, p.width_cm, p.points) for p in results.plants
+        PlantRow(
+            p.plant, p.x_m, p.y_m, p.height_cm, p.width_cm, p.points, **organs.get(p.plant, {})
+        )
+        for p in results.plants
     ]
     written = write_outputs(folder, rows, results.cloud, results.plant_clouds, results.report)
+    leaves = results.results_dir / "leaves.csv"
+    if leaves.is_file() and leaves.resolve() != (folder / "leaves.csv").resolve():
+        written.append(_write(folder / "leaves.csv", leaves.read_bytes()))
     written.append(_write(folder / "traits.csv", csv_text(rows).encode("utf-8")))
     for name, png in figures(results, evaluation, growth).items():
         written.append(_write(folder / "figures" / f"{name}.png", png))
@@ -68,6 +76,17 @@ def figures(
         if series:
             out[f"growth-{trait}"] = growth_png(trait, series, f"{trait} over the season")
     return out
+
+
+def _organ_columns(results_dir: Path) -> dict[int, dict[str, Any]]:
+    """The organ columns of the results folder's ``plants.csv`` by plant (none without
+    ``leaves.csv``), so that an export keeps them."""
+    if not (results_dir / "leaves.csv").is_file():
+        return {}
+    return {
+        int(row["plant"]): {c: row.get(c) for c in ORGAN_COLUMNS}
+        for row in read_table(results_dir / "plants.csv", ("plant",))
+    }
 
 
 def _write(path: Path, data: bytes) -> Path:

@@ -19,7 +19,7 @@ from ui.results.history import HistoryPanel
 from ui.results.manual import ManualPanel
 from ui.results.runner import Outcome, ReconstructionRunner, default_results_dir
 from ui.results.scene import CloudScene, build_scene
-from ui.results.tables import PlantTableModel, station_model
+from ui.results.tables import PlantTableModel, leaf_model, station_model
 from ui.results.topmap import TopMap
 from ui.results.view3d import CloudView
 
@@ -81,6 +81,7 @@ class ResultsPanel(QtWidgets.QWidget):
     def show_results(self, results: PlotResults, scene: CloudScene | None = None) -> None:
         """Show ``results`` (``scene``: its drawing, when already built off the GUI thread)."""
         self.results, self.selected = results, None
+        self.leaves.setModel(leaf_model([]))
         scene = scene or build_scene(results)
         self.view3d.show_scene(scene)
         self.map.show_scene(scene)
@@ -108,6 +109,9 @@ class ResultsPanel(QtWidgets.QWidget):
         self.selected = plant
         self.view3d.select(plant)
         self.map.select(plant)
+        self.leaves.setModel(
+            leaf_model([] if plant is None else self.results.leaves.get(plant, []))
+        )
         row = None if plant is None else self.plant_model.row_of(plant)
         if row is None:
             self.table.clearSelection()
@@ -193,6 +197,9 @@ class ResultsPanel(QtWidgets.QWidget):
         self.map.plant_clicked.connect(self.select_plant)
         self.stations = QtWidgets.QTableView()
         self.warnings = QtWidgets.QListWidget()
+        self.leaves = QtWidgets.QTableView()
+        self.leaves.setModel(leaf_model([]))
+        self.leaves.verticalHeader().hide()
         self.manual = ManualPanel()
         self.history = HistoryPanel(self.settings.paths.results_db)
         self.history.record_button.clicked.connect(self._record_clicked)
@@ -200,6 +207,7 @@ class ResultsPanel(QtWidgets.QWidget):
         pages = (
             (self.view3d, "3D"),
             (self.map, "Map"),
+            (self.leaves, "Leaves"),
             (self.stations, "Registration"),
             (self.warnings, "Warnings"),
             (self.manual, "Manual measurements"),

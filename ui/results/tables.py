@@ -8,8 +8,18 @@ from typing import Any
 from PySide6 import QtCore, QtGui
 
 from fieldapp.results.files import PlantRecord
+from fieldapp.results.organ_tables import LEAF_TRAITS
 
 PLANT_COLUMNS = ("plant", "x (m)", "y (m)", "height (cm)", "width (cm)", "points")
+LEAF_COLUMNS = (
+    "leaf",
+    "length (cm)",
+    "max width (cm)",
+    "area (cm²)",
+    "angle from stem (°)",
+    "azimuth (°)",
+    "insertion (cm)",
+)
 STATION_COLUMNS = ("station", "ICP accepted", "fitness", "RMSE (mm)", "correction (deg)", "note")
 Role = QtCore.Qt.ItemDataRole
 
@@ -74,5 +84,20 @@ def station_model(report: dict[str, Any], reference: int | None) -> QtGui.QStand
         elif row[1] == "no":
             for item in items:
                 item.setForeground(QtGui.QColor(170, 70, 0))
+        model.appendRow(items)
+    return model
+
+
+def leaf_model(leaves: list[dict[str, Any]]) -> QtGui.QStandardItemModel:
+    """One row per leaf of a plant (``leaves.csv`` rows), from the bottom."""
+    model = QtGui.QStandardItemModel(0, len(LEAF_COLUMNS))
+    model.setHorizontalHeaderLabels(list(LEAF_COLUMNS))
+    for leaf in sorted(leaves, key=lambda row: row["leaf_id"]):
+        cells = [str(leaf["leaf_id"])]
+        cells += ["-" if leaf.get(t) is None else f"{leaf[t]:.1f}" for t in LEAF_TRAITS]
+        items = [QtGui.QStandardItem(cell) for cell in cells]
+        for item in items:
+            item.setEditable(False)
+            item.setTextAlignment(QtCore.Qt.AlignmentFlag.AlignRight)
         model.appendRow(items)
     return model

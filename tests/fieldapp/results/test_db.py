@@ -45,7 +45,7 @@ def test_pragmas_and_schema_version(tmp_path):
         assert c.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
         assert c.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL
         assert c.execute("PRAGMA foreign_keys").fetchone()[0] == 1
-        assert db.schema_version == SCHEMA_VERSION == 2
+        assert db.schema_version == SCHEMA_VERSION == 3
 
 
 def test_migrates_an_old_database_step_by_step(tmp_path):
@@ -56,7 +56,7 @@ def test_migrates_an_old_database_step_by_step(tmp_path):
     assert "runs" in names and "traits_by_plant" not in names
     connection.close()
     with ResultsDB.open(path) as db:
-        assert db.schema_version == 2
+        assert db.schema_version == SCHEMA_VERSION
         names = {r[0] for r in db.connection.execute("SELECT name FROM sqlite_master")}
         assert "traits_by_plant" in names
 

@@ -1,0 +1,234 @@
+"""Traits of one leaf and of the stem, from a plant's organs (definitions in docs/TRAITS.md).
+
+A leaf's **midrib** is traced through the leaf's points: geodesic distance (shortest paths
+along 1.2 cm links) from where the leaf leaves the stem's cylinder, the centroid of every 1 cm
+level set, and the farthest point (the tip). The **collar** is where the midrib, extended
+back along its first centimetres, meets the stem's surface. Each level set's points, seen
+along the midrib, are the leaf's cross-section there: its **width** is the length of the
+section's profile (a folded blade is measured flattened, as with a ruler), and the **area** is
+the width integrated along the midrib.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from fieldapp.recon.organs import StemAxis, voxel_means
+
+LINK_M = 0.012
+LEVEL_M = 0.01
+"""Geodesic links and the spacing of the level sets along the leaf."""
+
+SOURCE_BAND_M = 0.01
+"""The leaf's base: its points within this of its point nearest to the stem's axis."""
+
+COLLAR_FIT_M = 0.05
+MAX_EXTENSION_M = 0.06
+"""The midrib is extended back to the stem (at most :data:`MAX_EXTENSION_M`) along the parabola
+through its first :data:`COLLAR_FIT_M`."""
+
+BASE_CHORD_M = 0.05
+"""Angle from the stem: chord from the collar to the midrib point this far along it."""
+
+EDGE_QUANTILE = 2.0
+"""A cross-section's span: between this percentile and its complement (scaled up)."""
+
+
+@dataclass(frozen=True)
+class LeafTraits:
+    """One leaf; ``leaf_id`` from the bottom; azimuth in the field frame (from +x towards +y)."""
+
+    leaf_id: int
+    length_m: float
+    max_width_m: float
+    area_m2: float
+    angle_from_stem_deg: float
+    azimuth_deg: float
+    insertion_height_m: float
+    midrib_m: NDArray[np.float64]
+    """(P, 3) the traced midrib, collar first."""
+
+
+def measure_leaf(
+    points_m: NDArray[np.float64], axis: StemAxis, stem_radius_m: float, leaf_id: int
+) -> LeafTraits:
+    """Traits of one leaf from its points (M, 3), the stem's axis and radius."""
+    _along, radial = axis.split(points_m)
+    sources = np.flatnonzero(radial <= radial.min() + SOURCE_BAND_M)
+    distance = geodesic_m(points_m, sources)
+    sections = [s for s in _level_sets(points_m, distance) if len(s) >= 3]
+    centres_m = (
+        np.array([s.mean(axis=0) for s in sections])
+        if sections
+        else points_m.mean(axis=0, keepdims=True)
+    )
+    tip = points_m[int(np.argmax(distance))]
+    extension = _collar(centres_m, axis, stem_radius_m)
+    collar = extension[0]
+    midrib = np.vstack([extension, centres_m, tip])
+    widths = [
+        section_width_m(
+            members, centres_m[min(i + 1, len(centres_m) - 1)] - centres_m[max(i - 1, 0)]
+        )
+        for i, members in enumerate(sections)
+    ]
+    width = _running_median(np.array(widths))
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(midrib, axis=0), axis=1))])
+    first = width[0] if len(width) else 0.0
+    profile = np.concatenate([np.full(len(extension), first), width, [0.0]])
+    return LeafTraits(
+        leaf_id=leaf_id,
+        length_m=float(arc[-1]),
+        max_width_m=float(width.max()) if len(width) else 0.0,
+        area_m2=float(np.trapezoid(profile, arc)),
+        angle_from_stem_deg=angle_from_axis_deg(midrib, axis.direction),
+        azimuth_deg=azimuth_deg(tip - collar),
+        insertion_height_m=float(collar[2] - axis.foot_m[2]),
+        midrib_m=midrib,
+    )
+
+
+def _level_sets(
+    points_m: NDArray[np.float64], distance: NDArray[np.float64]
+) -> list[NDArray[np.float64]]:
+    """The points (K, 3) of each :data:`LEVEL_M` level set of ``distance``, nearest first."""
+    levels = np.floor(distance / LEVEL_M).astype(np.intp)
+    order = np.argsort(levels, kind="stable")
+    _, starts = np.unique(levels[order], return_index=True)
+    return np.split(points_m[order], starts[1:])
+
+
+def geodesic_m(points_m: NDArray[np.float64], sources: NDArray[np.intp]) -> NDArray[np.float64]:
+    """(M,) shortest distance from any of ``sources`` along :data:`LINK_M` links between voxel
+    means (:func:`fieldapp.recon.organs.voxel_means`), plus each point's offset from its voxel's
+    mean; a voxel the links do not reach (a piece cut off by a gap) gets its nearest reached
+    voxel's distance plus the straight gap."""
+    means, inverse = voxel_means(points_m)
+    pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
+    length = np.linalg.norm(means[pairs[:, 0]] - means[pairs[:, 1]], axis=1)
+    graph = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(means),) * 2)
+    starts = np.unique(inverse[sources])
+    distance = dijkstra(graph.tocsr(), directed=False, indices=starts, min_only=True)
+    reached = np.isfinite(distance)
+    if not reached.all():
+        gap, nearest = cKDTree(means[reached]).query(means[~reached])
+        distance[~reached] = distance[reached][nearest] + gap
+    return distance[inverse]  # type: ignore[no-any-return]
+
+
+def _collar(
+    centres_m: NDArray[np.float64], axis: StemAxis, stem_radius_m: float
+) -> NDArray[np.float64]:
+    """Where the midrib, extended back from its first centre, meets the stem's surface (or comes
+    nearest to it), as (C, 3) points from the collar to just before the first centre. The
+    extension follows the parabola (in arc length) fitted to the centres of the first
+    :data:`COLLAR_FIT_M`: a leaf bends away from the stem as it goes, so a straight line through
+    its first centimetres would meet the stem too low and leave it too flat."""
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(centres_m, axis=0), axis=1))])
+    chosen = arc <= COLLAR_FIT_M
+    degree = 2 if chosen.sum() >= 4 else 1
+    if chosen.sum() < 2:
+        return centres_m[:1]
+    coefficients = np.polynomial.polynomial.polyfit(arc[chosen], centres_m[chosen], degree)
+    back = -np.arange(0.0, MAX_EXTENSION_M, 0.0005)
+    steps: NDArray[np.float64] = np.polynomial.polynomial.polyval(back, coefficients).T
+    _, radial = axis.split(steps)
+    inside = np.flatnonzero(radial <= stem_radius_m)
+    end = int(inside[0]) if len(inside) else int(np.argmin(radial))
+    return steps[end::-1][:-1] if end > 0 else steps[:1]
+
+
+def section_width_m(members_m: NDArray[np.float64], tangent: NDArray[np.float64]) -> float:
+    """Flattened width of a cross-section's points (K, 3) seen along ``tangent`` (3,): the
+    span across it (between the 2nd and 98th percentiles, scaled to the whole span of evenly
+    spread points: noise widens the extremes, not the quantiles) times the length per span of
+    the parabola fitted to the section's profile (a folded blade measured flat)."""
+    norm = float(np.linalg.norm(tangent))
+    if norm < 1e-9 or len(members_m) < 5:
+        return 0.0
+    t = tangent / norm
+    q = members_m - members_m.mean(axis=0)
+    q = q - np.outer(q @ t, t)
+    _, vectors = np.linalg.eigh(q.T @ q)
+    across, height = q @ vectors[:, 2], q @ vectors[:, 1]
+    ordered = np.sort(across)
+    edge = round(EDGE_QUANTILE / 100.0 * (len(ordered) - 1))
+    span = float(ordered[-1 - edge] - ordered[edge]) / (1.0 - 2.0 * edge / (len(ordered) - 1))
+    design = np.stack([np.ones_like(across), across, across * across], axis=1)
+    curve = np.linalg.solve(design.T @ design + 1e-12 * np.eye(3), design.T @ height)
+    x = np.linspace(float(ordered[0]), float(ordered[-1]), 32)
+    y = curve[0] + curve[1] * x + curve[2] * x * x
+    chord = float(x[-1] - x[0])
+    arc = float(np.hypot(np.diff(x), np.diff(y)).sum())
+    return span * (arc / chord if chord > 0 else 1.0)
+
+
+def _running_median(values: NDArray[np.float64], half: int = 1) -> NDArray[np.float64]:
+    """``values`` (K,) through a running median of ``2 * half + 1`` (ends repeated): a section
+    spoilt by a touching leaf or the stem's noise does not make the leaf's width."""
+    if len(values) < 2 * half + 1:
+        return values
+    padded = np.concatenate([np.full(half, values[0]), values, np.full(half, values[-1])])
+    windows = np.stack([padded[i : i + len(values)] for i in range(2 * half + 1)])
+    return np.median(windows, axis=0)  # type: ignore[no-any-return]
+
+
+def angle_from_axis_deg(
+    midrib_m: NDArray[np.float64], axis_direction: NDArray[np.float64]
+) -> float:
+    """Angle between the stem's upward ``axis_direction`` (3,) and the chord from the midrib's
+    first point (the collar) to its point :data:`BASE_CHORD_M` along it (P, 3)."""
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(midrib_m, axis=0), axis=1))])
+    end = np.array([np.interp(min(BASE_CHORD_M, s[-1]), s, midrib_m[:, i]) for i in range(3)])
+    chord = end - midrib_m[0]
+    cosine = float(chord @ axis_direction) / max(float(np.linalg.norm(chord)), 1e-12)
+    return float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
+
+
+def azimuth_deg(direction: NDArray[np.float64]) -> float:
+    """Azimuth of ``direction``'s horizontal part: degrees in [0, 360) from +x towards +y."""
+    return float(np.degrees(np.arctan2(direction[1], direction[0])) % 360.0)
+
+
+def stem_diameter_m(
+    points_m: NDArray[np.float64], axis: StemAxis, cut_m: float, top_m: float
+) -> float | None:
+    """Median over 1 cm slices, from 5 mm above the foot to ``top_m`` along the axis, of the
+    diameter of the circle fitted (least squares) to the slice's points within ``cut_m`` of the
+    axis; ``None`` when no slice has enough points."""
+    along, radial = axis.split(points_m)
+    diameters = []
+    for low in np.arange(0.005, max(top_m, 0.005), 0.01):
+        chosen = (radial <= cut_m) & (along >= low) & (along < min(low + 0.01, top_m))
+        if chosen.sum() >= 8:
+            radius = _circle_radius(points_m[chosen, :2])
+            if radius is not None and radius < cut_m:
+                diameters.append(2.0 * radius)
+    return float(np.median(diameters)) if diameters else None
+
+
+def _circle_radius(xy: NDArray[np.float64]) -> float | None:
+    """Radius of the least-squares (Kasa) circle through ``xy`` (K, 2), refitted once without
+    the points farther than 3 robust deviations from it."""
+    keep = np.ones(len(xy), dtype=bool)
+    radius = None
+    for _ in range(2):
+        if keep.sum() < 5:
+            return radius
+        x, y = xy[keep, 0], xy[keep, 1]
+        design = np.stack([x, y, np.ones_like(x)], axis=1)
+        a, b, c = np.linalg.lstsq(design, x * x + y * y, rcond=None)[0]
+        centre = np.array([a / 2.0, b / 2.0])
+        squared = c + centre @ centre
+        if squared <= 0:
+            return None
+        radius = float(np.sqrt(squared))
+        residual = np.abs(np.linalg.norm(xy - centre, axis=1) - radius)
+        keep = residual <= 3.0 * max(float(np.median(residual)) * 1.4826, 1e-4)
+    return radius

@@ -1,0 +1,97 @@
+"""The organ step: one plant's organs and their traits (docs/TRAITS.md), from its points.
+
+:func:`measure_organs` is called for each plant after the plants step; it needs nothing but
+the plant's points (N, 3) in the field frame and its stem's foot.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import ConvexHull, QhullError
+
+from fieldapp.recon.leaf_traits import LeafTraits, measure_leaf, stem_diameter_m
+from fieldapp.recon.organs import ORGAN_STEM, ORGAN_WHORL, Organs, segment_organs
+from fieldapp.recon.traits import PlantTraits
+
+CANOPY_CELL_M = 0.01
+"""Projected canopy area: occupied cells of this size on the ground plane."""
+
+
+@dataclass(frozen=True)
+class PlantOrgans:
+    """A plant's organs (per-point labels) and their traits; lengths in metres.
+
+    ``height_*_m`` above the local ground at the stem's foot: ``max`` the highest point,
+    ``p99`` the 99th percentile of the points' heights, ``whorl`` the top of the stem and the
+    whorl (``None`` without a stem).
+    """
+
+    organs: Organs
+    leaves: list[LeafTraits]
+    stem_diameter_m: float | None
+    projected_area_m2: float
+    hull_volume_m3: float
+    height_max_m: float
+    height_p99_m: float
+    height_whorl_m: float | None
+
+    @property
+    def leaf_count(self) -> int:
+        return len(self.leaves)
+
+    @property
+    def leaf_area_m2(self) -> float:
+        return float(sum(leaf.area_m2 for leaf in self.leaves))
+
+
+def foot_m(traits: PlantTraits) -> NDArray[np.float64]:
+    """(3,) the stem's foot as the plants step found it: base xy, local ground z."""
+    return np.array([traits.x_m, traits.y_m, traits.ground_z_m])
+
+
+def measure_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -> PlantOrgans:
+    """Organs and traits of one plant: points (N, 3) field frame, z up; ``foot_m`` (3,) the
+    stem's foot (base xy, local ground z)."""
+    if len(points_m) == 0:
+        raise ValueError("a plant without points has no organs")
+    organs = segment_organs(points_m, foot_m)
+    axis = organs.axis
+    leaves = [
+        measure_leaf(points_m[index], axis, organs.stem_radius_m, number)
+        for number, index in enumerate(organs.leaves, start=1)
+    ]
+    lowest = min((leaf.insertion_height_m for leaf in leaves), default=None)
+    along, _ = axis.split(points_m)
+    top = lowest if lowest is not None else float(along.max())
+    diameter = stem_diameter_m(points_m, axis, organs.cut_radius_m, top)
+    height = points_m[:, 2] - axis.foot_m[2]
+    stem = np.isin(organs.organ, (ORGAN_STEM, ORGAN_WHORL))
+    return PlantOrgans(
+        organs=organs,
+        leaves=leaves,
+        stem_diameter_m=diameter,
+        projected_area_m2=projected_area_m2(points_m),
+        hull_volume_m3=hull_volume_m3(points_m),
+        height_max_m=float(height.max()),
+        height_p99_m=float(np.percentile(height, 99.0)),
+        height_whorl_m=float(height[stem].max()) if stem.any() else None,
+    )
+
+
+def projected_area_m2(points_m: NDArray[np.float64], cell_m: float = CANOPY_CELL_M) -> float:
+    """Area of the plant's shadow from straight above: occupied ``cell_m`` cells."""
+    cells = np.unique(np.floor(points_m[:, :2] / cell_m).astype(np.int64), axis=0)
+    return float(len(cells) * cell_m * cell_m)
+
+
+def hull_volume_m3(points_m: NDArray[np.float64]) -> float:
+    """Volume of the points' convex hull; 0 when they are too few or flat."""
+    if len(points_m) < 4:
+        return 0.0
+    try:
+        return float(ConvexHull(points_m).volume)
+    except QhullError:
+        return 0.0

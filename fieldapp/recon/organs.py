@@ -1,0 +1,328 @@
+"""Organs of one plant: its stem (and the rolled whorl on top of it) and one instance per
+expanded leaf, from the plant's points alone (docs/RECONSTRUCTION.md, "Organs").
+
+1. **Stem axis**: the line through the medians of 1 cm slices of the points near the base's
+   column, refitted with a narrowing radius and without the slices a leaf pulls aside.
+2. **Stem**: the points within a cylinder around the axis a little wider than the stem; the
+   part of it above the highest leaf's insertion is the whorl.
+3. **Leaves**: what is left are the leaves, each one a branch that leaves the stem: connected
+   components (1 cm links) of the points outside the cylinder. A component that does not reach
+   the stem is a piece of a leaf cut off by a gap in the data: it joins the leaf it lies
+   nearest to. Leaves are numbered from the bottom by where they leave the stem.
+
+Works on any plant's points (N, 3), field frame, z up, whatever split the plot into plants.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.spatial import cKDTree
+
+ORGAN_NONE, ORGAN_STEM, ORGAN_LEAF, ORGAN_WHORL = 0, 1, 2, 3
+"""Per-point organ codes (``organ`` in the PLY files)."""
+
+FOOT_SEARCH_M = 0.02
+FOOT_HEIGHT_M = 0.03
+"""The foot is the median of the points within this of the base, this high above the ground
+(below the lowest leaf)."""
+
+TILT_SEARCH_M = 0.06
+TILT_HEIGHT = 0.5
+SHAPE_RADIUS_M = 0.012
+MIN_LINEARITY = 0.6
+COS_UPRIGHT = 0.9
+LINE_KEEP_M = 0.008
+"""The tilt: a line through the foot fitted to the stem-like points (their neighbourhood within
+:data:`SHAPE_RADIUS_M` an upright column: linearity above :data:`MIN_LINEARITY`, long axis within
+:data:`COS_UPRIGHT` of the vertical) within :data:`TILT_SEARCH_M` of the foot, up to
+:data:`TILT_HEIGHT` of the plant; refitted on those within :data:`LINE_KEEP_M` of the line."""
+
+MAX_TILT = 0.2
+"""Largest horizontal drift of the axis per metre of height (11 degrees)."""
+
+CUT_MARGIN_M = 0.016
+"""The stem's cylinder: its radius plus this margin (noise, the leaf sheath, the error of the
+axis' tilt: chosen on three seeds, 47 of 48 plants with the right leaf count, against 28 with
+8 mm and 43 with 2 cm)."""
+
+MIN_CUT_RADIUS_M = 0.014
+
+LINK_M = 0.012
+GRAPH_VOXEL_M = 0.004
+"""Points closer than :data:`LINK_M` are joined in a leaf (the means of :data:`GRAPH_VOXEL_M`
+voxels, to keep the graphs small)."""
+
+MIN_LEAF_POINTS = 40
+MIN_LEAF_EXTENT_M = 0.04
+"""A branch shorter than this, or with fewer points, is not an expanded leaf."""
+
+TOUCH_M = 0.012
+"""A component reaching within this of the cylinder leaves the stem (is a leaf's base)."""
+
+BASE_LINK_M = 0.015
+MIN_BASE_POINTS = 15
+"""A branch's base points (within :data:`TOUCH_M` of the cylinder) linked within
+:data:`BASE_LINK_M`; two groups of :data:`MIN_BASE_POINTS` or more are two leaves."""
+
+SHELL_GAP_M = 0.005
+SHELL_LINK_M = 0.006
+SHELL_REACH_M = 0.06
+"""Leaves grow back into the stem's cylinder down to the stem's radius plus
+:data:`SHELL_GAP_M`, along links of :data:`SHELL_LINK_M`, at most :data:`SHELL_REACH_M` along
+them."""
+
+FRAGMENT_JOIN_M = 0.06
+"""A fragment joins the nearest leaf within this distance; farther, it stays unassigned."""
+
+
+@dataclass(frozen=True)
+class StemAxis:
+    """The stem's axis: ``foot_m`` (3,) on the local ground, ``direction`` (3,) unit, upward."""
+
+    foot_m: NDArray[np.float64]
+    direction: NDArray[np.float64]
+
+    def split(
+        self, points_m: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(N,) height along the axis above the foot and (N,) distance from the axis."""
+        offset = points_m - self.foot_m
+        along = offset @ self.direction
+        radial = np.linalg.norm(offset - along[:, None] * self.direction, axis=1)
+        return along, radial
+
+
+@dataclass(frozen=True)
+class Organs:
+    """One plant's points split into organs.
+
+    - ``organ``: (N,) uint8, one of the ``ORGAN_*`` codes;
+    - ``leaf_id``: (N,) uint8, the leaf (1 = lowest) of each leaf point, 0 elsewhere;
+    - ``axis``: the stem's axis; ``stem_radius_m``: first estimate of the stem's radius (its
+      foot's points' median distance from the axis); ``cut_radius_m``: the stem cylinder's;
+    - ``leaves``: per leaf, from the bottom, the indices of its points.
+    """
+
+    organ: NDArray[np.uint8]
+    leaf_id: NDArray[np.uint8]
+    axis: StemAxis
+    stem_radius_m: float
+    cut_radius_m: float
+    leaves: list[NDArray[np.intp]]
+
+
+def fit_stem_axis(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -> StemAxis:
+    """The stem's axis from the plant's points (N, 3) and a first guess of the stem's foot (3,)
+    (base xy, local ground z): the foot is re-centred on the points of the stem's lowest
+    centimetres (below any leaf), then the tilt is that of the line through the foot fitted to
+    the stem-like points (:func:`_stem_like`), refitted on those near it."""
+    guess = StemAxis(foot_m, np.array([0.0, 0.0, 1.0]))
+    along, radial = guess.split(points_m)
+    low = (radial < FOOT_SEARCH_M) & (along > 0.005) & (along < FOOT_HEIGHT_M)
+    foot = foot_m.copy()
+    if low.sum() >= 5:
+        foot[:2] = np.median(points_m[low, :2], axis=0)
+    near = points_m[np.linalg.norm(points_m[:, :2] - foot[:2], axis=1) < TILT_SEARCH_M]
+    height = float(points_m[:, 2].max() - foot[2])
+    near = near[(near[:, 2] > foot[2] + 0.005) & (near[:, 2] < foot[2] + TILT_HEIGHT * height)]
+    stem_like = near[_stem_like(near)]
+    tilt = np.zeros(2)
+    for _ in range(3):
+        dz = stem_like[:, 2] - foot[2]
+        residual = np.linalg.norm(stem_like[:, :2] - foot[:2] - dz[:, None] * tilt, axis=1)
+        keep = residual < LINE_KEEP_M
+        if keep.sum() < 10:
+            break
+        dxy = stem_like[keep, :2] - foot[:2]
+        tilt = np.clip((dz[keep] @ dxy) / float(dz[keep] @ dz[keep]), -MAX_TILT, MAX_TILT)
+    direction = np.array([tilt[0], tilt[1], 1.0])
+    return StemAxis(foot, direction / np.linalg.norm(direction))
+
+
+def _stem_like(points_m: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """(N,) True where the neighbourhood (within :data:`SHAPE_RADIUS_M`) is a thin upright
+    column: much longer than wide (linearity), its long direction near the vertical. A leaf's
+    neighbourhood is a sheet."""
+    n = len(points_m)
+    if n < 6:
+        return np.zeros(n, dtype=bool)
+    pairs = cKDTree(points_m).query_pairs(SHAPE_RADIUS_M, output_type="ndarray")
+    rows = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(n)])
+    cols = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(n)])
+    neighbours = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)).tocsr()
+    count = np.asarray(neighbours.sum(axis=1)).ravel()
+    x, y, z = points_m.T
+    sums = neighbours @ np.stack([x, y, z, x * x, y * y, z * z, x * y, x * z, y * z], axis=1)
+    sums /= count[:, None]
+    mean = sums[:, :3]
+    second = sums[:, [3, 6, 7, 6, 4, 8, 7, 8, 5]].reshape(n, 3, 3)
+    covariance = second - mean[:, :, None] * mean[:, None, :]
+    eigenvalues, eigenvectors = np.linalg.eigh(covariance)
+    l2, l1 = eigenvalues[:, 1], eigenvalues[:, 2]
+    linearity = (l1 - l2) / np.maximum(l1, 1e-12)
+    upright = np.abs(eigenvectors[:, 2, 2]) > COS_UPRIGHT
+    return (count >= 6) & (linearity > MIN_LINEARITY) & upright  # type: ignore[no-any-return]
+
+
+def segment_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -> Organs:
+    """Split a plant's points (N, 3) into stem, whorl and leaves, given a first guess of the
+    stem's foot (3,) (base xy, local ground z)."""
+    axis = fit_stem_axis(points_m, foot_m)
+    along, radial = axis.split(points_m)
+    foot_ring = (along > 0.005) & (along < FOOT_HEIGHT_M) & (radial < FOOT_SEARCH_M)
+    stem_radius = float(np.median(radial[foot_ring])) if foot_ring.sum() >= 5 else 0.006
+    stem_radius = float(np.clip(stem_radius, 0.003, 0.012))
+    cut = max(stem_radius + CUT_MARGIN_M, MIN_CUT_RADIUS_M)
+    outside = np.flatnonzero(radial > cut)
+    labels = _components(points_m[outside])
+    leaves = _leaves_from_components(points_m, outside, labels, radial, cut)
+    leaves = _grow_into_shell(points_m, leaves, radial, stem_radius + SHELL_GAP_M, cut)
+    starts = [float(along[leaf][np.argmin(radial[leaf])]) for leaf in leaves]
+    leaves = [leaves[i] for i in np.argsort(starts, kind="stable")]
+    organ = np.where(radial <= cut, ORGAN_STEM, ORGAN_NONE).astype(np.uint8)
+    leaf_id = np.zeros(len(points_m), dtype=np.uint8)
+    for number, leaf in enumerate(leaves, start=1):
+        organ[leaf] = ORGAN_LEAF
+        leaf_id[leaf] = min(number, 255)
+    if leaves:
+        top_insertion = max(starts)
+        organ[(organ == ORGAN_STEM) & (along > top_insertion)] = ORGAN_WHORL
+    return Organs(organ, leaf_id, axis, stem_radius, cut, leaves)
+
+
+def _grow_into_shell(
+    points_m: NDArray[np.float64],
+    leaves: list[NDArray[np.intp]],
+    radial: NDArray[np.float64],
+    inner_m: float,
+    cut_m: float,
+) -> list[NDArray[np.intp]]:
+    """Leaves grown back into the stem's cylinder down to ``inner_m`` from the axis: each point
+    of that shell joins the leaf it is nearest to along :data:`SHELL_LINK_M` links (within
+    :data:`SHELL_REACH_M`). A leaf standing up beside the whorl runs for centimetres inside the
+    cylinder before it leaves it."""
+    if not leaves:
+        return leaves
+    shell = np.flatnonzero((radial > inner_m) & (radial <= cut_m))
+    bases = [leaf[radial[leaf] <= cut_m + SHELL_REACH_M] for leaf in leaves]
+    region = np.concatenate([*bases, shell])
+    owner = np.concatenate(
+        [np.full(len(b), k) for k, b in enumerate(bases)] + [np.full(len(shell), -1)]
+    )
+    if len(shell) == 0 or len(region) == len(shell):
+        return leaves
+    region_points = points_m[region]
+    pairs = cKDTree(region_points).query_pairs(SHELL_LINK_M, output_type="ndarray")
+    length = np.linalg.norm(region_points[pairs[:, 0]] - region_points[pairs[:, 1]], axis=1)
+    graph = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(region),) * 2)
+    starts = np.flatnonzero(owner >= 0)
+    distance, _, source = dijkstra(
+        graph.tocsr(), directed=False, indices=starts, min_only=True, return_predecessors=True
+    )
+    grown = list(leaves)
+    in_shell = np.arange(len(region)) >= len(region) - len(shell)
+    reached = in_shell & (distance <= SHELL_REACH_M)
+    for k in range(len(leaves)):
+        joined = region[reached & (owner[np.maximum(source, 0)] == k)]
+        grown[k] = np.unique(np.concatenate([leaves[k], joined]))
+    return grown
+
+
+def voxel_means(
+    points_m: NDArray[np.float64], voxel_m: float = GRAPH_VOXEL_M
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """The mean point (V, 3) of every occupied ``voxel_m`` voxel and each point's voxel (N,):
+    the graphs are built on these, a few per square centimetre of leaf."""
+    cells = np.floor(points_m / voxel_m).astype(np.int64)
+    cells -= cells.min(axis=0)
+    span = cells.max(axis=0) + 1
+    keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+    _, inverse = np.unique(keys, return_inverse=True)
+    count = np.bincount(inverse).astype(np.float64)
+    means = np.stack([np.bincount(inverse, points_m[:, i]) for i in range(3)], 1) / count[:, None]
+    return means, inverse.astype(np.intp)
+
+
+def _components(points_m: NDArray[np.float64]) -> NDArray[np.intp]:
+    """(N,) component of every point, voxels whose means are closer than :data:`LINK_M`
+    linked."""
+    if len(points_m) == 0:
+        return np.zeros(0, dtype=np.intp)
+    means, inverse = voxel_means(points_m)
+    pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(means),) * 2)
+    labels = connected_components(graph, directed=False)[1]
+    return labels[inverse].astype(np.intp)  # type: ignore[no-any-return]
+
+
+def _split_at_bases(
+    points_m: NDArray[np.float64],
+    members: NDArray[np.intp],
+    radial: NDArray[np.float64],
+    cut_m: float,
+) -> list[NDArray[np.intp]]:
+    """One branch per base: a branch leaving the stem at two places (two leaves touching
+    further out) is split, each point going to the base it is nearest to along the branch."""
+    base = members[radial[members] < cut_m + TOUCH_M]
+    groups = _components_linked(points_m[base], BASE_LINK_M)
+    sizes = np.bincount(groups)
+    kept = np.flatnonzero(sizes >= MIN_BASE_POINTS)
+    if len(kept) < 2:
+        return [members]
+    means, inverse = voxel_means(points_m[members])
+    pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
+    length = np.linalg.norm(means[pairs[:, 0]] - means[pairs[:, 1]], axis=1)
+    graph = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(means),) * 2)
+    position = {int(v): i for i, v in enumerate(members)}
+    distances = []
+    for group in kept:
+        starts = np.unique(inverse[[position[int(v)] for v in base[groups == group]]])
+        distances.append(dijkstra(graph.tocsr(), directed=False, indices=starts, min_only=True))
+    owner = np.argmin(np.stack(distances), axis=0)[inverse]
+    return [members[owner == k] for k in range(len(kept)) if np.any(owner == k)]
+
+
+def _components_linked(points_m: NDArray[np.float64], link_m: float) -> NDArray[np.intp]:
+    """(N,) component of every point, points closer than ``link_m`` linked."""
+    pairs = cKDTree(points_m).query_pairs(link_m, output_type="ndarray")
+    graph = coo_matrix(
+        (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points_m),) * 2
+    )
+    return connected_components(graph, directed=False)[1].astype(np.intp)  # type: ignore[no-any-return]
+
+
+def _leaves_from_components(
+    points_m: NDArray[np.float64],
+    outside: NDArray[np.intp],
+    labels: NDArray[np.intp],
+    radial: NDArray[np.float64],
+    cut_m: float,
+) -> list[NDArray[np.intp]]:
+    """Leaves (indices into ``points_m``): the components that reach the stem and are large
+    enough; the other large pieces join the nearest such leaf."""
+    leaves: list[NDArray[np.intp]] = []
+    pieces: list[NDArray[np.intp]] = []
+    for label in np.unique(labels):
+        members = outside[labels == label]
+        if len(members) < MIN_LEAF_POINTS // 4:
+            continue
+        extent = float(np.ptp(points_m[members], axis=0).max())
+        reaches = float(radial[members].min()) < cut_m + TOUCH_M
+        if reaches and len(members) >= MIN_LEAF_POINTS and extent >= MIN_LEAF_EXTENT_M:
+            leaves += _split_at_bases(points_m, members, radial, cut_m)
+        else:
+            pieces.append(members)
+    if not leaves:
+        return leaves
+    trees = [cKDTree(points_m[leaf]) for leaf in leaves]
+    for piece in pieces:
+        gaps = [float(tree.query(points_m[piece], k=1)[0].min()) for tree in trees]
+        nearest = int(np.argmin(gaps))
+        if gaps[nearest] <= FRAGMENT_JOIN_M:
+            leaves[nearest] = np.concatenate([leaves[nearest], piece])
+    return leaves
