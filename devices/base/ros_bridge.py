@@ -188,10 +188,12 @@ def build_bridge(
     telemetry_endpoint: str,
     keys: ServerKeys | None,
     config: ControllerConfig,
+    clock: Callable[[], float] = time.monotonic,
 ) -> ProtocolServer:
-    """The protocol server over ``navigation`` (not started)."""
-    controller = BaseController(BridgeBackend(navigation), config)
-    return ProtocolServer(controller, command_endpoint, telemetry_endpoint, keys)
+    """The protocol server over ``navigation`` (not started); ``clock`` times the watchdog,
+    telemetry and the zero-velocity hold."""
+    controller = BaseController(BridgeBackend(navigation, clock), config)
+    return ProtocolServer(controller, command_endpoint, telemetry_endpoint, keys, clock=clock)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -177,7 +177,7 @@ class ProtocolServer:
     # --- loop ---
 
     def _serve(self, router: zmq.Socket[bytes], publisher: zmq.Socket[bytes]) -> None:
-        telemetry = _TelemetryClock()
+        telemetry = TelemetrySchedule()
         poller = zmq.Poller()
         poller.register(router, zmq.POLLIN)
         try:
@@ -235,7 +235,7 @@ class ProtocolServer:
         self._cache.put(request_id, data)
         return data
 
-    def _tick(self, publisher: zmq.Socket[bytes], telemetry: _TelemetryClock) -> None:
+    def _tick(self, publisher: zmq.Socket[bytes], telemetry: TelemetrySchedule) -> None:
         now_s = self._clock()
         self.controller.tick(now_s)
         status = self.controller.status()
@@ -253,8 +253,8 @@ class ProtocolServer:
             publisher.send_multipart(encode_state_telemetry(status))
 
 
-class _TelemetryClock:
-    """When the next pose and state messages are due."""
+class TelemetrySchedule:
+    """When the next pose and state messages are due (times from the server's clock)."""
 
     def __init__(self) -> None:
         self._last_pose_s = -1e9

@@ -84,10 +84,13 @@ class GrblTable:
         *,
         timeouts: TableTimeouts | None = None,
         tolerance_deg: float = TOLERANCE_DEG,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        """``clock`` times every bound in :class:`TableTimeouts` (a fake one in tests)."""
         self.timeouts = timeouts or TableTimeouts()
         self.tolerance_deg = tolerance_deg
-        self._link = GrblLink(port, self._on_line, self.disconnected.emit)
+        self._clock = clock
+        self._link = GrblLink(port, self._on_line, self.disconnected.emit, clock)
         self._holds = 0
         self._position_known = False
 
@@ -119,6 +122,12 @@ class GrblTable:
     def position_known(self) -> bool:
         with self._link.cond:
             return self._position_known and not self._link.state.position_lost
+
+    @property
+    def statuses_received(self) -> int:
+        """How many status reports the controller has sent (monitoring and tests)."""
+        with self._link.cond:
+            return self._link.state.statuses
 
     @property
     def settings(self) -> dict[int, float]:
@@ -171,8 +180,8 @@ class GrblTable:
             self._holds += 1
             self._link.cond.notify_all()
         self._link.write(p.FEED_HOLD)
-        deadline_s = time.monotonic() + self.timeouts.hold_s
-        while time.monotonic() < deadline_s:
+        deadline_s = self._clock() + self.timeouts.hold_s
+        while self._clock() < deadline_s:
             status = self.status()
             if status.state in ("Idle", "Alarm") or (status.state, status.substate) == (
                 "Hold",

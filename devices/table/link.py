@@ -77,15 +77,18 @@ class ControllerState:
 class GrblLink:
     """Owns the port once started. ``on_line`` sees every parsed line (before the link
     accounts for it) and ``on_disconnect`` the loss of the port, both on the reader thread:
-    they must not block."""
+    they must not block. Every deadline is on ``clock`` (tests advance a fake one); waits
+    wake at least every ``READ_POLL_S`` of real time to look at it."""
 
     def __init__(
         self,
         port: SerialPort,
         on_line: Callable[[p.Reply], None],
         on_disconnect: Callable[[str], None],
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self._port = port
+        self.clock = clock
         self._on_line = on_line
         self._on_disconnect = on_disconnect
         self.cond = threading.Condition()
@@ -161,16 +164,16 @@ class GrblLink:
         interrupted: Callable[[], TableException | None],
         poll_s: float | None = None,
     ) -> p.Reply:
-        deadline_s = slot.deadline_s = time.monotonic() + timeout_s
-        next_poll_s = time.monotonic() + (poll_s or 0.0)
+        deadline_s = slot.deadline_s = self.clock() + timeout_s
+        next_poll_s = self.clock() + (poll_s or 0.0)
         with self.cond:
             while not slot.done:
-                if poll_s is not None and time.monotonic() >= next_poll_s:
+                if poll_s is not None and self.clock() >= next_poll_s:
                     next_poll_s += poll_s
                     self.write(p.STATUS_QUERY)
                 self._raise_if_disconnected()
                 stop = interrupted()
-                left_s = deadline_s - time.monotonic()
+                left_s = deadline_s - self.clock()
                 if stop is None and left_s <= 0.0:
                     stop = TableTimeout(f"no answer to {slot.line!r} within {timeout_s:.1f} s")
                 if stop is not None:
@@ -188,7 +191,7 @@ class GrblLink:
         if stale == 0:
             return
         # a stale line may still be running (a held move): wait as long as it was given
-        timeout_s += max(0.0, last_deadline_s - time.monotonic())
+        timeout_s += max(0.0, last_deadline_s - self.clock())
         if stale > MAX_STALE_LINES:
             raise TableTimeout(
                 f"controller out of step ({stale} lines unanswered); reset the table"
@@ -204,11 +207,11 @@ class GrblLink:
 
     def wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Wait (under :attr:`cond`) until ``predicate()``; False on timeout."""
-        deadline_s = time.monotonic() + timeout_s
+        deadline_s = self.clock() + timeout_s
         with self.cond:
             while not predicate():
                 self._raise_if_disconnected()
-                left_s = deadline_s - time.monotonic()
+                left_s = deadline_s - self.clock()
                 if left_s <= 0.0:
                     return False
                 self.cond.wait(min(left_s, READ_POLL_S))

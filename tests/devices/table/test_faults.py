@@ -3,6 +3,7 @@ never a false "done"."""
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 
@@ -17,8 +18,10 @@ from devices.table import (
     TableTimeout,
     TableTimeouts,
 )
+from devices.table.protocol import BARRIER_LINE
 
-from .conftest import FAST, goto_in_background
+from ..fake_clock import FakeClock, wait_real
+from .conftest import FAST, advance_while_polling, goto_in_background
 
 MakeServer = Callable[..., PtyGrblServer]
 MakeTable = Callable[..., GrblTable]
@@ -49,6 +52,20 @@ def test_stall_during_a_move_blocks_moves_until_the_operator_acts(
     assert not table.position_known  # unlocking does not make the position known
 
 
+def _in_background(call: Callable[[], object]) -> tuple[threading.Thread, list[BaseException]]:
+    outcome: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            call()
+        except BaseException as error:
+            outcome.append(error)
+
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    return worker, outcome
+
+
 def test_alarm_in_the_middle_of_a_real_time_move(
     timed_server: PtyGrblServer, make_table: MakeTable
 ) -> None:
@@ -56,7 +73,7 @@ def test_alarm_in_the_middle_of_a_real_time_move(
     mover, outcome = goto_in_background(table, 20.0)
     time.sleep(0.4)
     timed_server.simulator.inject_alarm(2)
-    mover.join(timeout=5.0)
+    mover.join(timeout=20.0)
     assert isinstance(outcome[0], TableAlarm)
     assert outcome[0].code == 2
     assert 0.0 < timed_server.simulator.angle_deg < 20.0
@@ -67,38 +84,46 @@ def test_alarm_in_the_middle_of_a_real_time_move(
 def test_lost_alarm_line_is_still_seen_through_the_status(
     server: PtyGrblServer, make_table: MakeTable
 ) -> None:
-    table = make_table(server)
+    clock = FakeClock()
+    table = make_table(server, clock=clock)
     server.simulator.inject_stall(after_deg=3.0)
     server.simulator.garble(count=1, skip=2)  # status, ok of G0, then ALARM:1 garbled
-    started_s = time.monotonic()
-    with pytest.raises(TableAlarm):
-        table.goto_deg(90.0)
-    assert time.monotonic() - started_s < 1.0  # found by polling, not by timing out
+    lines = len(server.simulator.executed_lines)
+    mover, outcome = goto_in_background(table, 90.0)
+    assert wait_real(lambda: len(server.simulator.executed_lines) > lines)  # the move ran
+    took_s = advance_while_polling(table, clock, mover, FAST.poll_s, FAST.move_max_s)
+    assert isinstance(outcome[0], TableAlarm)
+    assert took_s <= 3 * FAST.poll_s  # found by polling, not by timing out
 
 
-def test_no_reply_times_out_within_the_bound(server: PtyGrblServer, table: GrblTable) -> None:
+def test_no_reply_times_out_at_the_bound(server: PtyGrblServer, make_table: MakeTable) -> None:
+    clock = FakeClock()
+    table = make_table(server, clock=clock)
     server.simulator.set_silent(True)
     for call in (table.status, lambda: table.goto_deg(10.0)):
-        started_s = time.monotonic()
-        with pytest.raises(TableTimeout):
-            call()
-        assert time.monotonic() - started_s <= 3 * FAST.status_s + 0.3
+        worker, outcome = _in_background(call)
+        took_s = advance_while_polling(table, clock, worker, 0.01, 10.0, answer_wait_s=0.005)
+        assert isinstance(outcome[0], TableTimeout)
+        assert took_s >= 3 * FAST.status_s  # three status queries, none given up early
     assert server.simulator.angle_deg == 0.0
 
 
-def test_silence_during_a_move_times_out_within_the_move_bound(
+def test_silence_during_a_move_times_out_at_the_move_bound(
     timed_server: PtyGrblServer, make_table: MakeTable
 ) -> None:
-    table = make_table(timed_server)
-    started_s = time.monotonic()
+    clock = FakeClock()
+    table = make_table(timed_server, clock=clock)
     mover, outcome = goto_in_background(table, 20.0)
-    time.sleep(0.2)
+    barrier = BARRIER_LINE.replace(" ", "")
+    assert wait_real(lambda: barrier in timed_server.simulator.executed_lines)
     timed_server.simulator.set_silent(True)
-    mover.join(timeout=10.0)
-    elapsed_s = time.monotonic() - started_s
     bound_s = 1.5 * (20.0 / 30.0 + 30.0 / 60.0) + FAST.move_margin_s
+    clock.advance(bound_s - 0.01)
+    time.sleep(0.2)
+    assert mover.is_alive()
+    clock.advance(0.02)
+    mover.join(timeout=20.0)
     assert isinstance(outcome[0], TableTimeout)
-    assert bound_s - 0.1 <= elapsed_s <= bound_s + 0.5
 
 
 def test_garbled_barrier_answer_is_no_false_done(
@@ -137,7 +162,7 @@ def test_unplug_mid_move(timed_server: PtyGrblServer, make_table: MakeTable) -> 
     mover, outcome = goto_in_background(table, 20.0)
     time.sleep(0.4)
     timed_server.unplug()
-    mover.join(timeout=5.0)
+    mover.join(timeout=20.0)
     assert isinstance(outcome[0], TableDisconnected)
     assert reasons
     assert not table.position_known
