@@ -21,7 +21,13 @@ Then, with ``roscore``, ``move_base`` and ``amcl`` running::
     python -m devices.base.ros_bridge --keys ~/.fieldapp/base-keys \\
         --bind tcp://*:5555 --telemetry tcp://*:5556 --bounds -2 -2 12 12
 
-Without ``--keys`` only loopback addresses are accepted.
+Without ``--keys`` only loopback addresses are accepted. With keys the bridge fails closed (no
+client gets in while its ZAP handler is not running), re-reads ``authorized_clients/`` every
+second and at once on ``kill -HUP`` (a removed key's requests are dropped, also on connections
+already made), logs every rejected handshake with the client's public key, gives ``hello`` a new
+``session`` at every start (a captured ``goto`` cannot be replayed after a restart), caches
+replies per client and never swallows a ``stop``, and lets only the client that sent the goal
+feed the lost-link watchdog. After a lost link it stays stopped until a client sends ``reset``.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -218,6 +225,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         RosNavigation(args.battery_topic), args.bind, args.telemetry, keys, config
     )
     server.start()
+    signal.signal(signal.SIGHUP, lambda _signum, _frame: server.reload_keys())
     try:
         rospy.spin()
     finally:

@@ -29,10 +29,9 @@ class FakeBackend:
         return BackendSnapshot(Pose(0.0, 0.0, 0.0), self.progress, 90.0)
 
 
-def _goto(goal_id: str = "g") -> Request:
-    return Request(
-        f"c-{goal_id}", Command.GOTO, {"goal_id": goal_id, "x": 1.0, "y": 0.0, "yaw_deg": 0.0}
-    )
+def _goto(base: BaseController, goal_id: str = "g") -> Request:
+    args = {"goal_id": goal_id, "x": 1.0, "y": 0.0, "yaw_deg": 0.0}
+    return Request(f"c-{goal_id}", Command.GOTO, args, base.session)
 
 
 @pytest.fixture
@@ -46,7 +45,7 @@ def test_watchdog_fires_just_after_its_period_of_silence(
     controller: tuple[BaseController, FakeBackend], start_s: float
 ) -> None:
     base, backend = controller
-    assert base.handle(_goto(), start_s).ok
+    assert base.handle(_goto(base), start_s).ok
     base.tick(start_s + 0.6)
     assert base.handle(Request("c-hb", Command.HEARTBEAT), start_s + 0.6).ok
     base.tick(start_s + 1.6)  # exactly 1.0 s after the last request: not yet

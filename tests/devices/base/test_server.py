@@ -174,7 +174,7 @@ def test_retried_request_executes_once(
     link.drop_replies = 1
     client.stop()
     assert link.replies_dropped == 3
-    assert sim.executed[Command.STOP] == 1
+    assert sim.executed[Command.STOP] == 2  # a stop is executed again even when retried
     assert sim.latched
 
 
@@ -187,6 +187,7 @@ def test_same_id_gets_the_cached_reply_and_the_cache_keeps_256(
         "id": "r-1",
         "cmd": "goto",
         "args": {"goal_id": "g", "x": 1.0, "y": 0.0, "yaw_deg": 0.0},
+        "session": sim.server.session,
     }
     first = _request(sock, json.dumps(goto).encode())
     again = _request(sock, json.dumps(goto).encode())
@@ -210,6 +211,7 @@ def test_bad_requests_get_errors_or_are_dropped_and_nothing_moves(
 ) -> None:
     sock = raw_dealer(sim.command_endpoint)
     goal = '"goal_id": "g", "y": 0.0, "yaw_deg": 0.0'
+    session = f'"session": "{sim.server.session}"'.encode()
     cases: list[tuple[bytes, str, str | None]] = [
         (b"\x00garbage", "bad_request", None),
         (
@@ -238,7 +240,11 @@ def test_bad_requests_get_errors_or_are_dropped_and_nothing_moves(
             "b4",
         ),
         (
-            b'{"v": 1, "id": "b5", "cmd": "goto", "args": {' + goal.encode() + b', "x": 12.0}}',
+            b'{"v": 1, "id": "b5", "cmd": "goto", "args": {'
+            + goal.encode()
+            + b', "x": 12.0}, '
+            + session
+            + b"}",
             "out_of_bounds",
             "b5",
         ),
