@@ -19,9 +19,13 @@ class FakeClock:
     def __init__(self, start_s: float = 1000.0) -> None:
         self._now_s = start_s
         self._lock = threading.Lock()
+        self.reads = 0
+        """How many times the clock was read: a test waits for the code under test to have
+        taken the time (e.g. set its deadline) before it advances the clock."""
 
     def __call__(self) -> float:
         with self._lock:
+            self.reads += 1
             return self._now_s
 
     def advance(self, seconds: float) -> float:

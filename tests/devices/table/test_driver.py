@@ -52,9 +52,10 @@ def test_connect_without_banner_sends_ctrl_x(make_server: MakeServer) -> None:
     connecting = threading.Thread(target=table.connect, daemon=True)
     try:
         connecting.start()
-        clock.advance(0.29)
+        assert wait_real(lambda: clock.reads > 0)  # waiting for the banner
+        clock.advance(timeouts.banner_s - 0.01)
         time.sleep(0.2)
-        assert quiet.simulator.soft_resets_received == 0  # still waiting for a banner
+        assert quiet.simulator.soft_resets_received == 0  # not before the banner's bound
         clock.advance(0.02)
         assert wait_real(lambda: quiet.simulator.soft_resets_received == 1)
         connecting.join(timeout=20.0)
