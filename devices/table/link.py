@@ -21,7 +21,13 @@ from typing import Protocol
 
 from devices.table import protocol as p
 from devices.table.codes import POSITION_LOST_ALARMS
-from devices.table.errors import TableDisconnected, TableException, TableReset, TableTimeout
+from devices.table.errors import (
+    TableDisconnected,
+    TableException,
+    TableHeld,
+    TableReset,
+    TableTimeout,
+)
 
 log = logging.getLogger(__name__)
 
@@ -187,6 +193,8 @@ class GrblLink:
                     stop = TableTimeout(f"no answer to {slot.line!r} within {timeout_s:.1f} s")
                 if stop is not None:
                     slot.stale = True
+                    if not isinstance(stop, TableHeld):  # only a held move may still run
+                        slot.deadline_s = self.clock()
                     raise stop
                 self.cond.wait(min(left_s, READ_POLL_S))
             if slot.reply is not None:
@@ -329,7 +337,10 @@ class GrblLink:
         self.state.banners += 1
 
     def _drop_before_sync(self) -> None:
-        while self._pending and not self._pending[0].sync:
+        """A ``[GC:...]`` line: everything before the waiting resync was lost, including an
+        earlier resync given up on (its own ``[GC:...]`` garbled), which would otherwise
+        take this resync's answer and leave the link out of step for good."""
+        while self._pending and not (self._pending[0].sync and not self._pending[0].stale):
             lost = self._pending.popleft()
             lost.error = TableTimeout(f"the answer to {lost.line!r} was lost")
             log.warning("answer to %r lost (noise on the line?)", lost.line)

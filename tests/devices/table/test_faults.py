@@ -236,3 +236,16 @@ def test_moves_are_refused_while_the_position_is_unknown(
     assert server.simulator.angle_deg == 0.0
     table.confirm_position_known()
     assert table.goto_deg(30.0) == pytest.approx(30.0)
+
+
+def test_a_resync_whose_own_answer_was_lost_does_not_leave_the_link_out_of_step(
+    server: PtyGrblServer, table: GrblTable
+) -> None:
+    server.simulator.garble(count=1, skip=1)  # status, then the ok of G0 is lost
+    with pytest.raises(TableTimeout):
+        table.goto_deg(10.0)
+    server.simulator.garble(count=1, skip=1)  # status, then the resync's [GC:...] is lost
+    with pytest.raises(TableTimeout, match=r"\$G"):
+        table.goto_deg(20.0)
+    for target_deg in (30.0, 40.0):  # the next resync flushes both; back in step for good
+        assert table.goto_deg(target_deg) == pytest.approx(target_deg)
