@@ -171,3 +171,24 @@ def test_navigation_dropping_the_goal_counts_as_aborted() -> None:
     assert backend.update().progress is NavProgress.MOVING
     navigation.progress = NavProgress.IDLE  # preempted by someone else on the robot
     assert backend.update().progress is NavProgress.IDLE
+
+
+def test_the_bridge_obeys_only_the_goal_s_owner_and_its_session(
+    bridge: tuple[FakeNavigation, ProtocolServer],
+    clock: FakeClock,
+    make_client: MakeClient,
+    wait_for: WaitFor,
+) -> None:
+    navigation, server = bridge
+    owner = make_client(server.command_endpoint)
+    assert owner.hello().session == server.session
+    owner.goto("s01", Pose(5.0, 5.0, 0.0), wait=False)
+    owner.close()  # the commanding workstation dies
+    watcher = make_client(server.command_endpoint)
+    for _ in range(4):  # another client polling does not feed the watchdog
+        clock.advance(0.3)
+        watcher.status()
+    wait_for(lambda: navigation.cancels == 1, 20.0)
+    assert server.status().error == "link lost"
+    watcher.reset()  # recovery only by a client's explicit reset and a new goto
+    assert len(navigation.goals) == 1
