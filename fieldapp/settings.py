@@ -91,6 +91,18 @@ class BatterySettings(Section):
         return self
 
 
+class IncidentPolicy(Section):
+    """What a mission does when the base loses its link or cannot reach a station
+    (:mod:`fieldapp.mission.incidents`). The settings give new plans their policy; the plan
+    carries it into every session folder."""
+
+    lost_link: Literal["ask", "stop", "resume"] = "ask"
+    """``ask`` the operator (resume / skip station / stop; stop when nobody can be asked),
+    ``stop``, or ``resume`` by itself (at most ``retries.navigation`` times per station)."""
+    blocked_path: Literal["ask", "stop", "skip"] = "ask"
+    """After the navigation retries: ``ask`` the operator, ``stop``, or ``skip`` the station."""
+
+
 class Settings(Section):
     devices: DeviceSettings = Field(default_factory=DeviceSettings)
     battery: BatterySettings = Field(default_factory=BatterySettings)
@@ -98,6 +110,7 @@ class Settings(Section):
     reconstruction: ReconstructionSettings = Field(default_factory=ReconstructionSettings)
     camera_quality: CameraQualitySettings = Field(default_factory=CameraQualitySettings)
     results: ResultsSettings = Field(default_factory=ResultsSettings)
+    incidents: IncidentPolicy = Field(default_factory=IncidentPolicy)
 
 
 def default_settings_path() -> Path:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import secrets
 import threading
 import time
 from dataclasses import dataclass
@@ -61,6 +62,8 @@ class RequestChannel:
         self._monitor: zmq.Socket[bytes] | None = None
         self._failures = 0
         self._last_failure: BaseError | None = None
+        self.routing_id = b"fieldapp-" + secrets.token_hex(8).encode()
+        """Kept across reconnections: the base knows this client (its goal, its replies)."""
 
     def request(self, request_id: str, data: bytes) -> Reply:
         """Send ``data`` and return the reply with id ``request_id`` (Lazy Pirate)."""
@@ -137,6 +140,7 @@ class RequestChannel:
     def _open_socket(self) -> None:
         sock = self._context.socket(zmq.REQ)
         sock.setsockopt(zmq.LINGER, 0)
+        sock.setsockopt(zmq.ROUTING_ID, self.routing_id)
         if self._keys is not None:
             sock.curve_secretkey = self._keys.pair.secret.reveal()
             sock.curve_publickey = self._keys.pair.public

@@ -55,6 +55,8 @@ class BaseInfo:
     protocol: int
     frame: str
     bounds_m: tuple[float, float, float, float]
+    session: str | None = None
+    """Changes at every start of the base; ``None`` from an older base."""
 
 
 @dataclass(frozen=True)
@@ -107,8 +109,9 @@ class BaseClient:
         except BaseError:
             self._context.term()
             raise
-        self._session = uuid.uuid4().hex[:12]
+        self._id_prefix = uuid.uuid4().hex[:12]
         self._counter = itertools.count(1)
+        self._base_session: str | None = None
         self._active_goal: str | None = None
         self._link_error: BaseError | None = None
         self._closed = threading.Event()
@@ -128,17 +131,23 @@ class BaseClient:
     # --- commands ---
 
     def hello(self) -> BaseInfo:
+        """Greet the base and learn its ``session``, sent with every later request."""
+        self._base_session = None
         result = self._request(Command.HELLO, {"client": CLIENT_NAME})
         try:
             xmin, ymin, xmax, ymax = (float(v) for v in result["bounds"])
-            return BaseInfo(
+            session = result.get("session")
+            info = BaseInfo(
                 str(result["name"]),
                 int(result["protocol"]),
                 str(result["frame"]),
                 (xmin, ymin, xmax, ymax),
+                None if session is None else str(session),
             )
         except (KeyError, TypeError, ValueError) as error:
             raise BaseRequestRejected(f"malformed hello result from the base: {error}") from None
+        self._base_session = info.session
+        return info
 
     def status(self) -> Status:
         status = self._status_from(self._request(Command.STATUS, {}))
@@ -152,8 +161,12 @@ class BaseClient:
         """Send the base to ``goal`` (map frame); block until arrival unless ``wait`` is False.
 
         Raises :class:`BaseStopped` (latched), :class:`NavigationFailed` (aborted, refused,
-        cancelled or not arrived within ``timeout_s``), :class:`BaseOffline`.
+        cancelled or not arrived within ``timeout_s``), :class:`BaseOffline`, and
+        :class:`BaseRequestRejected` with code ``stale_session`` when the base restarted since
+        this client's ``hello`` (sent first when there was none).
         """
+        if self._base_session is None:
+            self.hello()
         self._request(Command.GOTO, {"goal_id": goal_id, **goal.to_json()})
         self._begin_goal(goal_id)
         if not wait:
@@ -202,7 +215,8 @@ class BaseClient:
     # --- internals ---
 
     def _request(self, cmd: Command, args: dict[str, Any]) -> dict[str, Any]:
-        request = Request(f"{self._session}-{next(self._counter):06d}", cmd, args)
+        request_id = f"{self._id_prefix}-{next(self._counter):06d}"
+        request = Request(request_id, cmd, args, self._base_session)
         try:
             data = encode_request(request)
         except ValueError as error:
@@ -213,6 +227,8 @@ class BaseClient:
         if reply.ok:
             return reply.result or {}
         code = reply.error_code or ErrorCode.BAD_REQUEST
+        if code is ErrorCode.STALE_SESSION:
+            self._base_session = None  # the next goto greets the restarted base first
         raise _error_for(cmd, code, reply.error_message or "")
 
     @staticmethod

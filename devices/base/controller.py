@@ -1,12 +1,17 @@
 """The base's protocol state: commands, goal state, stop latch and lost-link watchdog.
 
-No I/O and no clock of its own: :class:`BaseController` is given each request and the time, and
-is ticked with the backend's snapshot. The socket side lives in ``server.py``.
+No I/O and no clock of its own: :class:`BaseController` is given each request, the client it
+came from and the time, and is ticked with the backend's snapshot. The socket side lives in
+``server.py``. The ``session`` value is new for every controller (every start of the base):
+requests carrying another one are refused, and ``goto`` needs it, so a captured request cannot
+be replayed against a restarted base. Only the client that sent the active goal (its
+:data:`ClientId`) feeds the lost-link watchdog.
 """
 
 from __future__ import annotations
 
 import logging
+import secrets
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -30,6 +35,11 @@ log = logging.getLogger(__name__)
 LINK_LOST = "link lost"
 STOP_REQUESTED = "stop requested"
 
+ClientId = tuple[bytes, bytes]
+"""Who sent a request: (the client's CURVE public key in Z85, or b"" without keys; the
+connection's routing id, which the client keeps across its reconnections)."""
+ANONYMOUS: ClientId = (b"", b"")
+
 
 @dataclass(frozen=True)
 class ControllerConfig:
@@ -51,6 +61,9 @@ class BaseController:
         self._error: str | None = None
         self._latched = False
         self._last_heard_s = 0.0
+        self._owner: ClientId | None = None
+        self.session = secrets.token_hex(8)
+        """Changes every time the base starts (a new controller)."""
         self._snapshot = backend.update()
         self._handlers: dict[Command, Callable[[dict[str, Any]], Reply | dict[str, Any]]] = {
             Command.HELLO: self._hello,
@@ -74,16 +87,34 @@ class BaseController:
     def pose(self) -> Pose:
         return self._snapshot.pose
 
-    def handle(self, request: Request, now_s: float) -> Reply:
-        """Execute one request (once: the reply cache is the server's job)."""
-        self._last_heard_s = now_s
+    def handle(self, request: Request, now_s: float, client: ClientId = ANONYMOUS) -> Reply:
+        """Execute one request from ``client`` (once: the reply cache is the server's job)."""
+        refusal = self._session_problem(request)
+        if refusal is not None:
+            log.warning("%s %s refused: %s", request.cmd, request.id, refusal.error_message)
+            return Reply(request.id, False, None, refusal.error_code, refusal.error_message)
+        if client == self._owner:
+            self._last_heard_s = now_s
         self.executed[request.cmd] += 1
         outcome = self._handlers[request.cmd](request.args)
+        if request.cmd is Command.GOTO and not isinstance(outcome, Reply):
+            self._owner, self._last_heard_s = client, now_s
         if isinstance(outcome, Reply):
             return Reply(
                 request.id, outcome.ok, outcome.result, outcome.error_code, outcome.error_message
             )
         return Reply.success(request.id, outcome)
+
+    def _session_problem(self, request: Request) -> Reply | None:
+        if request.session is not None and request.session != self.session:
+            return Reply.failure(
+                None, ErrorCode.STALE_SESSION, "the base restarted since hello: send hello again"
+            )
+        if request.session is None and request.cmd is Command.GOTO:
+            return Reply.failure(
+                None, ErrorCode.BAD_REQUEST, "goto needs the base's session: send hello first"
+            )
+        return None
 
     def tick(self, now_s: float) -> None:
         """Take the backend's news and run the watchdog."""
@@ -117,6 +148,7 @@ class BaseController:
         return {
             "name": self.config.name,
             "protocol": PROTOCOL_VERSION,
+            "session": self.session,
             "frame": "map",
             "bounds": list(self.config.bounds_m),
         }

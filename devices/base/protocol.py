@@ -18,6 +18,7 @@ PROTOCOL_VERSION = 1
 MAX_MESSAGE_BYTES = 65536
 """ZMQ_MAXMSGSIZE on the base; larger frames are dropped."""
 MAX_ID_CHARS = 128
+MAX_SESSION_CHARS = 64
 MAX_ABS_COORDINATE = 1.0e6
 """Numbers beyond this (metres or degrees) are rejected as ``bad_request``, not as off the map."""
 
@@ -33,6 +34,7 @@ class ErrorCode(StrEnum):
     BUSY = "busy"
     NAV_FAILED = "nav_failed"
     VERSION = "version"
+    STALE_SESSION = "stale_session"
 
 
 class Command(StrEnum):
@@ -128,6 +130,8 @@ class Request:
     id: str
     cmd: Command
     args: dict[str, Any] = field(default_factory=dict)
+    session: str | None = None
+    """The base's ``session`` from ``hello``; ``None`` for older clients."""
 
 
 @dataclass(frozen=True)
@@ -199,9 +203,11 @@ def dumps(obj: Any) -> bytes:
 
 
 def encode_request(request: Request) -> bytes:
-    return dumps(
-        {"v": PROTOCOL_VERSION, "id": request.id, "cmd": request.cmd.value, "args": request.args}
-    )
+    obj: dict[str, Any] = {"v": PROTOCOL_VERSION, "id": request.id, "cmd": request.cmd.value}
+    obj["args"] = request.args
+    if request.session is not None:
+        obj["session"] = request.session
+    return dumps(obj)
 
 
 def decode_request(data: bytes) -> Request:
@@ -229,7 +235,12 @@ def decode_request(data: bytes) -> Request:
         _validate_args(cmd, args)
     except ProtocolError as error:
         raise _bad(error.message, request_id) from None
-    return Request(request_id, cmd, args)
+    session = obj.get("session")
+    if session is not None and (
+        not isinstance(session, str) or not 0 < len(session) <= MAX_SESSION_CHARS
+    ):
+        raise _bad(f"session must be a string of 1 to {MAX_SESSION_CHARS} characters", request_id)
+    return Request(request_id, cmd, args, session)
 
 
 _ALLOWED_ARGS: dict[Command, frozenset[str]] = {

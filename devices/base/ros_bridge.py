@@ -21,7 +21,13 @@ Then, with ``roscore``, ``move_base`` and ``amcl`` running::
     python -m devices.base.ros_bridge --keys ~/.fieldapp/base-keys \\
         --bind tcp://*:5555 --telemetry tcp://*:5556 --bounds -2 -2 12 12
 
-Without ``--keys`` only loopback addresses are accepted.
+Without ``--keys`` only loopback addresses are accepted. With keys the bridge fails closed (no
+client gets in while its ZAP handler is not running), re-reads ``authorized_clients/`` every
+second and at once on ``kill -HUP`` (a removed key's requests are dropped, also on connections
+already made), logs every rejected handshake with the client's public key, gives ``hello`` a new
+``session`` at every start (a captured ``goto`` cannot be replayed after a restart), caches
+replies per client and never swallows a ``stop``, and lets only the client that sent the goal
+feed the lost-link watchdog. After a lost link it stays stopped until a client sends ``reset``.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -188,10 +195,12 @@ def build_bridge(
     telemetry_endpoint: str,
     keys: ServerKeys | None,
     config: ControllerConfig,
+    clock: Callable[[], float] = time.monotonic,
 ) -> ProtocolServer:
-    """The protocol server over ``navigation`` (not started)."""
-    controller = BaseController(BridgeBackend(navigation), config)
-    return ProtocolServer(controller, command_endpoint, telemetry_endpoint, keys)
+    """The protocol server over ``navigation`` (not started); ``clock`` times the watchdog,
+    telemetry and the zero-velocity hold."""
+    controller = BaseController(BridgeBackend(navigation, clock), config)
+    return ProtocolServer(controller, command_endpoint, telemetry_endpoint, keys, clock=clock)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -216,6 +225,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         RosNavigation(args.battery_topic), args.bind, args.telemetry, keys, config
     )
     server.start()
+    signal.signal(signal.SIGHUP, lambda _signum, _frame: server.reload_keys())
     try:
         rospy.spin()
     finally:

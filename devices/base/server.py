@@ -1,10 +1,18 @@
 """The protocol server shared by the simulated base and the ROS bridge.
 
-A ROUTER socket for commands and a PUB socket for telemetry (both CURVE with ``zmq.auth`` when
-keys are given, loopback only otherwise), ZMQ_MAXMSGSIZE 65536, a 256-reply cache by request id,
-and one loop thread that answers requests, ticks the :class:`BaseController` (watchdog, stop
-latch) and publishes telemetry. Faults for tests: :meth:`ProtocolServer.freeze` (alive but
-silent) and :meth:`ProtocolServer.crash` (sockets gone at once, nothing halted).
+A ROUTER socket for commands and a PUB socket for telemetry (both CURVE with a ZAP handler when
+keys are given, loopback only otherwise), ZMQ_MAXMSGSIZE 65536, and one loop thread that answers
+requests, ticks the :class:`BaseController` (watchdog, stop latch) and publishes telemetry.
+
+Security (``shared/spec/base-protocol.md``): the sockets enforce ZAP, so with no handler no
+CURVE client gets in, and the loop serves nothing while the handler thread is dead (fail
+closed); the authorised-keys folder is re-read every ``keys_reload_s`` (or at once after
+:meth:`ProtocolServer.reload_keys`) and a request whose key was removed is dropped. Replies are
+cached per client (its CURVE key and routing id) and request id: a byte-identical retry gets the
+cached reply, another request with a used id is refused (``id reused``), a ``stop`` always runs.
+
+Faults for tests: :meth:`ProtocolServer.freeze` (alive but silent), :meth:`ProtocolServer.crash`
+(sockets gone at once, nothing halted), :meth:`ProtocolServer.kill_authenticator`.
 """
 
 from __future__ import annotations
@@ -19,11 +27,13 @@ from dataclasses import dataclass
 import zmq
 from zmq.auth.thread import ThreadAuthenticator
 
-from devices.base.controller import BaseController
+from devices.base.auth import ZAP_DOMAIN, AuthorizedKeys, enforce_zap
+from devices.base.controller import BaseController, ClientId
 from devices.base.keys import ServerKeys, require_loopback_without_keys
 from devices.base.protocol import (
     MAX_MESSAGE_BYTES,
     BaseState,
+    Command,
     ErrorCode,
     ProtocolError,
     Reply,
@@ -44,25 +54,40 @@ class ServerTiming:
     pose_period_moving_s: float = 0.05
     pose_period_rest_s: float = 1.0
     state_period_s: float = 1.0
+    keys_reload_s: float = 1.0
+    """How often the authorised-keys folder is checked for changes (the spec: within 2 s)."""
+
+
+@dataclass(frozen=True)
+class _Answered:
+    request: bytes
+    reply: bytes
 
 
 class ReplyCache:
-    """The last ``size`` replies by request id, oldest evicted first."""
+    """The last ``size`` replies of each client by request id, for at most ``clients`` clients
+    (the least recently heard is forgotten first)."""
 
-    def __init__(self, size: int) -> None:
+    def __init__(self, size: int, clients: int = 64) -> None:
         self._size = size
-        self._replies: OrderedDict[str, bytes] = OrderedDict()
+        self._clients = clients
+        self._by_client: OrderedDict[ClientId, OrderedDict[str, _Answered]] = OrderedDict()
 
-    def get(self, request_id: str) -> bytes | None:
-        return self._replies.get(request_id)
+    def get(self, client: ClientId, request_id: str) -> _Answered | None:
+        replies = self._by_client.get(client)
+        return None if replies is None else replies.get(request_id)
 
-    def put(self, request_id: str, reply: bytes) -> None:
-        self._replies[request_id] = reply
-        while len(self._replies) > self._size:
-            self._replies.popitem(last=False)
+    def put(self, client: ClientId, request_id: str, request: bytes, reply: bytes) -> None:
+        replies = self._by_client.setdefault(client, OrderedDict())
+        self._by_client.move_to_end(client)
+        replies[request_id] = _Answered(request, reply)
+        while len(replies) > self._size:
+            replies.popitem(last=False)
+        while len(self._by_client) > self._clients:
+            self._by_client.popitem(last=False)
 
     def __len__(self) -> int:
-        return len(self._replies)
+        return sum(len(replies) for replies in self._by_client.values())
 
 
 def split_envelope(frames: list[bytes]) -> tuple[list[bytes], list[bytes]]:
@@ -99,6 +124,9 @@ class ProtocolServer:
         self._thread: threading.Thread | None = None
         self._context: zmq.Context[zmq.Socket[bytes]] | None = None
         self._auth: ThreadAuthenticator | None = None
+        self._authorized = AuthorizedKeys(keys.authorized_dir) if keys is not None else None
+        self._reload_asked = threading.Event()
+        self._auth_lost_logged = False
         self.command_endpoint = command_endpoint
         self.telemetry_endpoint = telemetry_endpoint
         self.on_tick: Callable[[Status], None] | None = None
@@ -113,7 +141,7 @@ class ProtocolServer:
                 self._context, log=logging.getLogger(f"{__name__}.zap")
             )
             self._auth.start()
-            self._auth.configure_curve(domain="*", location=str(self._keys.authorized_dir))
+            self._auth.configure_curve_callback(ZAP_DOMAIN, credentials_provider=self._authorized)
         router = self._socket(self._context, zmq.ROUTER)
         publisher = self._socket(self._context, zmq.PUB)
         try:
@@ -137,7 +165,9 @@ class ProtocolServer:
         sock.setsockopt(zmq.LINGER, 0)
         if kind == zmq.ROUTER:
             sock.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES)
+            sock.setsockopt(zmq.ROUTER_HANDOVER, 1)  # a client's reconnection keeps its id
         if self._keys is not None:
+            enforce_zap(sock)
             sock.curve_secretkey = self._keys.pair.secret.reveal()
             sock.curve_publickey = self._keys.pair.public
             sock.curve_server = True
@@ -170,6 +200,20 @@ class ProtocolServer:
         """Drop both sockets at once without halting anything, like a dead process."""
         self._crashed.set()
 
+    def kill_authenticator(self) -> None:
+        """Fault for tests: the ZAP handler thread ends (the base must then serve nothing)."""
+        if self._auth is not None:
+            self._auth.stop()
+
+    def reload_keys(self) -> None:
+        """Read the authorised-keys folder again now (e.g. on SIGHUP); thread-safe."""
+        self._reload_asked.set()
+
+    @property
+    def session(self) -> str:
+        """The value ``hello`` returns; new at every start of the base."""
+        return self.controller.session
+
     def status(self) -> Status:
         with self._lock:
             return self._status
@@ -177,34 +221,74 @@ class ProtocolServer:
     # --- loop ---
 
     def _serve(self, router: zmq.Socket[bytes], publisher: zmq.Socket[bytes]) -> None:
-        telemetry = _TelemetryClock()
+        telemetry = TelemetrySchedule()
         poller = zmq.Poller()
         poller.register(router, zmq.POLLIN)
+        next_reload_s = self._clock() + self.timing.keys_reload_s
         try:
             while not self._stopping.is_set() and not self._crashed.is_set():
                 if self._frozen.is_set():
                     time.sleep(self.timing.poll_period_s)
                     continue
                 events = dict(poller.poll(timeout=round(self.timing.poll_period_s * 1000)))
+                now_s = self._clock()
+                if self._reload_asked.is_set() or now_s >= next_reload_s:
+                    self._reload_asked.clear()
+                    next_reload_s = now_s + self.timing.keys_reload_s
+                    if self._authorized is not None:
+                        self._authorized.refresh()
+                serving = self._authenticator_alive()
                 if router in events:
-                    self._drain(router)
-                self._tick(publisher, telemetry)
+                    self._drain(router, serving)
+                if serving:
+                    self._tick(publisher, telemetry)
+                else:
+                    self.controller.tick(now_s)  # the watchdog still halts a goal
         finally:
             if not self._crashed.is_set():
                 self.controller.backend.halt()
             router.close(linger=0)
             publisher.close(linger=0)
 
-    def _drain(self, router: zmq.Socket[bytes]) -> None:
+    def _authenticator_alive(self) -> bool:
+        """False when keys are in use but the ZAP handler is gone: then nothing is served."""
+        if self._keys is None or (self._auth is not None and self._auth.is_alive()):
+            return True
+        if not self._auth_lost_logged:
+            self._auth_lost_logged = True
+            log.error("the authenticator (ZAP handler) is not running: serving nothing")
+        return False
+
+    def _drain(self, router: zmq.Socket[bytes], serving: bool) -> None:
         for _ in range(100):
             try:
-                frames = router.recv_multipart(zmq.NOBLOCK)
+                frames = router.recv_multipart(zmq.NOBLOCK, copy=False)
             except zmq.Again:
                 return
-            envelope, reply = self._answer(frames)
+            if not serving:
+                continue
+            client = self._client_of(frames)
+            if client is None:
+                continue
+            envelope, reply = self._answer([frame.bytes for frame in frames], client)
             router.send_multipart([*envelope, reply])
 
-    def _answer(self, frames: list[bytes]) -> tuple[list[bytes], bytes]:
+    def _client_of(self, frames: list[zmq.Frame]) -> ClientId | None:
+        """Who sent ``frames``; None (and logged) for a key no longer authorised."""
+        routing_id = frames[0].bytes
+        if self._authorized is None:
+            return (b"", routing_id)
+        try:
+            user = str(frames[-1].get("User-Id")).encode("ascii")
+        except (zmq.ZMQError, UnicodeEncodeError):
+            user = b""
+        if not self._authorized.allows(user):
+            log.warning("request from client key %s refused: not authorised (revoked?)",
+                        user.decode() or "<none>")  # fmt: skip
+            return None
+        return (user, routing_id)
+
+    def _answer(self, frames: list[bytes], client: ClientId) -> tuple[list[bytes], bytes]:
         envelope, body = split_envelope(frames)
         if len(body) != 1:
             log.warning("a message of %d body frames: answered bad_request", len(body))
@@ -215,27 +299,22 @@ class ProtocolServer:
         except ProtocolError as error:
             log.warning("bad request (id %r): %s", error.request_id, error.message)
             reply = Reply.failure(error.request_id, error.code, error.message)
-            return envelope, self._cached(error.request_id, reply)
-        cached = self._cache.get(request.id)
-        if cached is not None:
-            log.info("repeated request %s (%s): sending the cached reply", request.id, request.cmd)
-            return envelope, cached
-        reply = self.controller.handle(request, self._clock())
+            return envelope, encode_reply(reply)
+        answered = self._cache.get(client, request.id)
+        if answered is not None and request.cmd is not Command.STOP:
+            if answered.request == body[0]:
+                log.info("repeated request %s (%s): the cached reply", request.id, request.cmd)
+                return envelope, answered.reply
+            log.warning("id %s reused for another request: refused", request.id)
+            reply = Reply.failure(request.id, ErrorCode.BAD_REQUEST, "id reused")
+            return envelope, encode_reply(reply)
+        data = encode_reply(self.controller.handle(request, self._clock(), client))
         with self._lock:  # status() reflects every command whose reply has been sent
             self._status = self.controller.status()
-        return envelope, self._cached(request.id, reply)
+        self._cache.put(client, request.id, body[0], data)
+        return envelope, data
 
-    def _cached(self, request_id: str | None, reply: Reply) -> bytes:
-        if request_id is None:
-            return encode_reply(reply)
-        previous = self._cache.get(request_id)
-        if previous is not None:
-            return previous
-        data = encode_reply(reply)
-        self._cache.put(request_id, data)
-        return data
-
-    def _tick(self, publisher: zmq.Socket[bytes], telemetry: _TelemetryClock) -> None:
+    def _tick(self, publisher: zmq.Socket[bytes], telemetry: TelemetrySchedule) -> None:
         now_s = self._clock()
         self.controller.tick(now_s)
         status = self.controller.status()
@@ -253,8 +332,8 @@ class ProtocolServer:
             publisher.send_multipart(encode_state_telemetry(status))
 
 
-class _TelemetryClock:
-    """When the next pose and state messages are due."""
+class TelemetrySchedule:
+    """When the next pose and state messages are due (times from the server's clock)."""
 
     def __init__(self) -> None:
         self._last_pose_s = -1e9

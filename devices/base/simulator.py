@@ -1,7 +1,8 @@
 """The simulated mobile base: the motion model served over the real protocol on loopback.
 
 ``time_scale`` makes simulated motion faster than real time (tests) or equal to it (demos); the
-watchdog and telemetry periods are always real time, since they are about the link. The current
+watchdog and telemetry periods follow the link's ``clock`` (real time by default; tests inject a
+fake clock and advance it). The current
 pose is :attr:`SimulatedBase.pose` and the psygnal signal :attr:`SimulatedBase.on_pose` (emitted
 from the server thread when the pose changes), for the simulated world to follow.
 """
@@ -85,13 +86,15 @@ class SimulatedBase:
         bounds_m: tuple[float, float, float, float] = DEFAULT_BOUNDS_M,
         watchdog_s: float = 1.0,
         timing: ServerTiming | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        """``clock`` times the link (watchdog, telemetry); motion follows the real clock."""
         self.model = MotionModel(limits, start, seed)
         self.backend = SimulatedMotionBackend(self.model, time_scale)
         config = ControllerConfig("fieldapp-sim-base", bounds_m, watchdog_s)
         self.controller = BaseController(self.backend, config)
         self.server = ProtocolServer(
-            self.controller, command_endpoint, telemetry_endpoint, keys, timing
+            self.controller, command_endpoint, telemetry_endpoint, keys, timing, clock
         )
         self.server.on_tick = self._emit_pose
         self._last_pose = self.model.pose

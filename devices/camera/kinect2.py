@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 import logging
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -59,12 +60,20 @@ class Kinect2Camera(DepthCamera):
 
     ``pipeline``: ``cpu``, ``opengl``, ``opencl``, ``cuda`` or ``None`` (libfreenect2's
     default). ``binding``: the module to use instead of importing ``pylibfreenect2`` (tests).
+    ``clock`` and ``sleep`` time the frame timeout (a fake pair in tests).
     """
 
     def __init__(
-        self, serial: str | None = None, pipeline: str | None = None, binding: Any = None
+        self,
+        serial: str | None = None,
+        pipeline: str | None = None,
+        binding: Any = None,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
     ) -> None:
         super().__init__()
+        self._clock, self._sleep = clock, sleep
         if pipeline is not None and pipeline not in PIPELINES:
             raise ValueError(f"pipeline must be one of {', '.join(PIPELINES)}, got {pipeline!r}")
         self.serial = serial
@@ -144,15 +153,15 @@ class Kinect2Camera(DepthCamera):
                 log.exception("closing Kinect v2 %s", self.serial)
 
     def _read(self, timeout_s: float) -> Frame:
-        deadline = time.monotonic() + timeout_s
+        deadline = self._clock() + timeout_s
         while not self._listener.hasNewFrame():
-            if time.monotonic() >= deadline:
+            if self._clock() >= deadline:
                 raise CameraTimeout(
                     f"no frame from Kinect v2 {self.serial} for {timeout_s:.1f} s "
                     "(unplugged, or not enough USB 3 bandwidth?)"
                 )
-            time.sleep(POLL_S)
-        stamp = time.monotonic()
+            self._sleep(POLL_S)
+        stamp = time.monotonic()  # frame ages are on the real clock (quality.py)
         frames = self._listener.waitForNewFrame()
         try:
             depth = frames["depth"]

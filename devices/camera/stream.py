@@ -13,6 +13,7 @@ import logging
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import TracebackType
 
@@ -87,9 +88,16 @@ class FrameStream:
     """Grabs frames from an open camera on a thread into a :class:`LatestFrame`."""
 
     def __init__(
-        self, camera: DepthCamera, timeout_s: float = FRAME_TIMEOUT_S, window_s: float = 2.0
+        self,
+        camera: DepthCamera,
+        timeout_s: float = FRAME_TIMEOUT_S,
+        window_s: float = 2.0,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        """``clock`` times the frame rate and :meth:`next_frame`'s wait (a fake one in tests);
+        the grabber's own wait is the camera's ``read_frame(timeout_s)``."""
         self.camera = camera
+        self._clock = clock
         self.timeout_s = timeout_s
         self.window_s = window_s
         self.buffer = LatestFrame()
@@ -143,10 +151,10 @@ class FrameStream:
     def next_frame(self, timeout_s: float | None = None) -> Frame:
         """A frame newer than the last one this method returned; waits for it."""
         timeout_s = self.timeout_s if timeout_s is None else timeout_s
-        deadline = time.monotonic() + timeout_s
+        deadline = self._clock() + timeout_s
         while True:
             self._raise_error()
-            remaining = deadline - time.monotonic()
+            remaining = deadline - self._clock()
             taken = self.buffer.wait_newer(self._seen, min(max(remaining, 0.0), 0.1))
             if taken is not None:
                 self._seen = taken[0]
@@ -180,7 +188,7 @@ class FrameStream:
         self.buffer.wake()
 
     def _count(self, frame: Frame) -> None:
-        now = time.monotonic()
+        now = self._clock()
         number = frame.meta.get("frame_number")
         with self._lock:
             self._frames += 1

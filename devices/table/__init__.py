@@ -14,6 +14,7 @@ from devices.table.errors import (
     TableException,
     TableHeld,
     TableMissedTarget,
+    TablePositionUnknown,
     TableReset,
     TableTimeout,
 )
@@ -30,6 +31,7 @@ __all__ = [
     "TableException",
     "TableHeld",
     "TableMissedTarget",
+    "TablePositionUnknown",
     "TableReset",
     "TableStatus",
     "TableTimeout",

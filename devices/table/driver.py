@@ -27,6 +27,7 @@ from devices.table.errors import (
     TableException,
     TableHeld,
     TableMissedTarget,
+    TablePositionUnknown,
     TableTimeout,
 )
 from devices.table.link import READ_POLL_S, GrblLink, SerialPort
@@ -40,15 +41,19 @@ TOLERANCE_DEG = 0.2
 @dataclass(frozen=True)
 class TableTimeouts:
     """Bounds on every wait, seconds. A move waits its estimated travel time x 1.5 plus
-    ``move_margin_s`` when the controller's ``$110``/``$120`` are known, else ``move_max_s``."""
+    ``move_margin_s`` when the controller's ``$110``/``$120`` are known, else ``move_max_s``;
+    but any failure is reported within ``failure_s``: the status queries' retries share it, a
+    resync shares its line's ``reply_s``, and a move fails once the controller stops answering
+    its polls for ``failure_s`` or reports Idle for half of it without answering the barrier."""
 
     banner_s: float = 2.0
-    reply_s: float = 2.0
+    reply_s: float = 1.0
     status_s: float = 0.5
     move_margin_s: float = 5.0
     move_max_s: float = 120.0
     hold_s: float = 10.0
     poll_s: float = 0.25
+    failure_s: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -84,10 +89,15 @@ class GrblTable:
         *,
         timeouts: TableTimeouts | None = None,
         tolerance_deg: float = TOLERANCE_DEG,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        """``clock`` times every bound in :class:`TableTimeouts` (a fake one in tests)."""
         self.timeouts = timeouts or TableTimeouts()
         self.tolerance_deg = tolerance_deg
-        self._link = GrblLink(port, self._on_line, self.disconnected.emit)
+        self._clock = clock
+        self._link = GrblLink(
+            port, self._on_line, self.disconnected.emit, clock, self.timeouts.failure_s
+        )
         self._holds = 0
         self._position_known = False
 
@@ -121,6 +131,12 @@ class GrblTable:
             return self._position_known and not self._link.state.position_lost
 
     @property
+    def statuses_received(self) -> int:
+        """How many status reports the controller has sent (monitoring and tests)."""
+        with self._link.cond:
+            return self._link.state.statuses
+
+    @property
     def settings(self) -> dict[int, float]:
         """The controller's ``$$`` settings as read at connect (``$110`` deg/min etc.)."""
         with self._link.cond:
@@ -145,10 +161,17 @@ class GrblTable:
     # --- motion -------------------------------------------------------------------------
 
     def goto_deg(self, target_deg: float) -> float:
-        """Turn to ``target_deg`` and return the angle reached (checked within tolerance)."""
+        """Turn to ``target_deg`` and return the angle reached (checked within tolerance).
+
+        Refused (:class:`TablePositionUnknown`, no line sent) while the position is unknown."""
         move_line = p.goto_line(target_deg)
         start = self.status()
         self._refuse_if_not_ready(start)
+        if not self.position_known:
+            raise TablePositionUnknown(
+                "table position unknown (after a reset, a lost-steps alarm or an unplug): "
+                "operator: home the table or confirm its angle; moves refused until then"
+            )
         interrupted = self._interruption_since()
         timeout_s = self._move_timeout_s(abs(target_deg - start.position_deg))
         self._run(move_line, self.timeouts.reply_s, interrupted)
@@ -171,8 +194,8 @@ class GrblTable:
             self._holds += 1
             self._link.cond.notify_all()
         self._link.write(p.FEED_HOLD)
-        deadline_s = time.monotonic() + self.timeouts.hold_s
-        while time.monotonic() < deadline_s:
+        deadline_s = self._clock() + self.timeouts.hold_s
+        while self._clock() < deadline_s:
             status = self.status()
             if status.state in ("Idle", "Alarm") or (status.state, status.substate) == (
                 "Hold",

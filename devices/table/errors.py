@@ -37,6 +37,11 @@ class TableAlarm(TableException):
         super().__init__(f"{text}; {advice}" if advice else text)
 
 
+class TablePositionUnknown(TableException):
+    """The table's angle is not known (after a reset, an alarm that lost steps, an unplug):
+    moves are refused until the operator homes the table or confirms its angle."""
+
+
 class TableHeld(TableException):
     """A move was interrupted by a feed hold (``!``); it resumes only on ``~``."""
 

@@ -21,7 +21,13 @@ from typing import Protocol
 
 from devices.table import protocol as p
 from devices.table.codes import POSITION_LOST_ALARMS
-from devices.table.errors import TableDisconnected, TableException, TableReset, TableTimeout
+from devices.table.errors import (
+    TableDisconnected,
+    TableException,
+    TableHeld,
+    TableReset,
+    TableTimeout,
+)
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +76,7 @@ class ControllerState:
     banners: int = 0
     alarms: int = 0
     statuses: int = 0
+    last_status_s: float = 0.0
     garbled_lines: int = 0
     disconnected: str | None = None
 
@@ -77,15 +84,21 @@ class ControllerState:
 class GrblLink:
     """Owns the port once started. ``on_line`` sees every parsed line (before the link
     accounts for it) and ``on_disconnect`` the loss of the port, both on the reader thread:
-    they must not block."""
+    they must not block. Every deadline is on ``clock`` (tests advance a fake one); waits
+    wake at least every ``READ_POLL_S`` of real time to look at it."""
 
     def __init__(
         self,
         port: SerialPort,
         on_line: Callable[[p.Reply], None],
         on_disconnect: Callable[[str], None],
+        clock: Callable[[], float] = time.monotonic,
+        failure_s: float = 2.0,
     ) -> None:
         self._port = port
+        self.clock = clock
+        self.failure_s = failure_s
+        """Every failure (silence, a lost answer) is reported within this many seconds."""
         self._on_line = on_line
         self._on_disconnect = on_disconnect
         self.cond = threading.Condition()
@@ -141,91 +154,109 @@ class GrblLink:
         """Send one line and wait for its ``ok`` (returned) or ``error:N`` (returned too).
 
         ``interrupted`` is checked while waiting: an exception it returns is raised and the
-        line is left stale. With ``poll_s``, a ``?`` is sent that often while waiting, so an
-        Alarm is seen even if its ``ALARM:N`` line was lost. Raises TableTimeout,
-        TableDisconnected or TableReset.
+        line is left stale. A resync before the line shares its deadline (no stacked timeouts).
+        With ``poll_s`` (a line that waits for motion), a ``?`` is sent that often while
+        waiting, so an Alarm is seen even if its ``ALARM:N`` line was lost, and the wait fails
+        as soon as the controller stops answering for ``failure_s`` or reports Idle for
+        ``failure_s / 2`` without the answer (lost to noise), whatever ``timeout_s`` is left.
+        Raises TableTimeout, TableDisconnected or TableReset.
         """
         data = p.encode_line(line)
         with self._send_lock:
-            self._resync(timeout_s)
+            started_s = self.clock()
+            waited_for_a_move = self._resync(
+                started_s + (self.failure_s if poll_s is not None else timeout_s)
+            )
             slot = _Slot(line)
             with self.cond:
                 self._pending.append(slot)
             self.write(data)
-            return self._wait_slot(slot, timeout_s, interrupted, poll_s)
+            base_s = self.clock() if poll_s is not None or waited_for_a_move else started_s
+            return self._wait_slot(slot, base_s + timeout_s, timeout_s, interrupted, poll_s)
 
     def _wait_slot(
         self,
         slot: _Slot,
+        deadline_s: float,
         timeout_s: float,
         interrupted: Callable[[], TableException | None],
         poll_s: float | None = None,
     ) -> p.Reply:
-        deadline_s = slot.deadline_s = time.monotonic() + timeout_s
-        next_poll_s = time.monotonic() + (poll_s or 0.0)
+        slot.deadline_s = deadline_s
+        watch = _Liveness(self, poll_s) if poll_s is not None else None
         with self.cond:
             while not slot.done:
-                if poll_s is not None and time.monotonic() >= next_poll_s:
-                    next_poll_s += poll_s
-                    self.write(p.STATUS_QUERY)
                 self._raise_if_disconnected()
-                stop = interrupted()
-                left_s = deadline_s - time.monotonic()
+                stop = interrupted() or (watch.check(slot.line) if watch else None)
+                left_s = deadline_s - self.clock()
                 if stop is None and left_s <= 0.0:
                     stop = TableTimeout(f"no answer to {slot.line!r} within {timeout_s:.1f} s")
                 if stop is not None:
                     slot.stale = True
+                    if not isinstance(stop, TableHeld):  # only a held move may still run
+                        slot.deadline_s = self.clock()
                     raise stop
                 self.cond.wait(min(left_s, READ_POLL_S))
             if slot.reply is not None:
                 return slot.reply
             raise slot.error or TableException(f"no answer to {slot.line!r}")
 
-    def _resync(self, timeout_s: float) -> None:
+    def _resync(self, deadline_s: float) -> bool:
+        """Flush stale lines by ``deadline_s`` (later if a stale move may still be running:
+        then True)."""
         with self.cond:
             stale = sum(1 for s in self._pending if s.stale)
             last_deadline_s = max((s.deadline_s for s in self._pending), default=0.0)
         if stale == 0:
-            return
-        # a stale line may still be running (a held move): wait as long as it was given
-        timeout_s += max(0.0, last_deadline_s - time.monotonic())
+            return False
         if stale > MAX_STALE_LINES:
             raise TableTimeout(
                 f"controller out of step ({stale} lines unanswered); reset the table"
             )
+        # a stale line may still be running (a held move that was resumed): it keeps its bound
+        extended = last_deadline_s > deadline_s
+        deadline_s = max(deadline_s, last_deadline_s)
         log.info("resynchronising with the controller (%d stale lines)", stale)
         slot = _Slot(p.PARSER_STATE_LINE, sync=True)
         with self.cond:
             self._pending.append(slot)
         self.write(p.encode_line(p.PARSER_STATE_LINE))
-        self._wait_slot(slot, timeout_s, lambda: None)
+        self._wait_slot(slot, deadline_s, deadline_s - self.clock(), lambda: None)
+        return extended
 
     # --- waiting for asynchronous lines -----------------------------------------------------
 
     def wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Wait (under :attr:`cond`) until ``predicate()``; False on timeout."""
-        deadline_s = time.monotonic() + timeout_s
+        return self._wait_until_deadline(predicate, self.clock() + timeout_s)
+
+    def _wait_until_deadline(self, predicate: Callable[[], bool], deadline_s: float) -> bool:
         with self.cond:
             while not predicate():
                 self._raise_if_disconnected()
-                left_s = deadline_s - time.monotonic()
+                left_s = deadline_s - self.clock()
                 if left_s <= 0.0:
                     return False
                 self.cond.wait(min(left_s, READ_POLL_S))
             return True
 
     def query_status(self, timeout_s: float, attempts: int = 3) -> p.StatusReport:
-        """Send ``?`` and return the first status report received after it (retrying)."""
-        for _ in range(attempts):
+        """Send ``?`` and return the first status report received after it, asking again
+        every ``timeout_s``; the attempts share one deadline of at most ``failure_s`` from
+        the first (no stacked timeouts)."""
+        started_s = self.clock()
+        budget_s = min(attempts * timeout_s, self.failure_s)
+        for attempt in range(1, attempts + 1):
             with self.cond:
                 seen = self.state.statuses
             self.write(p.STATUS_QUERY)
-            if self.wait_until(self._newer_status_than(seen), timeout_s):
+            deadline_s = started_s + min(attempt * timeout_s, budget_s)
+            if self._wait_until_deadline(self._newer_status_than(seen), deadline_s):
                 with self.cond:
                     status = self.state.status
                 if status is not None:
                     return status
-        raise TableTimeout(f"no status report within {attempts} x {timeout_s:.1f} s")
+        raise TableTimeout(f"no status report within {budget_s:.1f} s ({attempts} queries)")
 
     def _newer_status_than(self, seen: int) -> Callable[[], bool]:
         return lambda: self.state.statuses > seen
@@ -260,6 +291,7 @@ class GrblLink:
             self._answer(reply)
         elif isinstance(reply, p.StatusReport):
             state.status, state.statuses = reply, state.statuses + 1
+            state.last_status_s = self.clock()
             state.wco_x_deg = reply.wco[0] if reply.wco else state.wco_x_deg
             state.in_alarm = reply.state == "Alarm"
             if not state.in_alarm:
@@ -305,7 +337,10 @@ class GrblLink:
         self.state.banners += 1
 
     def _drop_before_sync(self) -> None:
-        while self._pending and not self._pending[0].sync:
+        """A ``[GC:...]`` line: everything before the waiting resync was lost, including an
+        earlier resync given up on (its own ``[GC:...]`` garbled), which would otherwise
+        take this resync's answer and leave the link out of step for good."""
+        while self._pending and not (self._pending[0].sync and not self._pending[0].stale):
             lost = self._pending.popleft()
             lost.error = TableTimeout(f"the answer to {lost.line!r} was lost")
             log.warning("answer to %r lost (noise on the line?)", lost.line)
@@ -333,3 +368,37 @@ class GrblLink:
     def _raise_if_disconnected(self) -> None:
         if self.state.disconnected is not None:
             raise TableDisconnected(f"table disconnected: {self.state.disconnected}")
+
+
+class _Liveness:
+    """While a line waits for motion: polls ``?`` every ``poll_s`` and tells when the
+    controller went silent, or sits Idle without answering the line (its answer was lost)."""
+
+    def __init__(self, link: GrblLink, poll_s: float) -> None:
+        self._link, self._poll_s = link, poll_s
+        now_s = link.clock()
+        self._next_poll_s = now_s + poll_s
+        self._heard_s = now_s
+        self._statuses = link.state.statuses
+        self._idle_since_s: float | None = None
+
+    def check(self, line: str) -> TableException | None:
+        """Called under the link's lock at every wake-up of the wait."""
+        link, state, now_s = self._link, self._link.state, self._link.clock()
+        if now_s >= self._next_poll_s:
+            self._next_poll_s = now_s + self._poll_s
+            link.write(p.STATUS_QUERY)
+        if state.statuses > self._statuses:
+            self._statuses, self._heard_s = state.statuses, state.last_status_s
+            idle = state.status is not None and state.status.state == "Idle"
+            if not idle:
+                self._idle_since_s = None
+            elif self._idle_since_s is None:
+                self._idle_since_s = now_s
+        if now_s - self._heard_s > link.failure_s:
+            return TableTimeout(
+                f"controller silent for {link.failure_s:.1f} s while waiting for {line!r}"
+            )
+        if self._idle_since_s is not None and now_s - self._idle_since_s > link.failure_s / 2:
+            return TableTimeout(f"controller idle but the answer to {line!r} was lost")
+        return None

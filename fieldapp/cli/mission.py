@@ -4,6 +4,11 @@
 - ``run [--plan FILE] [--sim] [--fast] --out SESSION``: run a plan into a new session folder.
 - ``resume SESSION [--fast]``: capture what a stopped, failed or killed mission is missing.
 
+Nobody is asked in a terminal: after a lost link (the base stopped itself) or a path still
+blocked after its retries the mission stops, unless ``--on-lost-link resume`` (clear the base's
+stop latch and drive again, at most the plan's navigation retries) or ``--on-blocked-path skip``
+(leave the station for a resume) says otherwise; the policy in force is recorded in the plan.
+
 Ctrl-C (or SIGTERM) stops at once: the table is held and the base stopped; ``resume`` carries
 on later. Exit 0 when the session is complete, 1 on a fault (what happened and what to do are
 printed), 130 when stopped.
@@ -24,6 +29,7 @@ if TYPE_CHECKING:
     from rich.progress import Progress, TaskID
 
     from fieldapp.mission import MissionResult, MissionSetup
+    from fieldapp.mission.plan import MissionPlan
 
 EXIT_FAULT = 1
 EXIT_STOPPED = 130
@@ -45,11 +51,37 @@ def register(subparsers: Any) -> None:
     run.add_argument("--sim", action="store_true", help="simulate every device")
     run.add_argument("--out", type=Path, required=True, help="the new session folder")
     _add_speed(run)
+    _add_incident_policy(run)
     run.set_defaults(handler=run_mission)
     resume = actions.add_parser("resume", help="capture what a mission folder is missing")
     resume.add_argument("session", type=Path, help="the mission's session folder")
     _add_speed(resume)
+    _add_incident_policy(resume)
     resume.set_defaults(handler=resume_mission)
+
+
+def _add_incident_policy(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--on-lost-link",
+        choices=["stop", "resume"],
+        default="stop",
+        help="after the base lost its link and stopped itself: stop the mission (default) or "
+        "resume by itself (reset the base and drive again)",
+    )
+    parser.add_argument(
+        "--on-blocked-path",
+        choices=["stop", "skip"],
+        default="stop",
+        help="when a station cannot be reached after the retries: stop (default) or skip it",
+    )
+
+
+def _with_incident_policy(plan: MissionPlan, args: argparse.Namespace) -> MissionPlan:
+    """The plan with the command line's policy: a terminal has nobody to ask."""
+    from fieldapp.settings import IncidentPolicy
+
+    policy = IncidentPolicy(lost_link=args.on_lost_link, blocked_path=args.on_blocked_path)
+    return plan.model_copy(update={"incidents": policy})
 
 
 def _add_speed(parser: argparse.ArgumentParser) -> None:
@@ -81,6 +113,7 @@ def run_mission(args: argparse.Namespace) -> int:
     if args.sim:
         realtime = plan.devices.realtime_simulation
         plan = plan.model_copy(update={"devices": DeviceSettings(realtime_simulation=realtime)})
+    plan = _with_incident_policy(plan, args)
     _quiet_logs(args)
     setup = _guarded(lambda: new_mission(plan, args.out, realtime=_realtime(args)), args.out)
     return _run(setup)
@@ -91,6 +124,7 @@ def resume_mission(args: argparse.Namespace) -> int:
 
     _quiet_logs(args)
     setup = _guarded(lambda: resume(args.session, realtime=_realtime(args)), args.session)
+    setup.plan = _with_incident_policy(setup.plan, args)
     return _run(setup)
 
 

@@ -12,6 +12,7 @@ from collections.abc import Callable
 
 from fieldapp.errors import FieldappError
 from fieldapp.mission.events import Fault
+from fieldapp.mission.incidents import OperatorPrompt
 
 
 class Aborted(Exception):
@@ -39,6 +40,9 @@ class Gate:
         self._paused = False
         self._aborted = False
         self._stopped = threading.Event()
+        self.operator_prompt: OperatorPrompt | None = None
+        """Asks the operator about a lost link or a blocked path (set by the GUI before the
+        mission starts); ``None``: nobody to ask (the plan's ``ask`` policies mean stop)."""
 
     @property
     def abort_requested(self) -> bool:

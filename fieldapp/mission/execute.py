@@ -28,6 +28,7 @@ from fieldapp.mission.events import (
     StationReached,
     ViewCaptured,
 )
+from fieldapp.mission.incidents import StationSkipped
 from fieldapp.mission.plan import MissionPlan, StationPlan
 from fieldapp.mission.steps import (
     Shot,
@@ -87,7 +88,11 @@ def run_mission(context: MissionContext, todo: list[tuple[int, int]]) -> Iterato
     yield clock.progress("starting")
     for station, views in visits(plan, todo):
         gate.checkpoint()
-        status, attempts = yield from drive_to(rig.base, station, plan, gate)
+        try:
+            status, attempts = yield from drive_to(rig.base, station, plan, gate)
+        except StationSkipped as skipped:
+            yield MissionWarning(f"{skipped}: its views are left for a resume", station.number)
+            continue
         pose = status.pose
         log.info("station %d reached at %s", station.number, pose)
         yield StationReached(station.number, pose.x_m, pose.y_m, pose.yaw_deg, attempts)

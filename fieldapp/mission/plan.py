@@ -20,7 +20,7 @@ from pydantic import Field, field_validator, model_validator
 from fieldapp.errors import FormatError, Problem
 from fieldapp.io.durable import write_bytes_durably
 from fieldapp.io.jsonfile import validate_document
-from fieldapp.settings import CameraQualitySettings, DeviceSettings, Section
+from fieldapp.settings import CameraQualitySettings, DeviceSettings, IncidentPolicy, Section
 
 PLAN_FORMAT: Literal["fieldapp-mission/1"] = "fieldapp-mission/1"
 GRID_SPACING_M = 1.6
@@ -93,6 +93,7 @@ class MissionPlan(Section):
     """Keep a view still below the quality limits after its retries (with a warning) instead
     of stopping the mission."""
     retries: RetryLimits = Field(default_factory=RetryLimits)
+    incidents: IncidentPolicy = Field(default_factory=IncidentPolicy)
     devices: DeviceSettings = Field(default_factory=DeviceSettings)
     calibration: Path | None = None
     """The calibration file in force; ``None`` with a simulated camera: the simulated rig's

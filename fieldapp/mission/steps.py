@@ -30,6 +30,7 @@ from devices.camera.quality import QualityReport, QualityThresholds, assess
 from devices.table import GrblTable, TableAlarm, TableException, TableMissedTarget
 from fieldapp.mission.control import Aborted, Gate, MissionFault
 from fieldapp.mission.events import Fault, MissionWarning
+from fieldapp.mission.incidents import Choice, Incident, IncidentKind, StationSkipped, decide
 from fieldapp.mission.plan import MissionPlan, StationPlan
 
 log = logging.getLogger(__name__)
@@ -49,35 +50,65 @@ def _fault(gate: Gate, device: str, what: str, advice: str) -> MissionFault | Ab
 def drive_to(
     base: BaseClient, station: StationPlan, plan: MissionPlan, gate: Gate
 ) -> Generator[MissionWarning, None, tuple[Status, int]]:
-    """Drive to ``station``; returns (the status on arrival, attempts)."""
+    """Drive to ``station``; returns (the status on arrival, attempts). A lost link or a path
+    still blocked after the retries is decided by the plan's ``incidents`` policy (may raise
+    :class:`StationSkipped`)."""
     goal = Pose(station.x_m, station.y_m, station.yaw_deg)
     attempts = plan.retries.navigation + 1
-    for attempt in range(1, attempts + 1):
+    attempt = 0
+    while True:
+        attempt += 1
         goal_id = f"s{station.number:02d}-{uuid.uuid4().hex[:8]}"
         try:
             base.goto(goal_id, goal, wait=False)
             *_, status = base.follow_goal(goal_id, plan.navigation_timeout_s)
             return status, attempt
         except NavigationFailed as error:
-            problem, advice = str(error), "clear the path to the station or check the map"
+            kind, problem = IncidentKind.BLOCKED_PATH, str(error)
+            advice = "clear the path to the station or check the map"
         except BaseStopped as error:
             if "link lost" not in str(error):
                 raise _fault(gate, "base", f"{error} (stopped by its operator?)",
                              "check the base and its emergency stop") from error  # fmt: skip
-            problem, advice = str(error), "check the Wi-Fi link to the base"
+            kind, problem = IncidentKind.LOST_LINK, str(error)
+            advice = "check the Wi-Fi link to the base"
         except BaseOffline as error:
-            problem = f"link lost: {error}"
+            kind, problem = IncidentKind.LOST_LINK, f"link lost: {error}"
             advice = "the base stops itself within a second (watchdog); check the Wi-Fi link "
             advice += "and the base's bridge"
         except BaseError as error:
             raise _fault(gate, "base", str(error), "check the plan's station poses against "
                          "the base's map") from error  # fmt: skip
-        if gate.stop_requested or attempt == attempts:
-            raise _fault(gate, "base", f"station {station.number}: {problem}", advice)
-        yield MissionWarning(f"station {station.number}: {problem}; trying again", station.number)
-        gate.sleep(plan.retries.base_link_wait_s if "link" in problem else 0.0)
+        what = f"station {station.number}: {problem}"
+        if gate.stop_requested:
+            raise _fault(gate, "base", what, advice)
+        if kind is IncidentKind.BLOCKED_PATH and attempt < attempts:
+            yield MissionWarning(f"{what}; trying again", station.number)
+        else:
+            choice = _incident_choice(kind, station.number, what, plan, gate, attempt < attempts)
+            if choice is Choice.STOP:
+                raise _fault(gate, "base", what, advice)
+            if choice is Choice.SKIP_STATION:  # the mission goes on: the base gets ready
+                _ready_for_goal(base, gate)
+                raise StationSkipped(station.number, problem)
+            attempts = max(attempts, attempt + 1)
+            yield MissionWarning(f"{what}; resuming ({choice.value})", station.number)
+        gate.sleep(plan.retries.base_link_wait_s if kind is IncidentKind.LOST_LINK else 0.0)
         _ready_for_goal(base, gate)
-    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _incident_choice(
+    kind: IncidentKind, station: int, what: str, plan: MissionPlan, gate: Gate, retry_left: bool
+) -> Choice:
+    """The plan's policy for ``kind``; an automatic resume only while retries are left."""
+    policy: str
+    if kind is IncidentKind.LOST_LINK:
+        policy = plan.incidents.lost_link
+        if policy == "resume" and not retry_left:
+            policy = "stop"
+    else:
+        policy = plan.incidents.blocked_path
+    return decide(policy, Incident(kind, station, what), gate.operator_prompt)
 
 
 def _ready_for_goal(base: BaseClient, gate: Gate) -> None:

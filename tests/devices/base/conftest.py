@@ -111,6 +111,7 @@ class LossyLink:
     def __init__(self, backend_endpoint: str) -> None:
         self._context: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
         self._front = self._context.socket(zmq.ROUTER)
+        self._front.setsockopt(zmq.ROUTER_HANDOVER, 1)  # as the base: clients keep their id
         self._front.bind(ANY_PORT)
         self._back = self._context.socket(zmq.DEALER)
         self._back.connect(backend_endpoint)

@@ -12,9 +12,11 @@ import pytest
 from devices.base import BaseClient, BaseState, BaseStopped, NavigationFailed, Pose
 from devices.base.backend import NavProgress
 from devices.base.controller import ControllerConfig
-from devices.base.protocol import Goal
+from devices.base.protocol import Command, Goal
 from devices.base.ros_bridge import ZERO_VELOCITY_HOLD_S, BridgeBackend, build_bridge
 from devices.base.server import ProtocolServer
+
+from ..fake_clock import FakeClock
 
 MakeClient = Callable[..., BaseClient]
 WaitFor = Callable[[Callable[[], bool], float], float]
@@ -23,7 +25,8 @@ WaitFor = Callable[[Callable[[], bool], float], float]
 class FakeNavigation:
     """Records what the bridge asks of ROS; the test plays move_base."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self.clock = clock
         self.goals: list[Goal] = []
         self.cancels = 0
         self.zero_velocity_times_s: list[float] = []
@@ -41,7 +44,7 @@ class FakeNavigation:
         self.progress = NavProgress.IDLE  # actionlib: PREEMPTED
 
     def publish_zero_velocity(self) -> None:
-        self.zero_velocity_times_s.append(time.monotonic())
+        self.zero_velocity_times_s.append(self.clock())
 
     def goal_progress(self) -> tuple[NavProgress, str | None]:
         return self.progress, self.error
@@ -54,10 +57,15 @@ class FakeNavigation:
 
 
 @pytest.fixture
-def bridge() -> Iterator[tuple[FakeNavigation, ProtocolServer]]:
-    navigation = FakeNavigation()
+def clock() -> FakeClock:
+    return FakeClock()
+
+
+@pytest.fixture
+def bridge(clock: FakeClock) -> Iterator[tuple[FakeNavigation, ProtocolServer]]:
+    navigation = FakeNavigation(clock)
     config = ControllerConfig("ros-bridge", (-2.0, -2.0, 12.0, 12.0), 1.0)
-    server = build_bridge(navigation, "tcp://127.0.0.1:*", "tcp://127.0.0.1:*", None, config)
+    server = build_bridge(navigation, "tcp://127.0.0.1:*", "tcp://127.0.0.1:*", None, config, clock)
     server.start()
     yield navigation, server
     server.close()
@@ -77,7 +85,7 @@ def test_goto_becomes_a_move_base_goal_and_arrival_is_reported(
     assert status.battery_pct == 76.5
     navigation.pose = Pose(1.62, 1.59, 0.8)
     navigation.progress = NavProgress.ARRIVED
-    wait_for(lambda: client.status().state is BaseState.ARRIVED, 2.0)
+    wait_for(lambda: client.status().state is BaseState.ARRIVED, 20.0)
     assert client.status().pose == Pose(1.62, 1.59, 0.8)
     threading.Timer(0.3, lambda: setattr(navigation, "progress", NavProgress.ARRIVED)).start()
     assert client.goto("s06", Pose(3.0, 1.6, 90.0), timeout_s=5.0).state is BaseState.ARRIVED
@@ -86,6 +94,7 @@ def test_goto_becomes_a_move_base_goal_and_arrival_is_reported(
 
 def test_lost_link_cancels_the_goal_and_holds_zero_velocity(
     bridge: tuple[FakeNavigation, ProtocolServer],
+    clock: FakeClock,
     make_client: MakeClient,
     make_link: Callable[[str], Any],
     wait_for: WaitFor,
@@ -94,20 +103,29 @@ def test_lost_link_cancels_the_goal_and_holds_zero_velocity(
     link = make_link(server.command_endpoint)
     client = make_client(link.endpoint)
     client.goto("s01", Pose(5.0, 5.0, 0.0), wait=False)
-    time.sleep(1.3)  # heartbeats keep it alive past the watchdog period
+    for _ in range(3):  # heartbeats keep it alive past the watchdog period
+        beats = server.controller.executed[Command.HEARTBEAT]
+        clock.advance(0.5)
+        wait_for(lambda beats=beats: server.controller.executed[Command.HEARTBEAT] > beats, 20.0)
     assert navigation.cancels == 0
     link.blackhole = True
-    silent_s = time.monotonic()
-    wait_for(lambda: navigation.cancels == 1, 3.0)
-    assert time.monotonic() - silent_s <= 1.5
+    clock.advance(1.0)  # at most the watchdog period since the last request: not yet
+    time.sleep(0.1)
+    assert navigation.cancels == 0
+    clock.advance(1.0)
+    wait_for(lambda: navigation.cancels == 1, 20.0)
     assert server.status().state is BaseState.STOPPED
     assert server.status().error == "link lost"
-    time.sleep(ZERO_VELOCITY_HOLD_S + 0.1)
     zero_s = navigation.zero_velocity_times_s
-    assert len(zero_s) >= 3  # published at once and repeated during the hold
-    assert zero_s[-1] - zero_s[0] >= ZERO_VELOCITY_HOLD_S * 0.8
+    halted_s = zero_s[0]  # published at once
+    for step in range(1, 5):  # and again during the hold
+        clock.advance(0.1)
+        wait_for(lambda step=step: zero_s[-1] > halted_s + 0.1 * step - 0.05, 20.0)
+    clock.advance(0.2)  # past the hold: no more
+    time.sleep(0.1)
+    assert max(zero_s) < halted_s + ZERO_VELOCITY_HOLD_S
     link.blackhole = False
-    wait_for(lambda: client.link_error is not None, 3.0)
+    assert client.status().error == "link lost"
     with pytest.raises(BaseStopped):
         client.goto("s02", Pose(1.0, 1.0, 0.0))
     assert len(navigation.goals) == 1
@@ -153,3 +171,24 @@ def test_navigation_dropping_the_goal_counts_as_aborted() -> None:
     assert backend.update().progress is NavProgress.MOVING
     navigation.progress = NavProgress.IDLE  # preempted by someone else on the robot
     assert backend.update().progress is NavProgress.IDLE
+
+
+def test_the_bridge_obeys_only_the_goal_s_owner_and_its_session(
+    bridge: tuple[FakeNavigation, ProtocolServer],
+    clock: FakeClock,
+    make_client: MakeClient,
+    wait_for: WaitFor,
+) -> None:
+    navigation, server = bridge
+    owner = make_client(server.command_endpoint)
+    assert owner.hello().session == server.session
+    owner.goto("s01", Pose(5.0, 5.0, 0.0), wait=False)
+    owner.close()  # the commanding workstation dies
+    watcher = make_client(server.command_endpoint)
+    for _ in range(4):  # another client polling does not feed the watchdog
+        clock.advance(0.3)
+        watcher.status()
+    wait_for(lambda: navigation.cancels == 1, 20.0)
+    assert server.status().error == "link lost"
+    watcher.reset()  # recovery only by a client's explicit reset and a new goto
+    assert len(navigation.goals) == 1

@@ -26,7 +26,10 @@ from devices.base import (
     SimulatedBase,
 )
 from devices.base.motion import wrap_deg
-from devices.base.protocol import Command
+from devices.base.protocol import Command, Status
+from devices.base.server import ServerTiming, TelemetrySchedule
+
+from ..fake_clock import FakeClock
 
 MakeSim = Callable[..., SimulatedBase]
 MakeClient = Callable[..., BaseClient]
@@ -71,16 +74,32 @@ def test_telemetry_streams_pose_while_moving_and_state_changes(
     states: list[BaseState] = []
     client.pose_received.connect(lambda t_s, pose: poses.append((t_s, pose)))
     client.state_received.connect(lambda status: states.append(status.state))
-    wait_for(lambda: len(states) > 0, 3.0)  # the subscription is live (1 Hz state at rest)
+    wait_for(lambda: len(states) > 0, 20.0)  # the subscription is live (1 Hz state at rest)
     client.goto("g1", Pose(2.0, 0.0, 0.0), wait=False)
-    wait_for(lambda: BaseState.ARRIVED in states, 10.0)
-    moving_times = [t for (_, before), (t, pose) in itertools.pairwise(poses) if pose != before]
-    assert len(moving_times) >= 5
-    gaps_s = [b - a for a, b in itertools.pairwise(moving_times)]
-    assert max(gaps_s) <= 0.1 + 0.05  # at least 10 Hz while moving
+    wait_for(lambda: BaseState.ARRIVED in states, 20.0)
+    moving_poses = [pose for (_, before), (_, pose) in itertools.pairwise(poses) if pose != before]
+    assert len(moving_poses) >= 5
     assert BaseState.MOVING in states
     assert states.index(BaseState.MOVING) < states.index(BaseState.ARRIVED)
-    wait_for(lambda: poses[-1][1] == sim.pose, 2.0)
+    wait_for(lambda: poses[-1][1] == sim.pose, 20.0)
+
+
+def test_telemetry_schedule_is_10_hz_moving_1_hz_at_rest_and_state_on_change() -> None:
+    schedule = TelemetrySchedule()
+    moving = [t / 100 for t in range(100)]  # a tick every 10 ms for 1 s
+    sent = [t for t in moving if schedule.due_pose(t, ServerTiming().pose_period_moving_s)]
+    assert 10 <= len(sent) <= 20  # 20 Hz asked, 10 Hz at least
+    assert max(b - a for a, b in itertools.pairwise(sent)) <= 0.1 + 1e-9
+    rest = [1.0 + t / 100 for t in range(300)]
+    sent = [t for t in rest if schedule.due_pose(t, ServerTiming().pose_period_rest_s)]
+    assert len(sent) == 3
+    idle = Status(BaseState.IDLE, None, Pose(0.0, 0.0, 0.0), 100.0, None)
+    moving_status = Status(BaseState.MOVING, "g", Pose(0.0, 0.0, 0.0), 100.0, None)
+    assert schedule.due_state(0.0, idle, 1.0)
+    assert not schedule.due_state(0.5, idle, 1.0)
+    assert schedule.due_state(0.6, moving_status, 1.0)  # a change: at once
+    assert not schedule.due_state(1.5, moving_status, 1.0)
+    assert schedule.due_state(1.6, moving_status, 1.0)  # 1 Hz
 
 
 def test_sim_reports_its_pose_to_listeners(sim: SimulatedBase, make_client: MakeClient) -> None:
@@ -94,22 +113,22 @@ def test_sim_reports_its_pose_to_listeners(sim: SimulatedBase, make_client: Make
 def test_lost_link_stops_and_latches_the_base_until_reset_and_new_goto(
     make_sim: MakeSim, make_client: MakeClient, make_link: Callable[[str], Any], wait_for: WaitFor
 ) -> None:
-    sim = make_sim(time_scale=2.0)
+    clock = FakeClock()
+    sim = make_sim(time_scale=2.0, clock=clock)
     link = make_link(sim.command_endpoint)
     client = make_client(link.endpoint)
     client.goto("far", Pose(4.5, 0.0, 0.0), wait=False)
-    wait_for(lambda: sim.pose.x_m > 0.05, 5.0)  # really moving
-    time.sleep(0.4)  # heartbeats are keeping it going
-    assert sim.status().state is BaseState.MOVING
+    wait_for(lambda: sim.pose.x_m > 0.05, 20.0)  # really moving
     link.blackhole = True
-    silent_since_s = time.monotonic()
-    wait_for(lambda: sim.latched, 3.0)
-    assert time.monotonic() - silent_since_s <= 1.5
+    clock.advance(1.0)  # the watchdog period since the last request at most: not yet
+    time.sleep(0.1)  # several server ticks
+    assert sim.status().state is BaseState.MOVING
+    clock.advance(1.0)  # (test_controller checks the exact bound)
+    wait_for(lambda: sim.latched, 20.0)
     assert sim.status().state is BaseState.STOPPED
     assert sim.status().error == "link lost"
     stopped_at = sim.pose
-    wait_for(lambda: isinstance(client.link_error, BaseOffline), 3.0)  # the client noticed too
-    time.sleep(0.3)
+    wait_for(lambda: isinstance(client.link_error, BaseOffline), 20.0)  # the client noticed too
     link.blackhole = False
     status = client.status()
     assert status.state is BaseState.STOPPED
@@ -120,17 +139,23 @@ def test_lost_link_stops_and_latches_the_base_until_reset_and_new_goto(
     time.sleep(0.3)
     assert client.status().state is BaseState.IDLE
     assert sim.pose == stopped_at  # never moved again by itself
-    client.goto("again", Pose(stopped_at.x_m + 0.3, 0.0, 0.0), timeout_s=10.0)
+    client.goto("again", Pose(stopped_at.x_m + 0.3, 0.0, 0.0), timeout_s=20.0)
     assert sim.pose.x_m > stopped_at.x_m + 0.25
 
 
-def test_heartbeats_keep_a_long_goal_alive(make_sim: MakeSim, make_client: MakeClient) -> None:
-    sim = make_sim(time_scale=1.0)
+def test_heartbeats_keep_a_long_goal_alive(
+    make_sim: MakeSim, make_client: MakeClient, wait_for: WaitFor
+) -> None:
+    clock = FakeClock()
+    sim = make_sim(time_scale=0.1, clock=clock)
     client = make_client(sim.command_endpoint)
     client.goto("slow", Pose(3.0, 0.0, 0.0), wait=False)
-    time.sleep(2.5)  # over twice the watchdog period, with no request from the caller
+    for _ in range(6):  # 3 s of link time, twice the watchdog period, no request from the caller
+        beats = sim.executed[Command.HEARTBEAT]
+        wait_for(lambda beats=beats: sim.executed[Command.HEARTBEAT] > beats, 20.0)
+        clock.advance(0.5)
+    time.sleep(0.05)
     assert sim.status().state is BaseState.MOVING
-    assert sim.executed[Command.HEARTBEAT] >= 6
     assert client.cancel("slow") is True
     assert client.status().state is BaseState.IDLE
 
@@ -149,7 +174,7 @@ def test_retried_request_executes_once(
     link.drop_replies = 1
     client.stop()
     assert link.replies_dropped == 3
-    assert sim.executed[Command.STOP] == 1
+    assert sim.executed[Command.STOP] == 2  # a stop is executed again even when retried
     assert sim.latched
 
 
@@ -162,6 +187,7 @@ def test_same_id_gets_the_cached_reply_and_the_cache_keeps_256(
         "id": "r-1",
         "cmd": "goto",
         "args": {"goal_id": "g", "x": 1.0, "y": 0.0, "yaw_deg": 0.0},
+        "session": sim.server.session,
     }
     first = _request(sock, json.dumps(goto).encode())
     again = _request(sock, json.dumps(goto).encode())
@@ -185,6 +211,7 @@ def test_bad_requests_get_errors_or_are_dropped_and_nothing_moves(
 ) -> None:
     sock = raw_dealer(sim.command_endpoint)
     goal = '"goal_id": "g", "y": 0.0, "yaw_deg": 0.0'
+    session = f'"session": "{sim.server.session}"'.encode()
     cases: list[tuple[bytes, str, str | None]] = [
         (b"\x00garbage", "bad_request", None),
         (
@@ -213,7 +240,11 @@ def test_bad_requests_get_errors_or_are_dropped_and_nothing_moves(
             "b4",
         ),
         (
-            b'{"v": 1, "id": "b5", "cmd": "goto", "args": {' + goal.encode() + b', "x": 12.0}}',
+            b'{"v": 1, "id": "b5", "cmd": "goto", "args": {'
+            + goal.encode()
+            + b', "x": 12.0}, '
+            + session
+            + b"}",
             "out_of_bounds",
             "b5",
         ),
@@ -240,6 +271,7 @@ def test_replies_always_match_requests(make_client: MakeClient) -> None:
     context: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
     router = context.socket(zmq.ROUTER)
     router.setsockopt(zmq.LINGER, 0)
+    router.setsockopt(zmq.ROUTER_HANDOVER, 1)  # the client reconnects with the same id
     router.bind("tcp://127.0.0.1:*")
     endpoint = router.getsockopt_string(zmq.LAST_ENDPOINT)
     seen_ids: list[str] = []
@@ -329,7 +361,7 @@ def test_blocked_path_and_navigation_failure_raise_navigation_failed(
 
 
 @pytest.mark.parametrize("fault", [SimFault.FREEZE, SimFault.CRASH])
-def test_frozen_or_crashed_base_is_reported_offline_within_3_s(
+def test_frozen_or_crashed_base_is_reported_offline_after_the_retries(
     make_sim: MakeSim, make_client: MakeClient, fault: SimFault
 ) -> None:
     sim = make_sim(time_scale=1.0)
@@ -339,7 +371,7 @@ def test_frozen_or_crashed_base_is_reported_offline_within_3_s(
 
     def follow() -> None:
         try:
-            for _ in client.follow_goal("g", timeout_s=30.0):
+            for _ in client.follow_goal("g", timeout_s=60.0):
                 pass
         except BaseException as error:
             failed.append(error)
@@ -348,9 +380,7 @@ def test_frozen_or_crashed_base_is_reported_offline_within_3_s(
     thread.start()
     time.sleep(0.3)
     sim.inject_fault(fault)
-    faulted_s = time.monotonic()
-    thread.join(timeout=5.0)
-    assert time.monotonic() - faulted_s <= 3.0
+    thread.join(timeout=30.0)  # the retry budget is 3 x 0.5 s; benchmarks/ measures it
     assert len(failed) == 1
     assert isinstance(failed[0], BaseOffline)
     assert "offline" in str(failed[0])
@@ -358,7 +388,5 @@ def test_frozen_or_crashed_base_is_reported_offline_within_3_s(
 
 def test_offline_when_nothing_listens(make_client: MakeClient) -> None:
     client = make_client("tcp://127.0.0.1:9", timing=ClientTiming(request_timeout_s=0.2, retries=1))
-    started_s = time.monotonic()
-    with pytest.raises(BaseOffline):
+    with pytest.raises(BaseOffline, match=r"no reply in 2 tries over 0\.4 s"):
         client.hello()
-    assert time.monotonic() - started_s < 1.0

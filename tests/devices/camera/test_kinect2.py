@@ -10,7 +10,6 @@ depth (float32 mm) and registered colour (BGRX uint8), ``Frame(w, h, bpp)``, ``F
 from __future__ import annotations
 
 import sys
-import time
 from enum import IntEnum
 from types import SimpleNamespace
 from typing import Any
@@ -19,7 +18,9 @@ import numpy as np
 import pytest
 
 from devices.camera.base import CameraTimeout, CameraUnavailable
-from devices.camera.kinect2 import Kinect2Camera
+from devices.camera.kinect2 import POLL_S, Kinect2Camera
+
+from ..fake_clock import FakeClock
 
 H, W = 424, 512
 
@@ -186,10 +187,11 @@ def test_no_device_and_no_binding_are_clear(monkeypatch: pytest.MonkeyPatch) -> 
 
 
 def test_no_frames_for_the_timeout_is_a_typed_error_not_a_hang() -> None:
-    camera = Kinect2Camera(binding=fake_binding([b"X"], frames=1))
+    clock = FakeClock()
+    camera = Kinect2Camera(binding=fake_binding([b"X"], frames=1), clock=clock, sleep=clock.sleep)
     with camera:
         camera.read_frame()
-        started = time.monotonic()
+        started_s = clock()
         with pytest.raises(CameraTimeout, match=r"no frame from Kinect v2 X for 0\.3 s"):
             camera.read_frame(timeout_s=0.3)
-        assert 0.29 < time.monotonic() - started < 2.0
+        assert 0.3 <= clock() - started_s <= 0.3 + POLL_S + 1e-9

@@ -12,6 +12,8 @@ from devices.camera.base import CameraDisconnected, CameraInfo, CameraTimeout, D
 from devices.camera.frames import KINECT_V2_PAPER, Frame, Intrinsics
 from devices.camera.stream import FrameStream, LatestFrame
 
+from ..fake_clock import FakeClock
+
 
 def _frame(number: int) -> Frame:
     depth = np.full((2, 2), float(number), np.float32)
@@ -72,7 +74,7 @@ def test_slow_consumer_never_slows_the_grabber() -> None:
     with camera, FrameStream(camera, timeout_s=1.0) as stream:
         for _ in range(40):
             camera.gate.release()  # the camera delivers all 40 frames at once
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + 20  # generous: waiting, not timing
         while stream.stats().frames < 40 and time.monotonic() < deadline:
             time.sleep(0.005)
         latest = stream.latest()
@@ -86,23 +88,24 @@ def test_slow_consumer_never_slows_the_grabber() -> None:
 def test_skipped_camera_frames_are_counted_and_fps_measured() -> None:
     numbers = [0, 1, 2, 5, 6, 10]
     camera = ScriptedCamera(numbers)
-    with camera, FrameStream(camera, timeout_s=1.0) as stream:
+    clock = FakeClock()
+    with camera, FrameStream(camera, timeout_s=2.0, clock=clock) as stream:
         seen = []
         for _ in numbers:
-            time.sleep(0.02)
+            clock.advance(0.02)
             camera.gate.release()
-            seen.append(stream.next_frame(1.0).meta["frame_number"])
+            seen.append(stream.next_frame(10.0).meta["frame_number"])
         stats = stream.stats()
     assert seen == numbers
     assert stats.camera_dropped == 2 + 3
-    assert 10 < stats.fps < 60  # a frame every ~20 ms, loosely (shared machine)
+    assert stats.fps == pytest.approx(50.0)  # a frame every 20 ms of the stream's clock
 
 
 def test_grabber_error_reaches_the_consumer() -> None:
     camera = ScriptedCamera([0], error=CameraDisconnected("unplugged"))
     camera.gate.release()
     with camera, FrameStream(camera, timeout_s=1.0) as stream:
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + 20  # generous: waiting, not timing
         while stream.running and time.monotonic() < deadline:
             time.sleep(0.005)
         assert not stream.running
@@ -114,8 +117,30 @@ def test_grabber_error_reaches_the_consumer() -> None:
 
 def test_no_frames_times_out_without_hanging() -> None:
     camera = ScriptedCamera([])
-    started = time.monotonic()
     with camera, FrameStream(camera, timeout_s=0.3) as stream, pytest.raises(CameraTimeout):
-        stream.next_frame(2.0)
-    assert time.monotonic() - started < 3.0
+        stream.next_frame(60.0)  # the grabber's timeout ends the wait, not this one
     assert isinstance(stream.error, CameraTimeout)
+
+
+def test_next_frame_gives_up_at_its_own_timeout() -> None:
+    camera = ScriptedCamera([0], error=CameraDisconnected("end of script"))
+    clock = FakeClock()
+    with camera, FrameStream(camera, timeout_s=60.0, clock=clock) as stream:
+        waiter_error: list[BaseException] = []
+
+        def wait() -> None:
+            try:
+                stream.next_frame(2.0)
+            except BaseException as error:
+                waiter_error.append(error)
+
+        waiter = threading.Thread(target=wait)
+        waiter.start()
+        clock.advance(1.99)
+        time.sleep(0.2)
+        assert waiter.is_alive()
+        clock.advance(0.02)
+        waiter.join(timeout=20.0)
+        camera.gate.release()  # the grabber ends at once
+    assert len(waiter_error) == 1 and isinstance(waiter_error[0], CameraTimeout)
+    assert "no new frame from the stream within 2.0 s" in str(waiter_error[0])

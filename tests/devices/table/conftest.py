@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Iterator
 
 import pytest
 import serial
 
 from devices.table import GrblSimulator, GrblTable, PtyGrblServer, TableTimeouts
+
+from ..fake_clock import FakeClock, wait_real
 
 FAST = TableTimeouts(
     banner_s=0.5, reply_s=0.5, status_s=0.2, move_margin_s=0.5, hold_s=3.0, poll_s=0.05
@@ -19,9 +22,13 @@ QUICK_TABLE = {110: 1800.0, 120: 60.0}
 """30 deg/s, 60 deg/s^2: a 20 degree move takes 1.17 s in real time."""
 
 
-def connect(server: PtyGrblServer, timeouts: TableTimeouts = FAST) -> GrblTable:
+def connect(
+    server: PtyGrblServer,
+    timeouts: TableTimeouts = FAST,
+    clock: Callable[[], float] = time.monotonic,
+) -> GrblTable:
     port = serial.serial_for_url(server.device_path, baudrate=115200, timeout=0.05)
-    table = GrblTable(port, timeouts=timeouts)
+    table = GrblTable(port, timeouts=timeouts, clock=clock)
     table.connect()
     return table
 
@@ -46,6 +53,30 @@ def goto_in_background(
     return mover, outcome
 
 
+def advance_while_polling(
+    table: GrblTable,
+    clock: FakeClock,
+    worker: threading.Thread,
+    step_s: float,
+    limit_s: float,
+    answer_wait_s: float = 2.0,
+) -> float:
+    """Advance ``clock`` by ``step_s`` each time the driver's last status poll was answered
+    (or when none came within ``answer_wait_s`` of real time: keep it generous unless the
+    controller is silent), until
+    ``worker`` ends or ``limit_s`` of clock time passed; returns the clock time elapsed. The
+    driver never sees its clock jump past an answer that is merely slow in real time."""
+    started_s = clock()
+    while worker.is_alive() and clock() - started_s < limit_s:
+        seen = table.statuses_received
+        clock.advance(step_s)
+        wait_real(
+            lambda seen=seen: table.statuses_received > seen or not worker.is_alive(), answer_wait_s
+        )
+    worker.join(timeout=20.0)
+    return clock() - started_s
+
+
 @pytest.fixture
 def make_server() -> Iterator[Callable[..., PtyGrblServer]]:
     servers: list[PtyGrblServer] = []
@@ -64,8 +95,12 @@ def make_server() -> Iterator[Callable[..., PtyGrblServer]]:
 def make_table() -> Iterator[Callable[..., GrblTable]]:
     tables: list[GrblTable] = []
 
-    def make(server: PtyGrblServer, timeouts: TableTimeouts = FAST) -> GrblTable:
-        table = connect(server, timeouts)
+    def make(
+        server: PtyGrblServer,
+        timeouts: TableTimeouts = FAST,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> GrblTable:
+        table = connect(server, timeouts, clock)
         tables.append(table)
         return table
 

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import random
+import threading
 import time
 from collections.abc import Callable
 
 import pytest
+import serial
 
 from devices.table import (
     GrblSimulator,
@@ -22,6 +24,7 @@ from devices.table import (
     open_table,
 )
 
+from ..fake_clock import FakeClock, wait_real
 from .conftest import FAST, QUICK_TABLE, goto_in_background
 
 MakeServer = Callable[..., PtyGrblServer]
@@ -43,10 +46,20 @@ def test_connect_reads_banner_status_and_settings(server: PtyGrblServer) -> None
 def test_connect_without_banner_sends_ctrl_x(make_server: MakeServer) -> None:
     quiet = make_server(GrblSimulator(), reset_on_open=False)
     timeouts = TableTimeouts(banner_s=0.3, reply_s=0.5, status_s=0.2)
-    started_s = time.monotonic()
-    table = open_table(quiet.device_path, timeouts=timeouts)
+    clock = FakeClock()
+    port = serial.serial_for_url(quiet.device_path, baudrate=115200, timeout=0.05)
+    table = GrblTable(port, timeouts=timeouts, clock=clock)
+    connecting = threading.Thread(target=table.connect, daemon=True)
     try:
-        assert 0.3 <= time.monotonic() - started_s < 1.0
+        connecting.start()
+        assert wait_real(lambda: clock.reads > 0)  # waiting for the banner
+        clock.advance(timeouts.banner_s - 0.01)
+        time.sleep(0.2)
+        assert quiet.simulator.soft_resets_received == 0  # not before the banner's bound
+        clock.advance(0.02)
+        assert wait_real(lambda: quiet.simulator.soft_resets_received == 1)
+        connecting.join(timeout=20.0)
+        assert not connecting.is_alive()
         assert table.status().state == "Idle"
     finally:
         table.close()
@@ -74,7 +87,7 @@ def test_goto_in_real_time_waits_for_the_move(
     assert table.goto_deg(20.0) == pytest.approx(20.0, abs=5e-4)
     elapsed_s = time.monotonic() - started_s
     travel_s = 20.0 / 30.0 + 30.0 / 60.0  # trapezoid: cruise + accelerate/brake
-    assert travel_s - 0.05 <= elapsed_s <= travel_s + 0.4
+    assert elapsed_s >= travel_s - 0.05  # the barrier waited for the physics (never faster)
     assert any(0.0 < deg < 20.0 for deg in seen)  # positions polled during the move
 
 

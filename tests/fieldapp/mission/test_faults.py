@@ -16,7 +16,7 @@ from fieldapp.io.session import load_session
 from fieldapp.mission import MissionResult, MissionSetup, MissionState, Outcome
 from fieldapp.mission.folder import STATUS_FILE
 from fieldapp.mission.plan import RetryLimits
-from fieldapp.settings import CameraQualitySettings
+from fieldapp.settings import CameraQualitySettings, IncidentPolicy
 
 from .conftest import HANG_S, small_plan
 
@@ -111,7 +111,8 @@ def test_navigation_failing_every_time_stops_the_mission(open_mission: Opener) -
 
 
 def test_a_base_link_that_comes_back_is_retried(open_mission: Opener) -> None:
-    setup = open_mission(small_plan(stations=(5,), views=1))
+    policy = IncidentPolicy(lost_link="resume")  # by itself only when the plan says so
+    setup = open_mission(small_plan(stations=(5,), views=1, incidents=policy))
     base = setup.rig.sim_base
     assert base is not None
     result, warnings = run(

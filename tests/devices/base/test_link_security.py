@@ -1,0 +1,227 @@
+"""Issue 23, findings 1-4 and 8: the base link fails closed and obeys only its owner."""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+import zmq
+
+from devices.base import (
+    BaseAuthRejected,
+    BaseClient,
+    BaseError,
+    BaseOffline,
+    BaseState,
+    ClientTiming,
+    Pose,
+    SimulatedBase,
+)
+from devices.base.keys import AUTHORIZED_CLIENTS_DIR
+from devices.base.protocol import Command
+from devices.base.server import ServerTiming
+
+from ..fake_clock import FakeClock, wait_real
+
+MakeSim = Callable[..., SimulatedBase]
+MakeClient = Callable[..., BaseClient]
+RawDealer = Callable[[str], zmq.Socket[bytes]]
+QUICK = ClientTiming(request_timeout_s=0.3, retries=1)
+
+
+def _ask(sock: zmq.Socket[bytes], request: dict[str, Any]) -> dict[str, Any] | None:
+    sock.send_multipart([b"", json.dumps(request).encode()])
+    if not sock.poll(5000):
+        return None
+    reply: dict[str, Any] = json.loads(sock.recv_multipart()[-1])
+    return reply
+
+
+def _goto(request_id: str, session: str | None, x_m: float = 1.0) -> dict[str, Any]:
+    request: dict[str, Any] = {"v": 1, "id": request_id, "cmd": "goto"}
+    request["args"] = {"goal_id": request_id, "x": x_m, "y": 0.0, "yaw_deg": 0.0}
+    if session is not None:
+        request["session"] = session
+    return request
+
+
+# --- 1. fail closed -------------------------------------------------------------------------
+
+
+def test_a_dead_authenticator_lets_nobody_in_and_serves_nothing(
+    key_folders: Any, make_sim: MakeSim, make_client: MakeClient
+) -> None:
+    sim = make_sim(keys=key_folders.server_keys())
+    friend = make_client(sim.command_endpoint, keys=key_folders.client_keys(), timing=QUICK)
+    assert friend.hello().name == "fieldapp-sim-base"
+    sim.server.kill_authenticator()
+    stranger = make_client(sim.command_endpoint, keys=key_folders.stranger_keys(), timing=QUICK)
+    with pytest.raises(BaseError):
+        stranger.goto("evil", Pose(1.0, 1.0, 0.0))
+    with pytest.raises((BaseOffline, BaseAuthRejected)):  # a connection made before: no reply,
+        friend.goto("g", Pose(1.0, 1.0, 0.0))  # and its reconnection is refused
+    newcomer = make_client(sim.command_endpoint, keys=key_folders.client_keys(), timing=QUICK)
+    with pytest.raises(BaseError):
+        newcomer.status()
+    assert sim.executed[Command.GOTO] == 0
+    assert sim.pose == Pose(0.0, 0.0, 0.0)
+
+
+# --- 2. revoked keys ------------------------------------------------------------------------
+
+
+def test_a_revoked_key_is_refused_on_new_and_old_connections(
+    key_folders: Any, make_sim: MakeSim, make_client: MakeClient, caplog: pytest.LogCaptureFixture
+) -> None:
+    clock = FakeClock()
+    timing = ServerTiming(keys_reload_s=1.0)
+    sim = make_sim(keys=key_folders.server_keys(), clock=clock, timing=timing)
+    old = make_client(sim.command_endpoint, keys=key_folders.client_keys(), timing=QUICK)
+    assert old.status().state is BaseState.IDLE
+    (key_folders.base / AUTHORIZED_CLIENTS_DIR / "ws.key").unlink()
+    clock.advance(1.0)  # the folder is checked every second of the base's clock
+    assert wait_real(lambda: "revoked" in caplog.text)
+    with pytest.raises((BaseOffline, BaseAuthRejected)):  # no reply on the old connection,
+        old.goto("g", Pose(1.0, 0.0, 0.0))  # and its reconnection is refused
+    with pytest.raises(BaseAuthRejected):
+        make_client(sim.command_endpoint, keys=key_folders.client_keys(), timing=QUICK).hello()
+    assert sim.executed[Command.GOTO] == 0
+
+
+def test_reload_keys_takes_a_new_key_at_once(
+    key_folders: Any, make_sim: MakeSim, make_client: MakeClient
+) -> None:
+    clock = FakeClock()  # never advanced: only reload_keys() (SIGHUP) reads the folder
+    sim = make_sim(keys=key_folders.server_keys(), clock=clock)
+    stranger_key = key_folders.stranger / "client.key"
+    with pytest.raises(BaseAuthRejected):
+        make_client(sim.command_endpoint, keys=key_folders.stranger_keys(), timing=QUICK).hello()
+    (key_folders.base / AUTHORIZED_CLIENTS_DIR / "new.key").write_text(stranger_key.read_text())
+    sim.server.reload_keys()
+    client = make_client(sim.command_endpoint, keys=key_folders.stranger_keys())
+    assert wait_real(lambda: _answers(client))
+
+
+def _answers(client: BaseClient) -> bool:
+    try:
+        client.status()
+    except BaseError:
+        return False
+    return True
+
+
+# --- 3. duplicates and replays --------------------------------------------------------------
+
+
+def test_a_stop_reusing_a_goto_id_is_executed(sim: SimulatedBase, raw_dealer: RawDealer) -> None:
+    sock = raw_dealer(sim.command_endpoint)
+    session = sim.server.session
+    assert _ask(sock, _goto("x-1", session, 4.0)) == {
+        "v": 1, "id": "x-1", "ok": True, "result": {"accepted": True},
+    }  # fmt: skip
+    reply = _ask(sock, {"v": 1, "id": "x-1", "cmd": "stop", "session": session})
+    assert reply == {"v": 1, "id": "x-1", "ok": True, "result": {}}
+    assert sim.latched and sim.status().state is BaseState.STOPPED
+
+
+def test_a_reused_id_with_another_request_is_refused(
+    sim: SimulatedBase, raw_dealer: RawDealer
+) -> None:
+    sock = raw_dealer(sim.command_endpoint)
+    assert _ask(sock, {"v": 1, "id": "y-1", "cmd": "heartbeat"}) is not None
+    reply = _ask(sock, _goto("y-1", sim.server.session))
+    assert reply is not None and reply["error"] == {"code": "bad_request", "message": "id reused"}
+    assert sim.executed[Command.GOTO] == 0
+
+
+def test_the_reply_cache_is_per_client(sim: SimulatedBase, raw_dealer: RawDealer) -> None:
+    first, second = raw_dealer(sim.command_endpoint), raw_dealer(sim.command_endpoint)
+    accepted = _ask(first, _goto("z-1", sim.server.session))
+    assert accepted is not None and accepted["ok"]
+    reply = _ask(second, {"v": 1, "id": "z-1", "cmd": "status"})
+    assert reply is not None and reply["result"]["state"] == "moving"  # its own reply
+    assert sim.executed[Command.STATUS] == 1
+
+
+def test_a_captured_goto_replayed_after_a_restart_is_refused(
+    make_sim: MakeSim, raw_dealer: RawDealer
+) -> None:
+    before = make_sim()
+    captured = _goto("r-1", before.server.session)
+    before.close()
+    after = make_sim()
+    assert after.server.session != captured["session"]
+    sock = raw_dealer(after.command_endpoint)
+    reply = _ask(sock, captured)
+    assert reply is not None and reply["error"]["code"] == "stale_session"
+    reply = _ask(sock, _goto("r-2", None))
+    assert reply is not None and reply["error"]["code"] == "bad_request"  # goto needs it
+    assert after.executed[Command.GOTO] == 0
+
+
+def test_the_client_sends_the_session_and_greets_a_restarted_base(
+    make_sim: MakeSim, make_client: MakeClient
+) -> None:
+    sim = make_sim()
+    client = make_client(sim.command_endpoint)
+    info = client.hello()
+    assert info.session == sim.server.session
+    sim.controller.session = "restarted"  # as if the base restarted behind the same address
+    with pytest.raises(BaseError, match="stale_session"):
+        client.status()
+    client.goto("g", Pose(0.3, 0.0, 0.0), timeout_s=30.0)  # greets first, then drives
+    assert sim.executed[Command.GOTO] == 1
+
+
+# --- 4. the goal's owner feeds the watchdog -------------------------------------------------
+
+
+def test_another_client_polling_does_not_keep_a_goal_alive(
+    make_sim: MakeSim, make_client: MakeClient
+) -> None:
+    clock = FakeClock()
+    sim = make_sim(time_scale=0.1, clock=clock)
+    owner = make_client(sim.command_endpoint)
+    owner.goto("g", Pose(3.0, 0.0, 0.0), wait=False)
+    owner.close()  # the commanding client dies
+    watcher = make_client(sim.command_endpoint)
+    for _ in range(4):
+        clock.advance(0.3)
+        assert watcher.status().state is BaseState.MOVING or sim.latched
+    assert wait_real(lambda: sim.latched)  # 1.2 s without a word from the owner
+    assert sim.status().error == "link lost"
+
+
+def test_the_owner_s_heartbeats_keep_its_goal_alive_across_a_reconnection(
+    make_sim: MakeSim, make_client: MakeClient, make_link: Callable[[str], Any]
+) -> None:
+    clock = FakeClock()
+    sim = make_sim(time_scale=0.1, clock=clock)
+    link = make_link(sim.command_endpoint)
+    owner = make_client(link.endpoint)
+    owner.goto("g", Pose(3.0, 0.0, 0.0), wait=False)
+    link.drop_replies = 1  # a lost reply: the client reconnects (Lazy Pirate)
+    for _ in range(4):
+        beats = sim.executed[Command.HEARTBEAT]
+        clock.advance(0.5)
+        assert wait_real(lambda beats=beats: sim.executed[Command.HEARTBEAT] > beats)
+    assert link.replies_dropped == 1
+    assert sim.status().state is BaseState.MOVING
+
+
+# --- 8. rejected handshakes are logged ------------------------------------------------------
+
+
+def test_a_rejected_handshake_is_logged_with_the_key(
+    key_folders: Any, make_sim: MakeSim, make_client: MakeClient, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING)
+    sim = make_sim(keys=key_folders.server_keys())
+    stranger_keys = key_folders.stranger_keys()
+    with pytest.raises(BaseAuthRejected):
+        make_client(sim.command_endpoint, keys=stranger_keys, timing=QUICK).hello()
+    assert wait_real(lambda: stranger_keys.pair.public.decode() in caplog.text)
+    assert "rejected handshake" in caplog.text
