@@ -97,6 +97,7 @@ def reconstruct(
         settings.threads,
     )
     registrations = yield from _timed_steps(timer, "registration", steps)
+    yield progress("registration", 1.0, f"{len(registrations)} stations placed")
     for station, registration in registrations.items():
         if registration.verdict in (COARSE_KEPT, UNRELIABLE) and settings.registration.enabled:
             warnings.append(f"station {station} {registration.verdict}: {registration.message}")
