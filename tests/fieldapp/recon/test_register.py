@@ -156,3 +156,24 @@ def test_the_expected_error_grows_with_the_distance_to_the_reference() -> None:
     assert far_m > 2.5 * near_m  # the reference's yaw swings a far station farther
     yaw = np.radians(settings.arrival_sigma_deg)
     assert far_m == pytest.approx(np.sqrt(2 * settings.arrival_sigma_m**2 + (6.4 * yaw) ** 2))
+
+
+def test_closing_the_registration_cancels_the_pairs_not_started(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from fieldapp.recon import register
+
+    points, coarse, _, reference = _plot(0, 3, 0.0, 0.0)
+    started = []
+    real = register.register_overlap
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        started.append(args[0])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(register, "register_overlap", counted)
+    steps = register_stations(points, coarse, np.zeros(3), reference, RegistrationSettings())
+    fraction, message = next(steps)
+    assert fraction == pytest.approx(1 / 20) and message == "stations 1-2 registered"
+    steps.close()
+    assert len(started) <= 2  # the first pair, and at most the one running when closed
