@@ -177,3 +177,16 @@ def test_closing_the_registration_cancels_the_pairs_not_started(
     assert fraction == pytest.approx(1 / 20) and message == "stations 1-2 registered"
     steps.close()
     assert len(started) <= 2  # the first pair, and at most the one running when closed
+
+
+@pytest.mark.slow  # 72 pairs
+def test_a_5x5_plot_is_refined_to_the_corners() -> None:
+    points, coarse, truth, reference = _plot(5, 5, 0.03, 1.5)
+    result = _run(points, coarse, reference, RegistrationSettings())
+    errors = _errors(result, truth, reference)
+    assert max(t for t, _ in errors.values()) < 0.002 and max(r for _, r in errors.values()) < 0.1
+    assert {r.verdict for r in result.values()} == {"reference", "refined"}
+    corner, neighbour = result[1], result[reference - 1]
+    assert corner.limit_m is not None and neighbour.limit_m is not None
+    assert corner.limit_m > 2 * neighbour.limit_m  # the guard widens with the distance
+    assert corner.limit_m > 0.4  # the fixed 20 cm guard rejected real corrections out here
