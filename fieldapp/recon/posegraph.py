@@ -9,9 +9,11 @@ Solved by Gauss-Newton on the right perturbation of every free node, the sparse 
 equations by SuperLU (one thread, so the result never depends on the machine). Edges marked
 ``robust`` go through a line process (Geman-McClure weights ``(1 / (1 + u^2))^2``, ``u`` the
 edge's disagreement in units of its tolerance): first plain least squares, then the weighted
-solution with a kernel narrowing from 16 tolerances to one (graduated non-convexity), then
-edges whose weight stays below 1/4 (disagreement above tolerance) are dropped, the worst
-first, and the rest solved again, as Open3D's global optimisation does with its line process.
+solution with a kernel narrowing from 16 tolerances to 2 (graduated non-convexity), then
+edges whose weight falls below 1/4 (disagreement above tolerance) are dropped, the worst
+first, and the rest solved again by plain least squares, as Open3D's global optimisation does
+with its line process. (Narrowing the kernel to one tolerance let the priors win over the
+down-weighted edges and drag good stations back towards their coarse poses.)
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from numpy.typing import NDArray
 from devices.geometry import Matrix4, invert
 from fieldapp.recon import se3
 
-GRADUATION = (16.0, 4.0, 1.0)
+GRADUATION = (16.0, 4.0, 2.0)
 """The robust kernel's width, in tolerances, from the first robust solution to the last: a
 narrow kernel from the start would call every edge an outlier of the coarse poses."""
 
@@ -100,7 +102,7 @@ def solve(
             break
         active.remove(worst)  # the worst first: one bad edge can make its neighbours look bad
         dropped.append(worst)
-        poses = _gauss_newton(poses, fixed, edges, active, tolerance, iterations)[0]
+        poses = _gauss_newton(poses, fixed, edges, active, None, iterations)[0]
     poses, H = _gauss_newton(poses, fixed, edges, active, None, iterations)
     solution = Solution(poses, active, sorted(dropped))
     solution.residuals = {k: disagreement(residual(edges[k], poses)) for k in active}

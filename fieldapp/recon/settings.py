@@ -73,7 +73,7 @@ class RegistrationSettings(_Section):
     overlap_cell_m: float = Field(default=0.2, gt=0.0)
     overlap_voxel_m: float = Field(default=0.01, gt=0.0)
     min_overlap_m2: float = Field(default=4.0, gt=0.0)
-    edge_effective_points: float = Field(default=100.0, gt=0.0)
+    edge_effective_points: float = Field(default=2000.0, gt=0.0)
     edge_noise_m: float = Field(default=0.002, gt=0.0)
     edge_tolerance_m: float = Field(default=0.02, gt=0.0)
     edge_tolerance_deg: float = Field(default=0.8, gt=0.0)
