@@ -89,13 +89,11 @@ def register_stations(
     }
     overlaps = find_overlaps(field_points, settings)
     fits: list[PairFit] = []
-    pool = ThreadPoolExecutor(max_workers=threads)  # one GICP thread per pair
-    try:
+    with ThreadPoolExecutor(max_workers=threads) as pool:  # one GICP thread per pair
+        # closing this generator closes map's iterator, which cancels the pairs not started
         for fit in pool.map(lambda o: register_overlap(o, nodes[o.b][:3, 3], settings), overlaps):
             fits.append(fit)
             yield len(fits) / len(overlaps), f"stations {fit.a}-{fit.b} registered"
-    finally:  # closing the generator cancels the pairs not yet started
-        pool.shutdown(wait=True, cancel_futures=True)
     return _solve_plot(nodes, overlaps, fits, reference, settings, T_field_station_coarse)
 
 
