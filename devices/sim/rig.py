@@ -12,8 +12,9 @@ Frames (``T_a_b`` maps b into a):
 - **camera**: OpenCV (x right, y down, z forward), on the arm: ``arm_m`` out from the axis along
   the table's x, ``side_m`` to its left, pitched down by ``pitch_deg``.
 
-Stations 1..9 form a 3 x 3 grid numbered row by row (rows along +y, columns along +x), so
-station 5 is the centre, at the field origin.
+Stations 1..G^2 form a G x G grid (``RigGeometry.grid``, 3 by default) numbered row by row
+(rows along +y, columns along +x); the reference station is the centre one (5 on the 3 x 3
+plan), at the field origin for odd G.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from devices.sim.soil import Soil
 
 STATIONS = tuple(range(1, 10))
 REFERENCE_STATION = 5
+MAX_GRID = 9
 
 
 @dataclass(frozen=True)
@@ -51,22 +53,42 @@ class RigGeometry:
     views: int = 8
     station_spacing_m: float = 1.6
     wheelbase_m: float = 0.5
+    grid: int = 3
+
+    def __post_init__(self) -> None:
+        if not 2 <= self.grid <= MAX_GRID:
+            raise ValueError(f"grid must be 2..{MAX_GRID} stations a side, got {self.grid}")
 
     @property
     def view_step_deg(self) -> float:
         return 360.0 / self.views
 
     @property
+    def stations(self) -> tuple[int, ...]:
+        """The station numbers, 1..grid^2."""
+        return tuple(range(1, self.grid**2 + 1))
+
+    @property
+    def reference_station(self) -> int:
+        """The centre station (the lower-numbered middle one on an even grid)."""
+        middle = (self.grid - 1) // 2
+        return middle * self.grid + middle + 1
+
+    @property
+    def plot_half_extent_m(self) -> float:
+        """Half the side of the square the stations span (the field origin at its centre)."""
+        return (self.grid - 1) * self.station_spacing_m / 2
+
+    @property
     def T_field_map(self) -> Matrix4:
-        return make_transform(
-            np.eye(3), np.array([-self.station_spacing_m, -self.station_spacing_m, 0.0])
-        )
+        offset = -self.plot_half_extent_m
+        return make_transform(np.eye(3), np.array([offset, offset, 0.0]))
 
     def station_pose(self, station: int) -> Pose2D:
-        """Nominal map pose of ``station`` (1..9): yaw 0, on the 3 x 3 grid."""
-        if station not in STATIONS:
-            raise ValueError(f"station must be 1..9, got {station}")
-        row, col = divmod(station - 1, 3)
+        """Nominal map pose of ``station`` (1..grid^2): yaw 0, on the G x G grid."""
+        if station not in self.stations:
+            raise ValueError(f"station must be 1..{self.grid**2}, got {station}")
+        row, col = divmod(station - 1, self.grid)
         return Pose2D(col * self.station_spacing_m, row * self.station_spacing_m, 0.0)
 
     def T_table_camera(self) -> Matrix4:
@@ -132,6 +154,15 @@ class StopErrors:
     locate_m: float = 0.015
     locate_deg: float = 0.6
     table_deg: float = 0.03
+
+    @classmethod
+    def arrival(cls, sigma_m: float, sigma_deg: float) -> StopErrors:
+        """Errors whose true arrival (goal to true pose) has standard deviation ``sigma_m`` per
+        horizontal axis and ``sigma_deg`` in yaw, split between stopping and localisation as in
+        the defaults (0.8 : 0.6 of the standard deviation)."""
+        if sigma_m < 0 or sigma_deg < 0:
+            raise ValueError("arrival errors must not be negative")
+        return cls(0.8 * sigma_m, 0.8 * sigma_deg, 0.6 * sigma_m, 0.6 * sigma_deg)
 
     def base_stop(self, goal: Pose2D, rng: np.random.Generator) -> tuple[Pose2D, Pose2D]:
         """(reported, true) poses of the base after driving to ``goal``."""

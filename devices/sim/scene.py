@@ -148,6 +148,13 @@ class PlotLayout:
     spacing_m: float = 0.8
     jitter_m: float = 0.04
 
+    @classmethod
+    def for_stations(cls, grid: int, station_spacing_m: float) -> PlotLayout:
+        """Plants spread over a plot of ``grid`` x ``grid`` stations: two plant rows and
+        columns per station spacing, as on the standard 3 x 3 plot (4 x 4 plants at 0.8 m)."""
+        count = max(2 * (grid - 1), 1)
+        return cls(rows=count, cols=count, spacing_m=station_spacing_m / 2)
+
     def positions(self, rng: np.random.Generator) -> NDArray[np.float64]:
         """(rows * cols, 2) plant positions, row by row."""
         ys = (np.arange(self.rows) - (self.rows - 1) / 2) * self.spacing_m
@@ -181,17 +188,39 @@ def add_spheres(scene: Scene) -> None:
         scene.add_sphere(f"sphere-{diameter}", spot[0], spot[1], diameter)
 
 
-def plot_scene(seed: int, day: int = 0, layout: PlotLayout | None = None) -> Scene:
-    """The paper's plot: 16 maize seedlings at 0.8 m on uneven soil."""
-    scene = empty_scene(seed)
+SOIL_MARGIN_M = 3.0
+"""Soil beyond the outermost stations: more than the camera sees (2.25 m crop, 0.2 m arm)."""
+
+
+def soil_for_plot(half_extent_m: float) -> SoilSpec:
+    """The default soil, wide enough for stations up to ``half_extent_m`` from the origin."""
+    return SoilSpec(half_extent_m=max(SoilSpec().half_extent_m, half_extent_m + SOIL_MARGIN_M))
+
+
+def plot_scene(
+    seed: int, day: int = 0, layout: PlotLayout | None = None, soil: SoilSpec | None = None
+) -> Scene:
+    """The paper's plot: 16 maize seedlings at 0.8 m on uneven soil (or ``layout``)."""
+    scene = empty_scene(seed, soil)
     add_plot(scene, seed, day, layout or PlotLayout())
     return scene
 
 
-def spheres_scene(seed: int, day: int = 0, with_plants: bool = False) -> Scene:
+def spheres_scene(
+    seed: int,
+    day: int = 0,
+    with_plants: bool = False,
+    layout: PlotLayout | None = None,
+    soil: SoilSpec | None = None,
+) -> Scene:
     """The six reference spheres on the soil, optionally among the plot's plants."""
-    scene = empty_scene(seed)
+    scene = empty_scene(seed, soil)
     if with_plants:
-        add_plot(scene, seed, day, PlotLayout())
+        add_plot(scene, seed, day, layout or PlotLayout())
     add_spheres(scene)
     return scene
+
+
+def bare_soil_scene(seed: int, soil: SoilSpec | None = None) -> Scene:
+    """Nothing but the uneven soil: its relief is the only feature the registration has."""
+    return empty_scene(seed, soil)

@@ -4,6 +4,7 @@ Issue 3's fields (``plants`` with, per plant, the organ truth of
 :mod:`devices.sim.organ_truth`: ``stem_diameter_mm``, ``leaf_count``, ``leaf_area_cm2`` and
 ``leaves``; ``spheres``, ``T_field_camera`` of view 0 of every station) plus
 ``boards`` (geometry, pose, corners), ``captures`` (true pose and angle of every capture),
+``stations`` (each station's nominal and true base pose in the map frame and its arrival error),
 ``intrinsics`` and the rig's nominal geometry.
 """
 
@@ -34,6 +35,28 @@ def board_truth(placed: PlacedBoard) -> dict[str, Any]:
         "T_field_board": placed.T_field_board.tolist(),
         "corners_field_m": placed.corners_field_m.tolist(),
     }
+
+
+def station_truth(captures: list[dict[str, Any]], rig: RigGeometry) -> dict[str, Any]:
+    """Per station (key: its number as text): ``nominal_pose`` and ``true_pose`` of the base (map
+    frame, x/y metres, yaw degrees) and ``arrival_error`` (true minus nominal)."""
+    stations: dict[str, Any] = {}
+    for capture in captures:
+        key = str(capture["station"])
+        if key in stations:
+            continue
+        nominal = rig.station_pose(capture["station"])
+        true = capture["base_pose"]
+        stations[key] = {
+            "nominal_pose": {"x": nominal.x_m, "y": nominal.y_m, "yaw_deg": nominal.yaw_deg},
+            "true_pose": dict(true),
+            "arrival_error": {
+                "x_m": true["x"] - nominal.x_m,
+                "y_m": true["y"] - nominal.y_m,
+                "yaw_deg": true["yaw_deg"] - nominal.yaw_deg,
+            },
+        }
+    return dict(sorted(stations.items(), key=lambda item: int(item[0])))
 
 
 def truth_document(
@@ -72,6 +95,7 @@ def truth_document(
         ],
         "boards": [board_truth(b) for b in scene.boards],
         "T_field_camera": view0,
+        "stations": station_truth(captures, rig),
         "captures": captures,
         "intrinsics": asdict(intrinsics),
         "rig": {**asdict(rig), "T_field_map": rig.T_field_map.tolist()},

@@ -19,7 +19,7 @@ import numpy as np
 from devices.camera.frames import KINECT_V2_PAPER, Frame, Intrinsics
 from devices.geometry import Matrix4
 from devices.sim.render import Renderer, SensorModel
-from devices.sim.rig import REFERENCE_STATION, Pose2D, RigGeometry
+from devices.sim.rig import Pose2D, RigGeometry
 from devices.sim.scene import Scene, plot_scene
 from devices.sim.visibility import boards_in_view
 
@@ -29,7 +29,7 @@ log = logging.getLogger(__name__)
 class SimWorld:
     """A scene seen by the rig's Kinect v2 from the current base pose and table angle.
 
-    The rig starts at the reference station (5) with the table at 0 degrees.
+    The rig starts at the reference station (5 on the 3 x 3 plan) with the table at 0 degrees.
     """
 
     def __init__(
@@ -44,7 +44,7 @@ class SimWorld:
         self.rig = rig or RigGeometry()
         self.renderer = Renderer(scene, intrinsics, sensor)
         self._lock = threading.Lock()
-        self._base_pose = self.rig.station_pose(REFERENCE_STATION)
+        self._base_pose = self.rig.station_pose(self.rig.reference_station)
         self._table_angle_deg = 0.0
         self._rng = np.random.default_rng([seed, 3])
 

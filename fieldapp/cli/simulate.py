@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from fieldapp.errors import FieldappError
 
 if TYPE_CHECKING:
-    from devices.sim.rig import RigGeometry
+    from devices.sim.rig import RigGeometry, StopErrors
     from devices.sim.survey import SimCapture
     from devices.sim.world import SimWorld
     from fieldapp.io.calibration import Calibration
@@ -27,7 +27,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-SCENES = ("plot", "spheres", "checkerboard", "turntable")
+SCENES = ("plot", "spheres", "soil", "checkerboard", "turntable")
+MAX_ARRIVAL_M = 0.10
+MAX_ARRIVAL_DEG = 5.0
 
 
 def register(subparsers: Any) -> None:
@@ -41,12 +43,24 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--scene",
         default="plot",
-        help="plot (default), spheres, checkerboard or turntable (a plant turning on a table "
-        "before a fixed camera, in a room; one station)",
+        help="plot (default), spheres, soil (bare), checkerboard or turntable (a plant turning "
+        "on a table before a fixed camera, in a room; one station)",
+    )
+    parser.add_argument(
+        "--grid", default="3", help="stations per side of the plot, 2..9 (plants spread over it)"
+    )
+    parser.add_argument(
+        "--arrival-error",
+        default=None,
+        metavar="M,DEG",
+        help="standard deviation of the base's true arrival from the nominal station pose: "
+        "metres per axis and degrees of yaw, up to 0.1,5 (default about 0.025,1)",
     )
     parser.add_argument("--seed", default="0", help="world seed (same seed, same plants)")
     parser.add_argument("--day", default="0", help="days since the first scan (plants grow)")
-    parser.add_argument("--stations", default="1-9", help="stations to visit, e.g. 4,5 or 1-9")
+    parser.add_argument(
+        "--stations", default=None, help="stations to visit, e.g. 4,5 or 1-9 (default: all)"
+    )
     parser.add_argument("--views", default="0-7", help="views per station, e.g. 0,1 or 0-7")
     parser.add_argument("--plants", action="store_true", help="spheres scene: add the plants")
     parser.add_argument(
@@ -83,17 +97,41 @@ def parse_list(name: str, text: str, low: int, high: int) -> list[int]:
     return sorted(values)
 
 
+def parse_arrival(text: str | None) -> tuple[float, float] | None:
+    """``"0.03,1.5"`` -> (0.03 m, 1.5 deg), each within the option's range; ``None`` stays."""
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        sigma_m, sigma_deg = (float(p) for p in parts)
+    except ValueError:
+        raise FieldappError(
+            f"--arrival-error: {text!r} is not two numbers M,DEG (e.g. 0.03,1.5)"
+        ) from None
+    if not (0.0 <= sigma_m <= MAX_ARRIVAL_M and 0.0 <= sigma_deg <= MAX_ARRIVAL_DEG):
+        raise FieldappError(
+            f"--arrival-error: {text!r} is outside "
+            f"0..{MAX_ARRIVAL_M:g} m, 0..{MAX_ARRIVAL_DEG:g} deg"
+        )
+    return sigma_m, sigma_deg
+
+
 def run(args: argparse.Namespace) -> int:
-    from devices.sim.rig import RigGeometry
+    from devices.sim.rig import MAX_GRID, RigGeometry, StopErrors
 
     if args.scene not in SCENES:
         raise FieldappError(f"--scene: {args.scene!r} is not one of {', '.join(SCENES)}")
     seed = parse_int("seed", args.seed, 0, 2**31 - 1)
     day = parse_int("day", args.day, 0, 120)
-    rig = RigGeometry()
-    stations = parse_list("stations", args.stations, 1, 9)
+    rig = RigGeometry(grid=parse_int("grid", args.grid, 2, MAX_GRID))
+    last = rig.grid**2
+    stations = parse_list("stations", args.stations or f"1-{last}", 1, last)
     views = parse_list("views", args.views, 0, rig.views - 1)
     shots = parse_int("intrinsics-images", args.intrinsics_images, 0, 100)
+    arrival = parse_arrival(args.arrival_error)
+    errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
+    if args.scene == "checkerboard" and rig.grid != 3:
+        raise FieldappError("--grid: the checkerboard scene is laid out for the 3 x 3 plan")
     if args.out.exists() and not args.out.is_dir():
         raise FieldappError(f"--out: {args.out} exists and is not a folder")
     try:
@@ -101,10 +139,13 @@ def run(args: argparse.Namespace) -> int:
             count = _write_turntable(args.out, seed, day, views, args.depth_only)
         else:
             world = build_world(args.scene, seed, day, rig, args.plants)
-            about = {"scene": args.scene, "seed": seed, "day": day}
+            about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
+            about["grid"] = rig.grid
+            if arrival:
+                about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
             if args.depth_only:
                 about["depth_only"] = True
-            count = write_session(args.out, world, stations, views, seed, about)
+            count = write_session(args.out, world, stations, views, seed, about, errors)
         if args.scene == "checkerboard" and shots:
             write_intrinsics_images(args.out, seed, shots)
     except OSError as error:
@@ -123,25 +164,36 @@ def _write_turntable(out: Path, seed: int, day: int, views: list[int], depth_onl
 
 def build_world(scene_name: str, seed: int, day: int, rig: RigGeometry, plants: bool) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
-    from devices.sim.scene import plot_scene, spheres_scene
+    from devices.sim.scene import (
+        PlotLayout,
+        bare_soil_scene,
+        plot_scene,
+        soil_for_plot,
+        spheres_scene,
+    )
     from devices.sim.world import SimWorld
 
+    layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
+    soil = soil_for_plot(rig.plot_half_extent_m)
     if scene_name == "plot":
-        scene = plot_scene(seed, day)
+        scene = plot_scene(seed, day, layout, soil)
     elif scene_name == "spheres":
-        scene = spheres_scene(seed, day, with_plants=plants)
+        scene = spheres_scene(seed, day, plants, layout, soil)
+    elif scene_name == "soil":
+        scene = bare_soil_scene(seed, soil)
     else:
         scene = checkerboard_scene(seed, rig)
     return SimWorld(scene, rig, seed=seed)
 
 
 def nominal_calibration(world: SimWorld) -> Calibration:
-    """The rig's pre-calibration over the 9 standard stations (reference 5)."""
-    from devices.sim.rig import REFERENCE_STATION, STATIONS
+    """The rig's pre-calibration over all the plan's stations (reference: the centre one, 5 on
+    the 3 x 3 plan)."""
     from fieldapp.mission.calibration import rig_calibration
 
-    poses = {s: world.rig.station_pose(s) for s in STATIONS}
-    return rig_calibration(world, poses, REFERENCE_STATION, world.rig.view_step_deg)
+    rig = world.rig
+    poses = {s: rig.station_pose(s) for s in rig.stations}
+    return rig_calibration(world, poses, rig.reference_station, rig.view_step_deg)
 
 
 def write_session(
@@ -151,6 +203,7 @@ def write_session(
     views: list[int],
     seed: int,
     about: dict[str, Any],
+    errors: StopErrors | None = None,
 ) -> int:
     """Simulate and write the session; returns the number of captures written."""
     from devices.sim.survey import survey
@@ -166,7 +219,7 @@ def write_session(
     tag_boards = bool(world.scene.boards)
     with ThreadPoolExecutor(max_workers=1) as saver:  # encode and write while rendering the next
         pending: deque[Future[Any]] = deque()
-        for capture in survey(world, stations, views, seed, tag_boards=tag_boards):
+        for capture in survey(world, stations, views, seed, errors, tag_boards=tag_boards):
             pending.append(
                 saver.submit(save_capture, writer, capture, bool(about.get("depth_only")))
             )

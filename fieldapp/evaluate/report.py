@@ -55,6 +55,11 @@ def _number(value: Any, digits: int) -> str:
     return f"{value:.{digits}f}" if isinstance(value, int | float) else "-"
 
 
+def _uncertainty(entry: dict[str, Any]) -> str:
+    """A station's estimated uncertainty, ``mm / deg``."""
+    return f"{_number(entry.get('uncertainty_mm'), 1)} / {_number(entry.get('uncertainty_deg'), 2)}"
+
+
 def _mm(value: Any) -> float | None:
     return 1000.0 * value if isinstance(value, int | float) else None
 
@@ -82,6 +87,8 @@ def registration_section(report: dict[str, Any]) -> str:
         [
             station,
             "yes" if entry.get("icp_accepted") else "no",
+            entry.get("verdict", "-"),
+            _uncertainty(entry),
             _number(entry.get("icp_fitness"), 3),
             _number(_mm(entry.get("icp_rmse_m")), 2),
             _number(entry.get("correction_rotation_deg"), 3),
@@ -90,8 +97,18 @@ def registration_section(report: dict[str, Any]) -> str:
         for station, entry in stations.items()
         if isinstance(entry, dict)
     ]
-    header = ["station", "ICP accepted", "fitness", "RMSE (mm)", "correction (deg)", "note"]
-    return _table(header, rows)
+    header = ["station", "ICP accepted", "verdict", "uncertainty (mm / deg)", "fitness"]
+    header += ["RMSE (mm)", "correction (deg)", "note"]
+    unreliable = [
+        s for s, e in stations.items() if isinstance(e, dict) and e.get("verdict") == "unreliable"
+    ]
+    warning = (
+        f"<p class=warn>Unreliable registration: station {', '.join(unreliable)}; their plants "
+        "may be misplaced or drawn twice.</p>"
+        if unreliable
+        else ""
+    )
+    return warning + _table(header, rows)
 
 
 def plants_section(plants: list[PlantRecord]) -> str:

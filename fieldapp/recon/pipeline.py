@@ -19,6 +19,7 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.session import Session
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
+from fieldapp.recon.guards import COARSE_KEPT, UNRELIABLE
 from fieldapp.recon.levelling import T_field_reference_initial, level_stations
 from fieldapp.recon.organ_traits import foot_m, measure_organs
 from fieldapp.recon.plants import find_plants
@@ -103,8 +104,7 @@ def reconstruct(
     measured_pixels = sum(scan.measured_pixels for scan in scans.values())
     scans.clear()  # the station clouds are no longer needed
 
-    # 5. Global registration: ICP on the overlaps, outward from the reference station.
-    registrations: dict[int, StationRegistration] = {}
+    # 5. Global registration: one pose graph of every overlap, the coarse poses as its prior.
     steps = register_stations(
         _registration_points(filtered, T_field_levelled, settings),
         T_field_levelled,
@@ -113,19 +113,11 @@ def reconstruct(
         settings.registration,
         settings.threads,
     )
-    for registration in _timed_iter(timer, "registration", steps):
-        registrations[registration.station] = registration
-        if (
-            registration.station != reference
-            and not registration.accepted
-            and settings.registration.enabled
-        ):
-            warnings.append(f"station {registration.station}: {registration.message}")
-        yield progress(
-            "registration",
-            len(registrations) / len(filtered),
-            f"station {registration.station} placed",
-        )
+    registrations = yield from _timed_steps(timer, "registration", steps)
+    yield progress("registration", 1.0, f"{len(registrations)} stations placed")
+    for station, registration in registrations.items():
+        if registration.verdict in (COARSE_KEPT, UNRELIABLE) and settings.registration.enabled:
+            warnings.append(f"station {station} {registration.verdict}: {registration.message}")
 
     # 6. One cloud of the plot; outliers removed where every station's view is together.
     with timer.stage("outlier removal"):
@@ -189,6 +181,22 @@ def _timed_iter(timer: StageTimer, stage: str, steps: Iterator[T]) -> Iterator[T
 
 
 _END = object()
+
+
+R = TypeVar("R")
+
+
+def _timed_steps(
+    timer: StageTimer, stage: str, steps: Generator[tuple[float, str], None, R]
+) -> Generator[Progress, None, R]:
+    """Run ``steps`` (fraction done, message), timing them under ``stage``; returns their value."""
+    while True:
+        try:
+            with timer.stage(stage):
+                fraction, message = next(steps)
+        except StopIteration as done:
+            return done.value  # type: ignore[no-any-return]
+        yield progress(stage, fraction, message)
 
 
 def _missing_warnings(session: Session) -> list[str]:

@@ -1,36 +1,40 @@
-"""Global registration: coarse by the station pre-calibration, fine by ICP on station overlaps.
+"""Global registration: one pose graph of all the plot's stations.
 
-Stations are refined outward from the reference station (Prim's order on the distance between
-station centres), each against what is already placed. The ICP runs on the points inside the
-overlap sphere of the station and each placed neighbour: centred between the two station
-centres (on the ground), the centres' distance as diameter. A refinement that does not converge,
-fits badly or moves the station implausibly far is rejected: the coarse transform is kept.
+Coarse poses come from the station pre-calibration (after levelling). Every pair of stations
+whose views overlap is registered on all the geometry the two share (:mod:`pairwise`); these
+edges and a prior per station (its coarse pose relative to the reference, weighted by the
+expected arrival error, :mod:`guards`) make one pose graph, solved robustly with loop closure
+(:mod:`posegraph`): edges that disagree with the rest are dropped. A station's correction is
+kept only when it is plausible for its expected error and makes its overlaps agree better than
+the coarse pose; otherwise the station is fixed at its coarse pose and the graph solved again.
+Every station gets a verdict (refined, coarse kept, unreliable) and an estimated uncertainty.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator
-from dataclasses import dataclass, field
+from collections.abc import Generator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
 
 import numpy as np
-import small_gicp
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
-from devices.geometry import Matrix4, rotation_angle_deg, transform_points
+from devices.geometry import Matrix4, invert, make_transform, transform_points
+from fieldapp.recon import guards, posegraph, se3
+from fieldapp.recon.pairwise import Overlap, PairFit, find_overlaps, register_overlap
 from fieldapp.recon.settings import RegistrationSettings
 
 log = logging.getLogger(__name__)
-
-NEIGHBOUR_FACTOR = 1.25
-"""Placed stations within this factor of the nearest one's distance are also neighbours."""
 
 
 @dataclass(frozen=True)
 class StationRegistration:
     """How one station was placed. ``T_correction`` maps its coarse field placement onto the
-    fine one (identity when ICP was off or rejected)."""
+    final one (identity when the coarse pose is kept). ``fitness`` and ``rmse_m``: the mean
+    of its kept edges; ``uncertainty_m``/``_deg``: estimated standard deviation of its pose
+    relative to the reference station; ``limit_m``/``_deg``: the largest correction its
+    expected arrival error allows (``guard_sigmas`` standard deviations)."""
 
     station: int
     T_field_station: Matrix4
@@ -40,114 +44,11 @@ class StationRegistration:
     rmse_m: float | None = None
     accepted: bool = False
     message: str = ""
-
-
-@dataclass(frozen=True)
-class IcpOutcome:
-    T_target_source: Matrix4
-    converged: bool
-    fitness: float
-    rmse_m: float
-    source_points: int
-    target_points: int
-
-
-def registration_order(
-    centres_m: dict[int, NDArray[np.float64]], reference: int
-) -> list[tuple[int, list[int]]]:
-    """(station, placed neighbours) from the reference outward: stations by their distance to
-    the reference; the neighbours of each are the placed stations within
-    :data:`NEIGHBOUR_FACTOR` of the nearest placed one."""
-
-    def distance(a: int, b: int) -> float:
-        return float(np.linalg.norm(centres_m[a] - centres_m[b]))
-
-    placed = [reference]
-    order: list[tuple[int, list[int]]] = []
-    for station in sorted(
-        (s for s in centres_m if s != reference), key=lambda s: (distance(s, reference), s)
-    ):
-        nearest = min(distance(station, p) for p in placed)
-        neighbours = sorted(p for p in placed if distance(station, p) <= NEIGHBOUR_FACTOR * nearest)
-        order.append((station, neighbours))
-        placed.append(station)
-    return order
-
-
-def overlap_mask(
-    points_m: NDArray[np.float64], centre_a_m: NDArray[np.float64], centre_b_m: NDArray[np.float64]
-) -> NDArray[np.bool_]:
-    """Mask of ``points_m`` (N, 3) inside the sphere between two station centres (3,)."""
-    middle = (centre_a_m + centre_b_m) / 2.0
-    radius = float(np.linalg.norm(centre_a_m - centre_b_m)) / 2.0
-    return np.sum((points_m - middle) ** 2, axis=1) <= radius**2  # type: ignore[no-any-return]
-
-
-def icp(
-    target_m: NDArray[np.float64],
-    source_m: NDArray[np.float64],
-    settings: RegistrationSettings,
-    threads: int = 1,
-) -> IcpOutcome:
-    """Align ``source_m`` (N, 3) onto ``target_m`` (M, 3), coarse to fine voxel sizes
-    (small_gicp); the fit is scored at the finest size."""
-    T = np.eye(4)
-    converged = True
-    target = source = None
-    tree = None
-    for voxel_m in settings.voxel_sizes_m:
-        target, tree = small_gicp.preprocess_points(target_m, voxel_m, num_threads=threads)
-        source, _ = small_gicp.preprocess_points(source_m, voxel_m, num_threads=threads)
-        result = small_gicp.align(
-            target,
-            source,
-            tree,
-            init_T_target_source=T,
-            registration_type=settings.method,
-            max_correspondence_distance=max(
-                settings.max_correspondence_m, settings.correspondence_factor * voxel_m
-            ),
-            num_threads=threads,
-            max_iterations=settings.max_iterations,
-        )
-        T = np.asarray(result.T_target_source, dtype=np.float64)
-        converged = bool(result.converged)
-    fitness, rmse = score(target_m, transform_points(T, source_m), settings.max_correspondence_m)
-    return IcpOutcome(T, converged, fitness, rmse, len(source_m), len(target_m))
-
-
-def score(
-    target_m: NDArray[np.float64], source_m: NDArray[np.float64], max_distance_m: float
-) -> tuple[float, float]:
-    """(fitness, RMSE in metres): the share of source points with a target point within
-    ``max_distance_m`` and the RMS distance of those pairs (Open3D's definitions)."""
-    if len(source_m) == 0 or len(target_m) == 0:
-        return 0.0, float("nan")
-    distances, _ = cKDTree(target_m).query(source_m, k=1, distance_upper_bound=max_distance_m)
-    inliers = np.isfinite(distances)
-    if not inliers.any():
-        return 0.0, float("nan")
-    return float(inliers.mean()), float(np.sqrt(np.mean(distances[inliers] ** 2)))
-
-
-def plausibility_problem(
-    outcome: IcpOutcome, centre_m: NDArray[np.float64], settings: RegistrationSettings
-) -> str | None:
-    """Why an ICP result must be rejected, or ``None`` when it is acceptable."""
-    if not outcome.converged:
-        return "ICP did not converge"
-    shift = float(
-        np.linalg.norm(transform_points(outcome.T_target_source, centre_m[None])[0] - centre_m)
-    )
-    if shift > settings.max_translation_m:
-        limit_mm = settings.max_translation_m * 1000
-        return f"ICP moved the station {shift * 1000:.0f} mm (limit {limit_mm:.0f} mm)"
-    angle = rotation_angle_deg(outcome.T_target_source[:3, :3])
-    if angle > settings.max_rotation_deg:
-        return f"ICP turned the station {angle:.1f} deg (limit {settings.max_rotation_deg:g} deg)"
-    if outcome.fitness < settings.min_fitness:
-        return f"ICP fitness {outcome.fitness:.2f} below {settings.min_fitness:g}"
-    return None
+    verdict: str = guards.COARSE_KEPT
+    uncertainty_m: float | None = None
+    uncertainty_deg: float | None = None
+    limit_m: float | None = None
+    limit_deg: float | None = None
 
 
 def ground_centre_m(
@@ -159,6 +60,9 @@ def ground_centre_m(
     return centre
 
 
+RegistrationSteps = Generator[tuple[float, str], None, dict[int, StationRegistration]]
+
+
 def register_stations(
     points_station_m: dict[int, NDArray[np.float64]],
     T_field_station_coarse: dict[int, Matrix4],
@@ -166,89 +70,287 @@ def register_stations(
     reference: int,
     settings: RegistrationSettings,
     threads: int = 1,
-) -> Iterator[StationRegistration]:
-    """Place every station, the reference first, then outward; yields each as it is placed.
+) -> RegistrationSteps:
+    """Place every station; yields (fraction done, message) per registered overlap and returns
+    the registrations by station.
 
-    ``points_station_m``: per station, the (N, 3) points ICP works on, in its view-0 frame.
+    ``points_station_m``: per station, the (N, 3) points to register, in its view-0 frame.
     ``axis_point_station_m``: (3,) a point of the turntable axis in view-0 frame.
     """
-    placed: dict[int, StationRegistration] = {}
-    centres = {
-        s: ground_centre_m(T, axis_point_station_m) for s, T in T_field_station_coarse.items()
+    nodes = {
+        s: make_transform(np.eye(3), ground_centre_m(T, axis_point_station_m))
+        for s, T in T_field_station_coarse.items()
     }
-    first = StationRegistration(
-        reference, T_field_station_coarse[reference], np.eye(4), accepted=True, message="reference"
-    )
-    placed[reference] = first
-    yield first
-    for station, neighbours in registration_order(centres, reference):
-        done = _place(
-            station,
-            neighbours,
-            points_station_m,
-            T_field_station_coarse,
-            placed,
-            axis_point_station_m,
-            settings,
-            threads,
-        )
-        placed[station] = done
-        yield done
+    if not settings.enabled:
+        return _coarse_only(T_field_station_coarse, nodes, reference, settings)
+    field_points = {
+        s: transform_points(T_field_station_coarse[s], points_station_m[s])
+        for s in sorted(T_field_station_coarse)
+    }
+    overlaps = find_overlaps(field_points, settings)
+    fits: list[PairFit] = []
+    with ThreadPoolExecutor(max_workers=threads) as pool:  # one GICP thread per pair
+        # closing this generator closes map's iterator, which cancels the pairs not started
+        for fit in pool.map(lambda o: register_overlap(o, nodes[o.b][:3, 3], settings), overlaps):
+            fits.append(fit)
+            yield len(fits) / len(overlaps), f"stations {fit.a}-{fit.b} registered"
+    return _solve_plot(nodes, overlaps, fits, reference, settings, T_field_station_coarse)
 
 
-def _place(
-    station: int,
-    neighbours: list[int],
-    points_station_m: dict[int, NDArray[np.float64]],
-    T_field_station_coarse: dict[int, Matrix4],
-    placed: dict[int, StationRegistration],
-    axis_point_station_m: NDArray[np.float64],
+def _usable(
+    fit: PairFit, edge: posegraph.Edge, nodes: dict[int, Matrix4], settings: RegistrationSettings
+) -> bool:
+    """A fit goes into the graph when it converged, fits well enough and is plausible: the
+    relative correction it asks for lies within ``guard_sigmas`` of the two stations'
+    expected arrival errors."""
+    if not (fit.converged and fit.fitness >= settings.min_fitness):
+        return False
+    if fit.points < settings.min_points:
+        return False
+    expected = guards.prior_covariance(nodes[fit.b], nodes[fit.a], settings)
+    return guards.mahalanobis(posegraph.residual(edge, nodes), expected) <= settings.guard_sigmas
+
+
+MAP_NODE = 0
+"""The nominal frame of the plan: the priors tie every station (the reference too) to it."""
+
+
+def _edges(
+    nodes: dict[int, Matrix4],
+    fits: list[PairFit],
+    reference: int,
     settings: RegistrationSettings,
-    threads: int,
-) -> StationRegistration:
-    T_coarse = T_field_station_coarse[station]
+) -> tuple[list[posegraph.Edge], dict[int, NDArray[np.float64]]]:
+    """The pair edges (one per fit, in order), then one prior edge per station from the
+    plan's frame (its coarse pose, each station's arrival error independent of the others');
+    also each station's expected error relative to the reference."""
+    edges = [
+        posegraph.Edge(f.a, f.b, invert(nodes[f.a]) @ f.T_a_b @ nodes[f.b], f.information)
+        for f in fits
+    ]
+    information = np.asarray(np.linalg.inv(guards.arrival_covariance(settings)), np.float64)
+    for s, T in sorted(nodes.items()):
+        edges.append(posegraph.Edge(MAP_NODE, s, T, information, robust=False))
+    priors = {
+        s: guards.prior_covariance(T, nodes[reference], settings)
+        for s, T in nodes.items()
+        if s != reference
+    }
+    return edges, priors
 
-    def kept(message: str, outcome: IcpOutcome | None = None) -> StationRegistration:
-        return StationRegistration(
+
+def _solve_plot(
+    nodes: dict[int, Matrix4],
+    overlaps: list[Overlap],
+    fits: list[PairFit],
+    reference: int,
+    settings: RegistrationSettings,
+    T_field_station_coarse: dict[int, Matrix4],
+) -> dict[int, StationRegistration]:
+    all_edges, priors = _edges(nodes, fits, reference, settings)
+    usable = [k for k, f in enumerate(fits) if _usable(f, all_edges[k], nodes, settings)]
+    tolerance = posegraph.Tolerance(settings.edge_tolerance_m, settings.edge_tolerance_deg)
+    graph = {MAP_NODE: np.eye(4)} | nodes
+    fixed: dict[int, str] = {}  # stations kept at their coarse pose, with the reason
+    while True:
+        chosen = [k for k in usable if not {fits[k].a, fits[k].b} & set(fixed)]
+        edges = [all_edges[k] for k in chosen] + all_edges[len(fits) :]
+        solution = posegraph.solve(graph, {MAP_NODE}, edges, tolerance, relative_to=reference)
+        plot = _Plot(nodes, priors, overlaps, fits, chosen, solution, settings, reference, fixed)
+        failure = plot.worst_failure()
+        if failure is None:
+            break
+        fixed[failure[0]] = failure[1]
+        log.info("station %d kept at its coarse pose: %s", *failure)
+    return {s: plot.registration(s, fixed.get(s), T_field_station_coarse[s]) for s in sorted(nodes)}
+
+
+@dataclass
+class _Plot:
+    """One solution of the plot's graph and what the guards need to judge it."""
+
+    nodes: dict[int, Matrix4]
+    priors: dict[int, NDArray[np.float64]]
+    overlaps: list[Overlap]
+    fits: list[PairFit]
+    chosen: list[int]
+    solution: posegraph.Solution
+    settings: RegistrationSettings
+    reference: int
+    fixed: dict[int, str]
+
+    def correction(self, station: int) -> Matrix4:
+        """Field-frame correction of ``station`` relative to the reference station (maps its
+        coarse placement onto the solution; identity for the reference and fixed stations)."""
+        if station == self.reference or station in self.fixed:
+            return np.eye(4)
+        poses = self.solution.T_field_node
+        C_reference = poses[self.reference] @ invert(self.nodes[self.reference])
+        return invert(C_reference) @ poses[station] @ invert(self.nodes[station])
+
+    def kept_fits(self, station: int) -> list[int]:
+        """Indices (into ``fits``) of the kept pair edges of ``station``."""
+        return [
+            self.chosen[k]
+            for k in self.solution.kept
+            if k < len(self.chosen)
+            and station in (self.fits[self.chosen[k]].a, self.fits[self.chosen[k]].b)
+        ]
+
+    def limits(self, station: int) -> tuple[float, float]:
+        """Largest acceptable correction (m, deg): ``guard_sigmas`` standard deviations."""
+        sigma_m, sigma_deg = guards.sigma_m_deg(self.priors[station])
+        return self.settings.guard_sigmas * sigma_m, self.settings.guard_sigmas * sigma_deg
+
+    def worst_failure(self) -> tuple[int, str] | None:
+        """The free station failing its guards worst, with the reason; ``None`` when all pass.
+        An implausible correction counts before one that does not improve the overlaps."""
+        failures: list[tuple[float, int, str]] = []
+        for station in sorted(set(self.nodes) - set(self.fixed) - {self.reference}):
+            problem = self.guard_problem(station)
+            if problem is not None:
+                failures.append((problem[0], station, problem[1]))
+        if not failures:
+            return None
+        _, station, reason = max(failures, key=lambda f: (f[0], -f[1]))
+        return station, reason
+
+    def guard_problem(self, station: int) -> tuple[float, str] | None:
+        """(severity, reason) when the station's correction fails a guard."""
+        twist = se3.log(
+            invert(self.nodes[station]) @ self.correction(station) @ self.nodes[station]
+        )
+        sigmas = guards.mahalanobis(twist, self.priors[station])
+        if sigmas > self.settings.guard_sigmas:
+            shift_m, turn_deg = posegraph.disagreement(twist)
+            limit_m, limit_deg = self.limits(station)
+            return sigmas, (
+                f"correction {1000 * shift_m:.0f} mm / {turn_deg:.2f} deg is {sigmas:.1f} sigma "
+                f"of the expected arrival error (limit {self.settings.guard_sigmas:g} sigma: "
+                f"about {1000 * limit_m:.0f} mm / {limit_deg:.2f} deg here)"
+            )
+        before, after = self.agreement(station)
+        if self.kept_fits(station) and after >= before:
+            return 0.0, (
+                "the correction does not make the overlaps agree better (RMS "
+                f"{1000 * np.sqrt(after):.1f} mm corrected, {1000 * np.sqrt(before):.1f} mm coarse)"
+            )
+        return None
+
+    def agreement(self, station: int) -> tuple[float, float]:
+        """Mean squared overlap disagreement (m^2) of ``station`` at its coarse and its
+        corrected pose, the neighbours at their solved poses (kept edges only)."""
+        before = after = 0.0
+        for k in self.kept_fits(station):
+            overlap = self.overlaps[k]
+            mine, theirs = (
+                (overlap.points_a_m, overlap.points_b_m)
+                if overlap.a == station
+                else (overlap.points_b_m, overlap.points_a_m)
+            )
+            other = overlap.b if overlap.a == station else overlap.a
+            T_other = self.correction(other)
+            cap = self.settings.max_correspondence_m
+            before += guards.overlap_disagreement(mine, theirs, np.eye(4), T_other, cap)
+            after += guards.overlap_disagreement(
+                mine, theirs, self.correction(station), T_other, cap
+            )
+        return before, after
+
+    def registration(
+        self, station: int, fixed_reason: str | None, T_coarse: Matrix4
+    ) -> StationRegistration:
+        """The verdict on ``station`` and how it is placed."""
+        kept = self.kept_fits(station)
+        linked = {self.fits[k].a for k in kept} | {self.fits[k].b for k in kept}
+        coarse = StationRegistration(
             station,
             T_coarse,
             np.eye(4),
-            neighbours,
-            outcome.fitness if outcome else None,
-            outcome.rmse_m if outcome else None,
-            accepted=False,
+            neighbours=sorted(linked - {station}),
+            fitness=float(np.mean([self.fits[k].fitness for k in kept])) if kept else None,
+            rmse_m=float(np.mean([self.fits[k].rmse_m for k in kept])) if kept else None,
+        )
+        if station == self.reference:
+            return replace(
+                coarse,
+                accepted=True,
+                message="reference",
+                verdict=guards.REFERENCE,
+                uncertainty_m=0.0,
+                uncertainty_deg=0.0,
+            )
+        limit_m, limit_deg = self.limits(station)
+        coarse = replace(coarse, limit_m=limit_m, limit_deg=limit_deg)
+        if fixed_reason is not None or not kept:
+            sigma_m, sigma_deg = guards.sigma_m_deg(self.priors[station])
+            return replace(
+                coarse,
+                message=f"{fixed_reason or 'no overlap registered'}: coarse pose kept",
+                verdict=guards.COARSE_KEPT
+                if self._within(sigma_m, sigma_deg)
+                else guards.UNRELIABLE,
+                uncertainty_m=sigma_m,
+                uncertainty_deg=sigma_deg,
+            )
+        C = self.correction(station)
+        sigma_m, sigma_deg = guards.sigma_m_deg(self.solution.covariance[station])
+        refined = self._within(sigma_m, sigma_deg)
+        message = f"refined on {len(kept)} overlaps"
+        if not refined:
+            message += (
+                f", but the estimated uncertainty {1000 * sigma_m:.1f} mm / {sigma_deg:.2f} deg "
+                "is too large"
+            )
+        return replace(
+            coarse,
+            T_field_station=C @ T_coarse,
+            T_correction=C,
+            accepted=refined,
             message=message,
+            verdict=guards.REFINED if refined else guards.UNRELIABLE,
+            uncertainty_m=sigma_m,
+            uncertainty_deg=sigma_deg,
         )
 
-    if not settings.enabled:
-        return kept("ICP off: coarse transform")
-    centre = ground_centre_m(T_coarse, axis_point_station_m)
-    source = transform_points(T_coarse, points_station_m[station])
-    source_mask = np.zeros(len(source), dtype=bool)
-    targets = []
-    for neighbour in neighbours:
-        done = placed[neighbour]
-        neighbour_centre = ground_centre_m(done.T_field_station, axis_point_station_m)
-        target = transform_points(done.T_field_station, points_station_m[neighbour])
-        targets.append(target[overlap_mask(target, centre, neighbour_centre)])
-        source_mask |= overlap_mask(source, centre, neighbour_centre)
-    target = np.concatenate(targets) if targets else np.zeros((0, 3))
-    source = source[source_mask]
-    if min(len(source), len(target)) < settings.min_points:
-        return kept(
-            f"too few points in the overlap ({len(source)} / {len(target)}): coarse transform kept"
+    def _within(self, sigma_m: float, sigma_deg: float) -> bool:
+        return (
+            sigma_m <= self.settings.max_uncertainty_m
+            and sigma_deg <= self.settings.max_uncertainty_deg
         )
-    outcome = icp(target, source, settings, threads)
-    problem = plausibility_problem(outcome, centre, settings)
-    if problem:
-        return kept(f"{problem}: coarse transform kept", outcome)
-    return StationRegistration(
-        station,
-        outcome.T_target_source @ T_coarse,
-        outcome.T_target_source,
-        neighbours,
-        outcome.fitness,
-        outcome.rmse_m,
-        accepted=True,
-        message="ICP refined",
-    )
+
+
+def _coarse_only(
+    T_field_station_coarse: dict[int, Matrix4],
+    nodes: dict[int, Matrix4],
+    reference: int,
+    settings: RegistrationSettings,
+) -> dict[int, StationRegistration]:
+    """Registration off: every station at its coarse pose, with its expected error."""
+    registrations = {}
+    for station, T in sorted(T_field_station_coarse.items()):
+        if station == reference:
+            registrations[station] = StationRegistration(
+                station,
+                T,
+                np.eye(4),
+                accepted=True,
+                message="reference",
+                verdict=guards.REFERENCE,
+                uncertainty_m=0.0,
+                uncertainty_deg=0.0,
+            )
+            continue
+        sigma_m, sigma_deg = guards.sigma_m_deg(
+            guards.prior_covariance(nodes[station], nodes[reference], settings)
+        )
+        registrations[station] = StationRegistration(
+            station,
+            T,
+            np.eye(4),
+            message="registration off: coarse pose",
+            verdict=guards.COARSE_KEPT,
+            uncertainty_m=sigma_m,
+            uncertainty_deg=sigma_deg,
+        )
+    return registrations

@@ -176,7 +176,17 @@ def _station_entry(registration: StationRegistration) -> dict[str, Any]:
         "correction_rotation_deg": round(rotation_angle_deg(correction[:3, :3]), 4),
         "neighbours": registration.neighbours,
         "message": registration.message,
+        "verdict": registration.verdict,
+        "uncertainty_mm": _rounded(registration.uncertainty_m, 1000),
+        "uncertainty_deg": _rounded(registration.uncertainty_deg, 1),
+        "correction_limit_mm": _rounded(registration.limit_m, 1000),
+        "correction_limit_deg": _rounded(registration.limit_deg, 1),
     }
+
+
+def _rounded(value: float | None, scale: float) -> float | None:
+    finite = _finite_or_none(value)
+    return None if finite is None else round(finite * scale, 4)
 
 
 def _finite_or_none(value: float | None) -> float | None:

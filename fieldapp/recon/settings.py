@@ -51,19 +51,39 @@ class FilterSettings(_Section):
 
 
 class RegistrationSettings(_Section):
-    """Fine registration by ICP on the overlap of neighbouring stations."""
+    """Global registration: a pose graph of every overlapping pair of stations.
+
+    ``arrival_sigma_m``/``_deg``: the base's arrival uncertainty (one standard deviation per
+    horizontal axis, and in yaw); ``level_sigma_*``: what levelling leaves of tilt and height.
+    A correction beyond ``guard_sigmas`` of this expected error is rejected. Pairs sharing
+    ``min_overlap_m2`` of ground (cells of ``overlap_cell_m``) are registered (GICP, coarse to
+    fine over ``voxel_sizes_m``); an edge disagreeing with the solution by more than
+    ``edge_tolerance_m``/``_deg`` is dropped. A station whose estimated uncertainty exceeds
+    ``max_uncertainty_m``/``_deg`` is reported unreliable."""
 
     enabled: bool = True
     method: Literal["GICP", "PLANE_ICP"] = "GICP"
-    voxel_sizes_m: tuple[float, ...] = (0.05, 0.02, 0.008)
+    voxel_sizes_m: tuple[float, ...] = (0.1, 0.05, 0.02, 0.008)
     correspondence_factor: float = Field(default=5.0, gt=0.0)
     max_correspondence_m: float = Field(default=0.02, gt=0.0)
     max_iterations: int = Field(default=50, ge=1)
     include_soil: bool = True
     min_points: int = Field(default=300, ge=10)
-    max_translation_m: float = Field(default=0.20, gt=0.0)
-    max_rotation_deg: float = Field(default=6.0, gt=0.0)
     min_fitness: float = Field(default=0.3, ge=0.0, le=1.0)
+    overlap_cell_m: float = Field(default=0.2, gt=0.0)
+    overlap_voxel_m: float = Field(default=0.01, gt=0.0)
+    min_overlap_m2: float = Field(default=4.0, gt=0.0)
+    edge_effective_points: float = Field(default=2000.0, gt=0.0)
+    edge_noise_m: float = Field(default=0.002, gt=0.0)
+    edge_tolerance_m: float = Field(default=0.02, gt=0.0)
+    edge_tolerance_deg: float = Field(default=0.8, gt=0.0)
+    arrival_sigma_m: float = Field(default=0.03, gt=0.0)
+    arrival_sigma_deg: float = Field(default=1.5, gt=0.0)
+    level_sigma_deg: float = Field(default=1.0, gt=0.0)
+    level_sigma_m: float = Field(default=0.02, gt=0.0)
+    guard_sigmas: float = Field(default=4.0, gt=0.0)
+    max_uncertainty_m: float = Field(default=0.01, gt=0.0)
+    max_uncertainty_deg: float = Field(default=0.4, gt=0.0)
 
 
 class GridPrior(_Section):

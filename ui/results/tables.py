@@ -20,7 +20,16 @@ LEAF_COLUMNS = (
     "azimuth (°)",
     "insertion (cm)",
 )
-STATION_COLUMNS = ("station", "ICP accepted", "fitness", "RMSE (mm)", "correction (deg)", "note")
+STATION_COLUMNS = (
+    "station",
+    "ICP accepted",
+    "verdict",
+    "uncertainty (mm / deg)",
+    "fitness",
+    "RMSE (mm)",
+    "correction (deg)",
+    "note",
+)
 Role = QtCore.Qt.ItemDataRole
 
 
@@ -65,6 +74,8 @@ def station_rows(report: dict[str, Any]) -> list[list[str]]:
             [
                 str(station),
                 "yes" if entry.get("icp_accepted") else "no",
+                str(entry.get("verdict", "-")),
+                uncertainty_text(entry),
                 "-" if fitness is None else f"{fitness:.3f}",
                 "-" if rmse is None else f"{1000 * rmse:.2f}",
                 f"{entry.get('correction_rotation_deg', 0.0):.3f}",
@@ -74,6 +85,12 @@ def station_rows(report: dict[str, Any]) -> list[list[str]]:
     return rows
 
 
+def uncertainty_text(entry: dict[str, Any]) -> str:
+    """A station's estimated uncertainty as ``"2.6 / 0.11"`` (mm / deg), ``-`` when unknown."""
+    mm, deg = entry.get("uncertainty_mm"), entry.get("uncertainty_deg")
+    return "-" if mm is None or deg is None else f"{mm:.1f} / {deg:.2f}"
+
+
 def station_model(report: dict[str, Any], reference: int | None) -> QtGui.QStandardItemModel:
     model = QtGui.QStandardItemModel(0, len(STATION_COLUMNS))
     model.setHorizontalHeaderLabels(list(STATION_COLUMNS))
@@ -81,6 +98,10 @@ def station_model(report: dict[str, Any], reference: int | None) -> QtGui.QStand
         items = [QtGui.QStandardItem(cell) for cell in row]
         if reference is not None and row[0] == str(reference):
             items[-1].setText(items[-1].text() or "reference station")
+        elif row[2] == "unreliable":  # a warning the user cannot miss
+            for item in items:
+                item.setForeground(QtGui.QColor(255, 255, 255))
+                item.setBackground(QtGui.QColor(190, 30, 30))
         elif row[1] == "no":
             for item in items:
                 item.setForeground(QtGui.QColor(170, 70, 0))

@@ -99,10 +99,11 @@ def test_rejected_refinements_keep_the_coarse_poses_and_are_visibly_worse(
     reconstruction: Reconstruction, plot_session: Simulated
 ) -> None:
     settings = ReconstructionSettings()
-    settings.registration.max_rotation_deg = 1e-4  # every ICP correction is "implausible"
+    settings.registration.arrival_sigma_m = 1e-4  # a base believed to stop within 0.1 mm:
+    settings.registration.arrival_sigma_deg = 1e-3  # every correction is "implausible"
     coarse = run_reconstruction(load_session(plot_session.folder), settings)
     assert len(coarse.warnings) == 8
-    assert all("coarse transform kept" in w for w in coarse.warnings)
+    assert all("coarse pose kept" in w for w in coarse.warnings)
     assert coarse.plants  # still a result
     errors = _station_errors(coarse, plot_session.truth)
     assert max(t for t, _ in errors.values()) > 0.02  # centimetres off, not millimetres

@@ -1,19 +1,20 @@
+"""Pairwise ICP and the plot's pose graph on synthetic stations with known poses."""
+
+from __future__ import annotations
+
 import numpy as np
 import pytest
 
 from devices.geometry import invert, make_transform, pose_error, rotation_z, transform_points
-from fieldapp.recon.register import (
-    IcpOutcome,
-    icp,
-    overlap_mask,
-    plausibility_problem,
-    register_stations,
-    registration_order,
-    score,
-)
+from fieldapp.recon import guards
+from fieldapp.recon.pairwise import find_overlaps, icp, score
+from fieldapp.recon.register import StationRegistration, register_stations
 from fieldapp.recon.settings import RegistrationSettings
 
 from .synthetic import cylinder
+
+SPACING_M = 1.6
+VIEW_RADIUS_M = 2.2
 
 
 def _scene(rng: np.random.Generator) -> np.ndarray:
@@ -38,42 +39,6 @@ def test_icp_recovers_a_few_cm_and_degrees() -> None:
     assert outcome.converged and outcome.fitness > 0.95 and outcome.rmse_m < 0.002
 
 
-def test_overlap_sphere_is_between_the_stations() -> None:
-    a, b = np.array([0.0, 0.0, 0.0]), np.array([1.6, 0.0, 0.0])
-    points = np.array([[0.8, 0.0, 0.0], [0.8, 0.79, 0.0], [0.8, 0.0, 0.81], [0.0, 0.0, 0.0]])
-    assert overlap_mask(points, a, b).tolist() == [True, True, False, True]
-
-
-def test_registration_order_goes_outward_from_the_reference() -> None:
-    centres = {s: np.array([(s - 1) % 3 * 1.6, (s - 1) // 3 * 1.6, 0.0]) for s in range(1, 10)}
-    order = registration_order(centres, 5)
-    stations = [s for s, _ in order]
-    assert stations[:4] == [2, 4, 6, 8]
-    assert sorted(stations) == [1, 2, 3, 4, 6, 7, 8, 9]
-    for station, neighbours in order:
-        placed = [5, *stations[: stations.index(station)]]
-        assert neighbours and set(neighbours) <= set(placed)
-    assert dict(order)[1] == [2, 4]
-
-
-def test_implausible_corrections_are_rejected() -> None:
-    settings = RegistrationSettings(max_translation_m=0.1, max_rotation_deg=3.0, min_fitness=0.5)
-    centre = np.array([1.0, 0.0, 0.0])
-
-    def outcome(T: np.ndarray, converged: bool = True, fitness: float = 0.9) -> IcpOutcome:
-        return IcpOutcome(T, converged, fitness, 0.001, 1000, 1000)
-
-    assert plausibility_problem(outcome(np.eye(4)), centre, settings) is None
-    far = make_transform(np.eye(3), np.array([0.2, 0.0, 0.0]))
-    assert "moved" in str(plausibility_problem(outcome(far), centre, settings))
-    turned = make_transform(rotation_z(5.0), np.zeros(3))
-    assert "turned" in str(plausibility_problem(outcome(turned), np.zeros(3), settings))
-    assert "converge" in str(
-        plausibility_problem(outcome(np.eye(4), converged=False), centre, settings)
-    )
-    assert "fitness" in str(plausibility_problem(outcome(np.eye(4), fitness=0.1), centre, settings))
-
-
 def test_score_counts_pairs_within_the_distance() -> None:
     target = np.array([[0.0, 0, 0], [1.0, 0, 0]])
     source = np.array([[0.0, 0, 0.003], [5.0, 0, 0]])
@@ -81,33 +46,147 @@ def test_score_counts_pairs_within_the_distance() -> None:
     assert fitness == pytest.approx(0.5) and rmse == pytest.approx(0.003)
 
 
-def _two_stations(rng: np.random.Generator, T_error: np.ndarray) -> tuple[dict, dict, dict]:
-    world = _scene(rng) + np.array([0.8, 0.0, 0.0])
-    world = np.concatenate([world, _scene(rng) - np.array([0.8, 0.0, 0.0])])
-    T_field_station_true = {
-        1: np.eye(4),
-        2: make_transform(rotation_z(90.0), np.array([1.6, 0, 0])),
+def _world(rng: np.random.Generator, grid: int) -> np.ndarray:
+    """Soil with gentle relief over the plot and a few stems: (N, 3), about 4 cm sampling."""
+    half = (grid - 1) * SPACING_M / 2 + VIEW_RADIUS_M
+    n = int((2 * half) ** 2 * 700)
+    xy = rng.uniform(-half, half, (n, 2))
+    z = 0.015 * np.sin(2.1 * xy[:, 0] + 0.4) * np.cos(1.7 * xy[:, 1]) + 0.004 * np.sin(
+        9 * xy[:, 0] - 7 * xy[:, 1]
+    )
+    stems = [
+        cylinder(rng, x, y, 0.01, 0.25, 600)
+        for x, y in rng.uniform(-half + 0.3, half - 0.3, (grid * grid, 2))
+    ]
+    return np.concatenate([np.column_stack([xy, z]), *stems])
+
+
+def _plot(
+    seed: int, grid: int, sigma_m: float, sigma_deg: float
+) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], dict[int, np.ndarray], int]:
+    """Stations on a ``grid`` x ``grid`` plan, each seeing the world within 2.2 m: (points in
+    the station frame, coarse poses (nominal), true poses, reference)."""
+    rng = np.random.default_rng(seed)
+    world = _world(rng, grid)
+    points, coarse, truth = {}, {}, {}
+    offset = (grid - 1) * SPACING_M / 2
+    for station in range(1, grid * grid + 1):
+        row, col = divmod(station - 1, grid)
+        nominal = np.array([col * SPACING_M - offset, row * SPACING_M - offset, 0.0])
+        coarse[station] = make_transform(np.eye(3), nominal)
+        error = make_transform(
+            rotation_z(rng.normal(0.0, sigma_deg)), np.r_[rng.normal(0.0, sigma_m, 2), 0.0]
+        )
+        truth[station] = coarse[station] @ error
+        seen = world[np.hypot(*(world[:, :2] - nominal[:2]).T) < VIEW_RADIUS_M]
+        points[station] = transform_points(invert(truth[station]), seen)
+    reference = (grid * grid + 1) // 2
+    return points, coarse, truth, reference
+
+
+def _run(
+    points: dict, coarse: dict, reference: int, settings: RegistrationSettings, threads: int = 1
+) -> dict[int, StationRegistration]:
+    steps = register_stations(points, coarse, np.zeros(3), reference, settings, threads)
+    while True:
+        try:
+            next(steps)
+        except StopIteration as done:
+            return done.value  # type: ignore[no-any-return]
+
+
+def _errors(result: dict, truth: dict, reference: int) -> dict[int, tuple[float, float]]:
+    T_ref = result[reference].T_field_station
+    return {
+        s: pose_error(invert(T_ref) @ r.T_field_station, invert(truth[reference]) @ truth[s])
+        for s, r in result.items()
     }
-    points = {s: transform_points(invert(T), world) for s, T in T_field_station_true.items()}
-    coarse = {1: np.eye(4), 2: T_error @ T_field_station_true[2]}
-    return points, coarse, T_field_station_true
 
 
-def test_stations_register_against_the_placed_ones_and_bad_ones_keep_coarse() -> None:
-    rng = np.random.default_rng(3)
-    T_error = make_transform(rotation_z(1.2), np.array([0.03, 0.02, -0.005]))
-    points, coarse, truth = _two_stations(rng, T_error)
-    placed = list(register_stations(points, coarse, np.zeros(3), 1, RegistrationSettings()))
-    assert [p.station for p in placed] == [1, 2]
-    assert placed[1].accepted and placed[1].neighbours == [1]
-    translation_m, rotation_deg = pose_error(placed[1].T_field_station, truth[2])
-    assert translation_m < 0.002 and rotation_deg < 0.05
+@pytest.mark.parametrize("seed", [0, 1])
+def test_every_station_of_a_3x3_plot_lands_within_2_mm_and_0_1_degrees(seed: int) -> None:
+    points, coarse, truth, reference = _plot(seed, 3, 0.03, 1.5)
+    result = _run(points, coarse, reference, RegistrationSettings())
+    for station, (translation_m, rotation_deg) in _errors(result, truth, reference).items():
+        assert translation_m < 0.002 and rotation_deg < 0.1, (station, translation_m)
+        assert result[station].verdict in ("refined", "reference")
+        assert result[station].uncertainty_m is not None
+    assert result[1].neighbours == [2, 4, 5]  # side and diagonal neighbours, not 3 or 7
 
-    strict = RegistrationSettings(max_translation_m=0.001)
-    kept = list(register_stations(points, coarse, np.zeros(3), 1, strict))[1]
-    assert not kept.accepted and "coarse transform kept" in kept.message
-    np.testing.assert_allclose(kept.T_field_station, coarse[2])
-    off = list(
-        register_stations(points, coarse, np.zeros(3), 1, RegistrationSettings(enabled=False))
-    )[1]
-    assert not off.accepted and off.message.startswith("ICP off")
+
+def test_results_do_not_depend_on_the_thread_count() -> None:
+    points, coarse, _, reference = _plot(2, 3, 0.03, 1.5)
+    one = _run(points, coarse, reference, RegistrationSettings(), threads=1)
+    two = _run(points, coarse, reference, RegistrationSettings(), threads=2)
+    for station in one:
+        assert one[station].T_field_station.tobytes() == two[station].T_field_station.tobytes()
+        assert one[station].uncertainty_m == two[station].uncertainty_m
+
+
+def test_a_correction_beyond_the_expected_arrival_error_keeps_the_coarse_pose() -> None:
+    points, coarse, _, reference = _plot(0, 3, 0.03, 1.5)
+    believed = RegistrationSettings(arrival_sigma_m=0.002, arrival_sigma_deg=0.05)
+    result = _run(points, coarse, reference, believed)
+    for station, registration in result.items():
+        if station == reference:
+            continue
+        assert registration.verdict != "refined" and not registration.accepted
+        np.testing.assert_array_equal(registration.T_correction, np.eye(4))
+        np.testing.assert_array_equal(registration.T_field_station, coarse[station])
+        assert "coarse pose kept" in registration.message
+    off = _run(points, coarse, reference, RegistrationSettings(enabled=False))
+    assert all(r.verdict in ("coarse kept", "reference") for r in off.values())
+
+
+def test_overlaps_are_the_side_and_diagonal_neighbours() -> None:
+    points, coarse, _, _ = _plot(0, 3, 0.0, 0.0)
+    field = {s: transform_points(coarse[s], p) for s, p in points.items()}
+    pairs = [(o.a, o.b) for o in find_overlaps(field, RegistrationSettings())]
+    assert len(pairs) == 12 + 8  # 12 side pairs, 8 diagonal ones
+    assert (1, 3) not in pairs and (1, 5) in pairs and (2, 6) in pairs
+
+
+def test_the_expected_error_grows_with_the_distance_to_the_reference() -> None:
+    settings = RegistrationSettings()
+    reference = np.eye(4)
+    near = guards.prior_covariance(make_transform(np.eye(3), np.r_[1.6, 0, 0]), reference, settings)
+    far = guards.prior_covariance(make_transform(np.eye(3), np.r_[6.4, 0, 0]), reference, settings)
+    (near_m, near_deg), (far_m, far_deg) = guards.sigma_m_deg(near), guards.sigma_m_deg(far)
+    assert near_deg == pytest.approx(far_deg)  # yaw: the two stations' own errors
+    assert far_m > 2.5 * near_m  # the reference's yaw swings a far station farther
+    yaw = np.radians(settings.arrival_sigma_deg)
+    assert far_m == pytest.approx(np.sqrt(2 * settings.arrival_sigma_m**2 + (6.4 * yaw) ** 2))
+
+
+def test_closing_the_registration_cancels_the_pairs_not_started(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from fieldapp.recon import register
+
+    points, coarse, _, reference = _plot(0, 3, 0.0, 0.0)
+    started = []
+    real = register.register_overlap
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        started.append(args[0])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(register, "register_overlap", counted)
+    steps = register_stations(points, coarse, np.zeros(3), reference, RegistrationSettings())
+    fraction, message = next(steps)
+    assert fraction == pytest.approx(1 / 20) and message == "stations 1-2 registered"
+    steps.close()
+    assert len(started) <= 2  # the first pair, and at most the one running when closed
+
+
+@pytest.mark.slow  # 72 pairs
+def test_a_5x5_plot_is_refined_to_the_corners() -> None:
+    points, coarse, truth, reference = _plot(5, 5, 0.03, 1.5)
+    result = _run(points, coarse, reference, RegistrationSettings())
+    errors = _errors(result, truth, reference)
+    assert max(t for t, _ in errors.values()) < 0.002 and max(r for _, r in errors.values()) < 0.1
+    assert {r.verdict for r in result.values()} == {"reference", "refined"}
+    corner, neighbour = result[1], result[reference - 1]
+    assert corner.limit_m is not None and neighbour.limit_m is not None
+    assert corner.limit_m > 2 * neighbour.limit_m  # the guard widens with the distance
+    assert corner.limit_m > 0.4  # the fixed 20 cm guard rejected real corrections out here

@@ -1,0 +1,76 @@
+"""What the registration may believe: the expected error of the coarse poses and the checks a
+correction must pass.
+
+The base stops with an arrival error of ``arrival_sigma_m`` per horizontal axis and
+``arrival_sigma_deg`` in yaw (levelling leaves ``level_sigma_deg`` of tilt and
+``level_sigma_m`` of height). A station's coarse pose relative to the reference carries its
+own arrival error and the reference's, whose yaw swings the station about the reference: the
+farther the station, the larger its expected error (:func:`prior_covariance`). A correction is
+acceptable when it lies within ``guard_sigmas`` (Mahalanobis) of that expectation, and kept
+only when it makes the station's overlaps agree better than its coarse pose does
+(:func:`overlap_disagreement`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from devices.geometry import Matrix4, invert, transform_points
+from fieldapp.recon import se3
+from fieldapp.recon.settings import RegistrationSettings
+
+REFINED = "refined"
+COARSE_KEPT = "coarse kept"
+UNRELIABLE = "unreliable"
+REFERENCE = "reference"
+
+
+def arrival_covariance(settings: RegistrationSettings) -> NDArray[np.float64]:
+    """(6, 6) covariance of one station's pose error in its own frame (field axes)."""
+    tilt = np.radians(settings.level_sigma_deg)
+    yaw = np.radians(settings.arrival_sigma_deg)
+    sigma = [tilt, tilt, yaw, settings.arrival_sigma_m, settings.arrival_sigma_m]
+    return np.diag(np.square([*sigma, settings.level_sigma_m]))
+
+
+def prior_covariance(
+    T_field_node: Matrix4, T_field_reference: Matrix4, settings: RegistrationSettings
+) -> NDArray[np.float64]:
+    """(6, 6) covariance of a station's coarse pose relative to the reference, in the
+    station's frame: its own arrival error plus the reference's carried over to it."""
+    single = arrival_covariance(settings)
+    A = se3.adjoint(invert(T_field_node) @ T_field_reference)
+    covariance: NDArray[np.float64] = single + A @ single @ A.T
+    return covariance
+
+
+def sigma_m_deg(covariance: NDArray[np.float64]) -> tuple[float, float]:
+    """(translation m, rotation deg): the largest standard deviation of each part."""
+    translation = float(np.sqrt(max(np.linalg.eigvalsh(covariance[3:, 3:]).max(), 0.0)))
+    rotation = float(np.sqrt(max(np.linalg.eigvalsh(covariance[:3, :3]).max(), 0.0)))
+    return translation, float(np.degrees(rotation))
+
+
+def mahalanobis(correction: se3.Vector6, covariance: NDArray[np.float64]) -> float:
+    """How many standard deviations of ``covariance`` the (6,) ``correction`` is."""
+    return float(np.sqrt(correction @ np.linalg.solve(covariance, correction)))
+
+
+def overlap_disagreement(
+    station_points_m: NDArray[np.float64],
+    neighbour_points_m: NDArray[np.float64],
+    T_station: Matrix4,
+    T_neighbour: Matrix4,
+    max_distance_m: float,
+) -> float:
+    """Mean squared distance (m^2, each capped at ``max_distance_m``) of the station's overlap
+    points (N, 3), moved by ``T_station``, to the neighbour's (M, 3), moved by ``T_neighbour``."""
+    if len(station_points_m) == 0 or len(neighbour_points_m) == 0:
+        return max_distance_m**2
+    tree = cKDTree(transform_points(T_neighbour, neighbour_points_m))
+    distances, _ = tree.query(
+        transform_points(T_station, station_points_m), k=1, distance_upper_bound=max_distance_m
+    )
+    return float(np.mean(np.minimum(distances, max_distance_m) ** 2))

@@ -1,0 +1,47 @@
+"""The same session gives the same results for any thread count (issue 19)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from fieldapp.io.session import load_session
+from fieldapp.recon.outputs import write_outputs
+from fieldapp.recon.pipeline import run_reconstruction
+from fieldapp.recon.result import Reconstruction
+from fieldapp.recon.settings import ReconstructionSettings
+
+from .conftest import Simulated
+
+pytestmark = pytest.mark.slow  # one more reconstruction of the standard plot
+
+
+def _write(result: Reconstruction, folder: Path) -> tuple[bytes, dict]:
+    write_outputs(
+        folder, result.rows(), result.cloud, {p.id: p.cloud for p in result.plants}, result.report()
+    )
+    report = json.loads((folder / "report.json").read_text())
+    for measured in ("timings_s", "cpu_s"):  # wall and CPU seconds differ from run to run
+        assert report.pop(measured)
+    return (folder / "plants.csv").read_bytes(), report
+
+
+def test_one_and_two_threads_give_identical_outputs(
+    reconstruction: Reconstruction, plot_session: Simulated, tmp_path: Path
+) -> None:
+    assert ReconstructionSettings().threads == 2  # the session fixture ran with two
+    single = run_reconstruction(
+        load_session(plot_session.folder), ReconstructionSettings(threads=1)
+    )
+    csv_two, report_two = _write(reconstruction, tmp_path / "two")
+    csv_one, report_one = _write(single, tmp_path / "one")
+    assert csv_one == csv_two
+    assert report_one == report_two
+    assert (tmp_path / "one" / "cloud.ply").read_bytes() == (
+        tmp_path / "two" / "cloud.ply"
+    ).read_bytes()
+    verdicts = {s["verdict"] for s in report_one["stations"].values()}
+    assert verdicts == {"reference", "refined"}
+    assert all(s["uncertainty_mm"] is not None for s in report_one["stations"].values())
