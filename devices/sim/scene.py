@@ -6,7 +6,7 @@ Field frame: z up, z = 0 on the mean ground, origin at the plot centre, metres.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -14,6 +14,7 @@ import open3d as o3d
 from numpy.typing import NDArray
 
 from devices.sim.boards import PlacedBoard
+from devices.sim.canopy import PlantSurface, canopy_contacts
 from devices.sim.plants import PlantMesh, make_plant, settle_on_ground
 from devices.sim.soil import Soil, SoilSpec
 
@@ -44,7 +45,8 @@ class Body:
 
 @dataclass(frozen=True)
 class PlantTruth:
-    """A plant's base (``x_m``, ``y_m``, ground height ``z_m`` there) and traits."""
+    """A plant's base (``x_m``, ``y_m``, ground height ``z_m`` there) and traits; the plants
+    it touches and whose space it reaches into (:mod:`devices.sim.canopy`)."""
 
     name: str
     x_m: float
@@ -52,6 +54,9 @@ class PlantTruth:
     z_m: float
     height_cm: float
     width_cm: float
+    leaves: int = 0
+    touching: tuple[str, ...] = ()
+    reaching_into: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -78,7 +83,31 @@ class Scene:
             Body(name, "plant", mesh.vertices_m, mesh.triangles, mesh.albedo_rgb, mesh.albedo_ir)
         )
         x, y, z = (float(v) for v in mesh.base_m)
-        self.plants.append(PlantTruth(name, x, y, z, 100 * mesh.height_m, 100 * mesh.width_m))
+        self.plants.append(
+            PlantTruth(name, x, y, z, 100 * mesh.height_m, 100 * mesh.width_m, mesh.leaves)
+        )
+
+    def record_contacts(self) -> None:
+        """Fill each plant's ``touching`` and ``reaching_into`` from the meshes."""
+        meshes = {b.name: b for b in self.bodies if b.kind == "plant"}
+        surfaces = [
+            PlantSurface(
+                p.name,
+                meshes[p.name].vertices_m,
+                meshes[p.name].triangles,
+                np.array([p.x_m, p.y_m, p.z_m]),
+            )
+            for p in self.plants
+        ]
+        contacts = canopy_contacts(surfaces)
+        self.plants = [
+            replace(
+                p,
+                touching=tuple(contacts.touching[p.name]),
+                reaching_into=tuple(contacts.reaching_into[p.name]),
+            )
+            for p in self.plants
+        ]
 
     def add_sphere(self, name: str, x_m: float, y_m: float, diameter_mm: float) -> None:
         """A foam sphere resting on the soil at (``x_m``, ``y_m``)."""
@@ -151,15 +180,20 @@ class PlotLayout:
         return grid + rng.uniform(-self.jitter_m, self.jitter_m, grid.shape)
 
 
-def add_plot(scene: Scene, seed: int, day: int, layout: PlotLayout) -> None:
-    """Sow the plot of ``seed`` (positions and plants do not depend on ``day``)."""
+def add_plot(
+    scene: Scene, seed: int, day: int, layout: PlotLayout, stage: str = "seedling"
+) -> None:
+    """Sow the plot of ``seed`` (positions and plants do not depend on ``day``) at ``stage``
+    (:data:`devices.sim.plants.STAGES`)."""
     if scene.soil is None:
         raise ValueError("a plot needs soil")
     rng = np.random.default_rng([seed, 11])
     for index, (x, y) in enumerate(layout.positions(rng)):
-        mesh = make_plant(seed * 1000 + index, day, (x, y), scene.soil.height_at(x, y))
+        ground_z = scene.soil.height_at(x, y)
+        mesh = make_plant(seed * 1000 + index, day, (x, y), ground_z, stage)
         ground = scene.soil.height_m(mesh.vertices_m[:, 0], mesh.vertices_m[:, 1])
         scene.add_plant(f"p{index + 1:02d}", settle_on_ground(mesh, ground))
+    scene.record_contacts()
 
 
 SPHERE_SPOTS_M = ((-0.8, -0.8), (0.8, -0.8), (-0.8, 0.8), (0.8, 0.8), (0.0, -0.8), (0.0, 0.8))
@@ -175,10 +209,12 @@ def add_spheres(scene: Scene) -> None:
         scene.add_sphere(f"sphere-{diameter}", spot[0], spot[1], diameter)
 
 
-def plot_scene(seed: int, day: int = 0, layout: PlotLayout | None = None) -> Scene:
-    """The paper's plot: 16 maize seedlings at 0.8 m on uneven soil."""
+def plot_scene(
+    seed: int, day: int = 0, layout: PlotLayout | None = None, stage: str = "seedling"
+) -> Scene:
+    """The paper's plot: 16 maize plants at 0.8 m on uneven soil (seedlings by default)."""
     scene = empty_scene(seed)
-    add_plot(scene, seed, day, layout or PlotLayout())
+    add_plot(scene, seed, day, layout or PlotLayout(), stage)
     return scene
 
 

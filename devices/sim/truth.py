@@ -1,6 +1,8 @@
 """``truth.json``: what was really there and where the camera really stood.
 
-Issue 3's fields (``plants``, ``spheres``, ``T_field_camera`` of view 0 of every station) plus
+Issue 3's fields (``plants``, ``spheres``, ``T_field_camera`` of view 0 of every station; plants
+also at ``map_x_m``/``map_y_m`` in the base's map frame, with their ``leaves``, the plants they
+are ``touching`` and those whose space they are ``reaching_into``) plus
 ``boards`` (geometry, pose, corners), ``captures`` (true pose and angle of every capture),
 ``intrinsics`` and the rig's nominal geometry.
 """
@@ -12,6 +14,7 @@ from dataclasses import asdict
 from typing import Any
 
 from devices.camera.frames import Intrinsics
+from devices.geometry import Matrix4, invert
 from devices.sim.boards import PlacedBoard
 from devices.sim.rig import RigGeometry
 from devices.sim.scene import Scene
@@ -34,6 +37,13 @@ def board_truth(placed: PlacedBoard) -> dict[str, Any]:
     }
 
 
+def _map_xy(T_map_field: Matrix4, x_m: float, y_m: float) -> dict[str, float]:
+    """``map_x_m``, ``map_y_m``: a field position in the base's map frame (where the
+    reconstruction reports plants of a session whose captures carry base poses)."""
+    x, y, _, _ = T_map_field @ [x_m, y_m, 0.0, 1.0]
+    return {"map_x_m": float(x), "map_y_m": float(y)}
+
+
 def truth_document(
     scene: Scene,
     captures: Iterable[dict[str, Any]],
@@ -44,6 +54,7 @@ def truth_document(
     """The truth of a simulated session. ``captures``: :meth:`SimCapture.truth` of each capture;
     ``about`` (scene name, seed, day...) is kept as is."""
     captures = list(captures)
+    T_map_field = invert(rig.T_field_map)
     view0 = {
         str(c["station"]): c["T_field_camera"]
         for c in captures
@@ -60,6 +71,10 @@ def truth_document(
                 "z_m": p.z_m,
                 "height_cm": p.height_cm,
                 "width_cm": p.width_cm,
+                **_map_xy(T_map_field, p.x_m, p.y_m),
+                "leaves": p.leaves,
+                "touching": list(p.touching),
+                "reaching_into": list(p.reaching_into),
             }
             for p in scene.plants
         ],

@@ -41,6 +41,12 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--scene", default="plot", help="plot (default), spheres or checkerboard")
     parser.add_argument("--seed", default="0", help="world seed (same seed, same plants)")
     parser.add_argument("--day", default="0", help="days since the first scan (plants grow)")
+    parser.add_argument(
+        "--stage",
+        default="seedling",
+        help="plot growth stage: seedling (default) or touching (55-90 cm, 5-8 leaves, "
+        "canopies reaching across the 80 cm spacing)",
+    )
     parser.add_argument("--stations", default="1-9", help="stations to visit, e.g. 4,5 or 1-9")
     parser.add_argument("--views", default="0-7", help="views per station, e.g. 0,1 or 0-7")
     parser.add_argument("--plants", action="store_true", help="spheres scene: add the plants")
@@ -78,16 +84,20 @@ def run(args: argparse.Namespace) -> int:
 
     if args.scene not in SCENES:
         raise FieldappError(f"--scene: {args.scene!r} is not one of {', '.join(SCENES)}")
+    from devices.sim.plants import STAGES
+
     seed = parse_int("seed", args.seed, 0, 2**31 - 1)
     day = parse_int("day", args.day, 0, 120)
+    if args.stage not in STAGES:
+        raise FieldappError(f"--stage: {args.stage!r} is not one of {', '.join(STAGES)}")
     rig = RigGeometry()
     stations = parse_list("stations", args.stations, 1, 9)
     views = parse_list("views", args.views, 0, rig.views - 1)
     shots = parse_int("intrinsics-images", args.intrinsics_images, 0, 100)
     if args.out.exists() and not args.out.is_dir():
         raise FieldappError(f"--out: {args.out} exists and is not a folder")
-    world = build_world(args.scene, seed, day, rig, args.plants)
-    about = {"scene": args.scene, "seed": seed, "day": day}
+    world = build_world(args.scene, seed, day, rig, args.plants, args.stage)
+    about = {"scene": args.scene, "seed": seed, "day": day, "stage": args.stage}
     try:
         count = write_session(args.out, world, stations, views, seed, about)
         if args.scene == "checkerboard" and shots:
@@ -100,13 +110,20 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_world(scene_name: str, seed: int, day: int, rig: RigGeometry, plants: bool) -> SimWorld:
+def build_world(
+    scene_name: str,
+    seed: int,
+    day: int,
+    rig: RigGeometry,
+    plants: bool,
+    stage: str = "seedling",
+) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.scene import plot_scene, spheres_scene
     from devices.sim.world import SimWorld
 
     if scene_name == "plot":
-        scene = plot_scene(seed, day)
+        scene = plot_scene(seed, day, stage=stage)
     elif scene_name == "spheres":
         scene = spheres_scene(seed, day, with_plants=plants)
     else:
@@ -137,7 +154,8 @@ def write_session(
     from fieldapp.io.durable import write_json_durably
     from fieldapp.io.writer import SessionWriter
 
-    session_id = f"sim-{about['scene']}-seed{seed}-day{about['day']}"
+    stage = "" if about.get("stage", "seedling") == "seedling" else f"-{about['stage']}"
+    session_id = f"sim-{about['scene']}-seed{seed}-day{about['day']}{stage}"
     writer = SessionWriter.create(
         folder, session_id, nominal_calibration(world), extra={"simulated": about}
     )
