@@ -16,6 +16,7 @@ from fieldapp.errors import FormatError, Problem
 from fieldapp.io.calibration import Calibration, FiniteFloat, SpecModel, load_calibration
 from fieldapp.io.images import ImageError, depth_units_to_m, read_color, read_depth_units, read_ir
 from fieldapp.io.jsonfile import load_model
+from fieldapp.io.planting import SessionPlan
 
 SESSION_FORMAT = "fieldapp-session/1"
 SESSION_FILE = "session.json"
@@ -76,6 +77,7 @@ class SessionDocument(SpecModel):
     created: datetime | None = None
     calibration: RelativePath
     captures: list[Capture]
+    plan: SessionPlan | None = None
 
 
 @dataclass

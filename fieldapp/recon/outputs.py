@@ -18,6 +18,8 @@ from fieldapp.io.durable import write_bytes_durably, write_json_durably
 from fieldapp.recon.cloud import Cloud
 
 CSV_COLUMNS = ["plant", "x_m", "y_m", "height_cm", "width_cm", "points"]
+GRID_COLUMNS = ["row", "column"]
+"""Added to ``plants.csv`` when the session has a planting grid (1-based; empty: extra plant)."""
 
 _PLY_VERTEX = np.dtype(
     [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
@@ -26,7 +28,8 @@ _PLY_VERTEX = np.dtype(
 
 @dataclass(frozen=True)
 class PlantRow:
-    """One line of ``plants.csv``; positions in metres, traits in centimetres."""
+    """One line of ``plants.csv``; positions in metres, traits in centimetres; the planting
+    grid's row and column (1-based) when known."""
 
     plant: int
     x_m: float
@@ -34,6 +37,8 @@ class PlantRow:
     height_cm: float
     width_cm: float
     points: int
+    row: int | None = None
+    column: int | None = None
 
 
 def ply_bytes(cloud: Cloud) -> bytes:
@@ -62,21 +67,24 @@ def read_ply(path: Path) -> Cloud:
     return Cloud(points, colors.astype(np.uint8))
 
 
-def csv_text(rows: list[PlantRow]) -> str:
+def csv_text(rows: list[PlantRow], grid: bool | None = None) -> str:
+    """``plants.csv``; with ``row`` and ``column`` when ``grid`` (default: when a row has one)."""
+    with_grid = any(r.row is not None for r in rows) if grid is None else grid
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(CSV_COLUMNS)
+    writer.writerow(CSV_COLUMNS + (GRID_COLUMNS if with_grid else []))
     for row in rows:
-        writer.writerow(
-            [
-                row.plant,
-                f"{row.x_m:.4f}",
-                f"{row.y_m:.4f}",
-                f"{row.height_cm:.2f}",
-                f"{row.width_cm:.2f}",
-                row.points,
-            ]
-        )
+        cells: list[object] = [
+            row.plant,
+            f"{row.x_m:.4f}",
+            f"{row.y_m:.4f}",
+            f"{row.height_cm:.2f}",
+            f"{row.width_cm:.2f}",
+            row.points,
+        ]
+        if with_grid:
+            cells += ["" if row.row is None else row.row, "" if row.column is None else row.column]
+        writer.writerow(cells)
     return buffer.getvalue()
 
 
