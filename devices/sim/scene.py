@@ -6,7 +6,7 @@ Field frame: z up, z = 0 on the mean ground, origin at the plot centre, metres.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -14,7 +14,7 @@ import open3d as o3d
 from numpy.typing import NDArray
 
 from devices.sim.boards import PlacedBoard
-from devices.sim.canopy import PlantSurface, canopy_contacts
+from devices.sim.canopy import CanopyContacts, PlantSurface, canopy_contacts
 from devices.sim.plants import PlantMesh, make_plant, settle_on_ground
 from devices.sim.soil import Soil, SoilSpec
 
@@ -45,8 +45,7 @@ class Body:
 
 @dataclass(frozen=True)
 class PlantTruth:
-    """A plant's base (``x_m``, ``y_m``, ground height ``z_m`` there) and traits; the plants
-    it touches and whose space it reaches into (:mod:`devices.sim.canopy`)."""
+    """A plant's base (``x_m``, ``y_m``, ground height ``z_m`` there), traits and leaf count."""
 
     name: str
     x_m: float
@@ -55,8 +54,6 @@ class PlantTruth:
     height_cm: float
     width_cm: float
     leaves: int = 0
-    touching: tuple[str, ...] = ()
-    reaching_into: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -87,8 +84,9 @@ class Scene:
             PlantTruth(name, x, y, z, 100 * mesh.height_m, 100 * mesh.width_m, mesh.leaves)
         )
 
-    def record_contacts(self) -> None:
-        """Fill each plant's ``touching`` and ``reaching_into`` from the meshes."""
+    def contacts(self) -> CanopyContacts:
+        """Which plants touch and whose space each reaches into (from the meshes; about 1 s
+        for 16 plants, so computed for the truth file only)."""
         meshes = {b.name: b for b in self.bodies if b.kind == "plant"}
         surfaces = [
             PlantSurface(
@@ -99,15 +97,7 @@ class Scene:
             )
             for p in self.plants
         ]
-        contacts = canopy_contacts(surfaces)
-        self.plants = [
-            replace(
-                p,
-                touching=tuple(contacts.touching[p.name]),
-                reaching_into=tuple(contacts.reaching_into[p.name]),
-            )
-            for p in self.plants
-        ]
+        return canopy_contacts(surfaces)
 
     def add_sphere(self, name: str, x_m: float, y_m: float, diameter_mm: float) -> None:
         """A foam sphere resting on the soil at (``x_m``, ``y_m``)."""
@@ -193,7 +183,6 @@ def add_plot(
         mesh = make_plant(seed * 1000 + index, day, (x, y), ground_z, stage)
         ground = scene.soil.height_m(mesh.vertices_m[:, 0], mesh.vertices_m[:, 1])
         scene.add_plant(f"p{index + 1:02d}", settle_on_ground(mesh, ground))
-    scene.record_contacts()
 
 
 SPHERE_SPOTS_M = ((-0.8, -0.8), (0.8, -0.8), (-0.8, 0.8), (0.8, 0.8), (0.0, -0.8), (0.0, 0.8))

@@ -55,6 +55,7 @@ def truth_document(
     ``about`` (scene name, seed, day...) is kept as is."""
     captures = list(captures)
     T_map_field = invert(rig.T_field_map)
+    contacts = scene.contacts() if scene.plants else None
     view0 = {
         str(c["station"]): c["T_field_camera"]
         for c in captures
@@ -73,8 +74,8 @@ def truth_document(
                 "width_cm": p.width_cm,
                 **_map_xy(T_map_field, p.x_m, p.y_m),
                 "leaves": p.leaves,
-                "touching": list(p.touching),
-                "reaching_into": list(p.reaching_into),
+                "touching": contacts.touching[p.name] if contacts else [],
+                "reaching_into": contacts.reaching_into[p.name] if contacts else [],
             }
             for p in scene.plants
         ],

@@ -31,16 +31,13 @@ def test_the_seedling_stage_is_the_default_and_unchanged_by_the_touching_draws()
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_touching_plots_touch_and_seedling_plots_do_not(seed: int) -> None:
-    grown = plot_scene(seed, stage="touching")
-    assert sum(len(p.touching) for p in grown.plants) // 2 >= 1
-    assert sum(bool(p.reaching_into) for p in grown.plants) >= 12
-    for plant in grown.plants:  # symmetric, and only between plants of the plot
-        assert all(
-            plant.name in next(q for q in grown.plants if q.name == o).touching
-            for o in plant.touching
-        )
-    seedlings = plot_scene(seed)
-    assert not any(p.touching or p.reaching_into for p in seedlings.plants)
+    grown = plot_scene(seed, stage="touching").contacts()
+    assert grown.touching_pairs >= 1
+    assert sum(bool(names) for names in grown.reaching_into.values()) >= 12
+    for name, others in grown.touching.items():  # symmetric
+        assert all(name in grown.touching[other] for other in others)
+    seedlings = plot_scene(seed).contacts()
+    assert seedlings.touching_pairs == 0 and not any(seedlings.reaching_into.values())
 
 
 def test_contacts_of_two_ribbons() -> None:
