@@ -24,8 +24,9 @@ SPACING_M = 0.8
 
 
 def synthetic_plant(rng: np.random.Generator, x: float, y: float) -> NDArray[np.float64]:
-    """(N, 3) a stem of 1 cm radius and 5-8 arching ribbon leaves standing at (x, y)."""
-    height = rng.uniform(0.3, 0.45)  # above the highest leaf node (0.26 m)
+    """(N, 3) a stem of 1 cm radius and 5-8 arching ribbon leaves standing at (x, y); the
+    leaves start above the 15 cm stem band and droop to 3-7 cm above the ground."""
+    height = rng.uniform(0.4, 0.5)  # above the highest leaf node (0.37 m)
     angle = rng.uniform(0, 2 * np.pi, 3000)
     z = rng.uniform(0, height, 3000)
     parts = [np.column_stack([x + 0.01 * np.cos(angle), y + 0.01 * np.sin(angle), z])]
@@ -33,10 +34,11 @@ def synthetic_plant(rng: np.random.Generator, x: float, y: float) -> NDArray[np.
         u = rng.uniform(0, 1, 2000)
         across = rng.uniform(-0.03, 0.03, 2000) * (1 - 0.8 * u)
         az = rng.uniform(0, 2 * np.pi)
-        length, rise, node = rng.uniform(0.4, 0.7), rng.uniform(0.05, 0.2), 0.05 + 0.03 * k
+        length, rise, node = rng.uniform(0.4, 0.7), rng.uniform(0.05, 0.2), 0.16 + 0.03 * k
         along, side = np.array([np.cos(az), np.sin(az)]), np.array([-np.sin(az), np.cos(az)])
         xy = np.array([x, y]) + (u * length)[:, None] * along + across[:, None] * side
-        parts.append(np.column_stack([xy, node + rise * np.sin(np.pi * u) - 0.5 * rise * u**2]))
+        droop = node + rise * np.sin(np.pi * u) - 0.8 * node * u**2  # tips end 3-7 cm up
+        parts.append(np.column_stack([xy, droop]))
     return np.concatenate(parts)
 
 

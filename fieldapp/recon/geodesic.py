@@ -108,12 +108,17 @@ def assign_to_stems(
     second = np.full(voxels, np.inf)
     owner = np.full(voxels, UNREACHED, dtype=np.intp)
     tree = cKDTree(graph.centres_m[:, :2])
+    position = np.full(voxels, -1, dtype=np.intp)  # global -> local index, reset after each stem
     for index, xy in enumerate(stems_xy_m):
         local = np.asarray(tree.query_ball_point(xy, reach_m), dtype=np.intp)
         sources = _sources(graph.centres_m[local], xy, seed_radius_m, seed_height_m)
         if len(sources) == 0:
             continue
-        sub = _outward(graph.edges[local][:, local], graph.centres_m[local], xy, inward_penalty)
+        position[local] = np.arange(len(local))
+        sub = _outward(
+            _subgraph(graph.edges, local, position), graph.centres_m[local], xy, inward_penalty
+        )
+        position[local] = -1
         distance = dijkstra(sub, directed=True, indices=sources, min_only=True)
         reached = np.isfinite(distance)
         where, d = local[reached], distance[reached]
@@ -125,6 +130,17 @@ def assign_to_stems(
     ambiguous = np.zeros(voxels, dtype=bool)
     ambiguous[reached_twice] = second[reached_twice] - best[reached_twice] < ambiguity_margin_m
     return Assignment(owner[graph.point_voxel], ambiguous[graph.point_voxel])
+
+
+def _subgraph(edges: csr_matrix, local: NDArray[np.intp], position: NDArray[np.intp]) -> csr_matrix:
+    """The edges among the ``local`` voxels, renumbered by ``position`` (global -> local, -1
+    elsewhere), in time proportional to their edges, not to the whole graph."""
+    rows = edges[local]
+    columns = position[rows.indices]
+    keep = columns >= 0
+    row_ids = np.repeat(np.arange(len(local)), np.diff(rows.indptr))
+    n = len(local)
+    return coo_matrix((rows.data[keep], (row_ids[keep], columns[keep])), shape=(n, n)).tocsr()
 
 
 def _outward(

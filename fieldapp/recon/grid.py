@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from devices.geometry import Matrix4
 from fieldapp.recon.settings import GridPrior, StemSettings
@@ -84,11 +85,14 @@ def stems_at_empty_nodes(
 ) -> list[Stem]:
     """Stems found with the weaker test (``prior_layer_fraction``) at nodes that have none."""
     weak = settings.model_copy(update={"min_layer_fraction": settings.prior_layer_fraction})
-    found = []
+    found: list[Stem] = []
+    if len(points_m) == 0:
+        return found
+    tree = cKDTree(points_m[:, :2])
     for xy in grid.xy_m:
         if any(np.linalg.norm(stem.xy_m - xy) <= grid.snap_radius_m for stem in stems):
             continue
-        near = np.sum((points_m[:, :2] - xy) ** 2, axis=1) <= grid.snap_radius_m**2
+        near = np.asarray(tree.query_ball_point(xy, grid.snap_radius_m), dtype=np.intp)
         local = points_m[near]
         if len(local) == 0:
             continue
@@ -119,8 +123,6 @@ def apply_grid_prior_nodes(
     """
     if len(points_m) == 0:
         return labels.copy()
-    from scipy.spatial import cKDTree
-
     distance, nearest = cKDTree(grid.xy_m).query(points_m[:, :2])
     low = points_m[:, 2] <= points_m[:, 2].min() + base_height_m
     claims = (labels >= 0) & low & (distance <= grid.snap_radius_m)

@@ -141,6 +141,7 @@ def reconstruct(
             cloud, soil, settings.plants, settings.ground.local_ground_radius_m, grid
         )
         plants = search.plants
+        warnings.extend(search.warnings(settings.plants.stems.flag_ambiguous_share))
     yield progress("traits", 1.0, f"{len(plants)} plants")
     if not plants:
         warnings.append("no plant found")

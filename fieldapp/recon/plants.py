@@ -133,6 +133,23 @@ class PlantSearch:
     missing_cells: list[tuple[int, int]] = field(default_factory=list)
     extra_plants: list[int] = field(default_factory=list)
 
+    def warnings(self, flag_ambiguous_share: float) -> list[str]:
+        """One line per plant that may hold another's points, per missing grid cell (as a
+        list) and per plant off the grid."""
+        lines = [
+            f"plant {p.id}: {100 * p.ambiguous_share:.1f} % of its points could belong to a "
+            "neighbour (canopies touch)"
+            for p in self.plants
+            if p.ambiguous_share > flag_ambiguous_share
+        ]
+        if self.missing_cells:
+            cells = ", ".join(f"row {r} column {c}" for r, c in self.missing_cells)
+            lines.append(f"{len(self.missing_cells)} planting-grid cells without a plant: {cells}")
+        if self.extra_plants:
+            ids = ", ".join(str(i) for i in self.extra_plants)
+            lines.append(f"{len(self.extra_plants)} plants off the planting grid: {ids}")
+        return lines
+
 
 def find_plants(
     cloud: Cloud,

@@ -86,7 +86,7 @@ class StemSettings(_Section):
     enabled: bool = True
     band_m: float = Field(default=0.15, gt=0.0)
     cell_m: float = Field(default=0.01, gt=0.0)
-    min_layer_fraction: float = Field(default=0.6, gt=0.0, le=1.0)
+    min_layer_fraction: float = Field(default=0.75, gt=0.0, le=1.0)
     prior_layer_fraction: float = Field(default=0.3, gt=0.0, le=1.0)
     """Near a planting-grid node without a stem, a weaker column is taken as its stem."""
     max_foot_gap_m: float = Field(default=0.05, ge=0.0)

@@ -97,12 +97,13 @@ def find_stems(
     grid = np.zeros(tuple(cells.max(axis=0) + 1), dtype=np.float64)
     grid[cells[:, 0], cells[:, 1]] = fractions
     labels, count = ndimage.label(grid > 0, structure=np.ones((3, 3)))
-    stems = []
-    for index in range(1, count + 1):
-        members = np.argwhere(labels == index)
-        weights = grid[members[:, 0], members[:, 1]]
-        xy = origin + (np.average(members, axis=0, weights=weights) + 0.5) * settings.cell_m
-        stems.append((float(weights.max()), xy))
+    index = np.arange(1, count + 1)
+    centres = np.array(ndimage.center_of_mass(grid, labels, index)).reshape(-1, 2)
+    strengths = np.asarray(ndimage.maximum(grid, labels, index), dtype=np.float64).reshape(-1)
+    stems = [
+        (float(strength), origin + (centre + 0.5) * settings.cell_m)
+        for strength, centre in zip(strengths, centres, strict=True)
+    ]
     return _merge_close(stems, soil_m, settings.min_separation_m)
 
 

@@ -108,8 +108,10 @@ def test_rejected_refinements_keep_the_coarse_poses_and_are_visibly_worse(
     settings = ReconstructionSettings()
     settings.registration.max_rotation_deg = 1e-4  # every ICP correction is "implausible"
     coarse = run_reconstruction(load_session(plot_session.folder), settings)
-    assert len(coarse.warnings) == 8
-    assert all("coarse transform kept" in w for w in coarse.warnings)
+    kept = [w for w in coarse.warnings if "coarse transform kept" in w]
+    assert len(kept) == 8
+    # the rest: plants drawn twice by misplaced stations overlap and are flagged
+    assert all(w.startswith("plant ") for w in coarse.warnings if w not in kept)
     assert coarse.plants  # still a result
     errors = _station_errors(coarse, plot_session.truth)
     assert max(t for t, _ in errors.values()) > 0.02  # centimetres off, not millimetres

@@ -100,6 +100,10 @@ def test_the_grid_prior_finds_a_faint_stem_and_reports_missing_and_extra_plants(
     assert (1, 1) in cells and (1, 2) in cells
     assert search.missing_cells == [(1, 3)]
     assert len(search.extra_plants) == 1
+    assert search.warnings(0.005)[-2:] == [
+        "1 planting-grid cells without a plant: row 1 column 3",
+        f"1 plants off the planting grid: {search.extra_plants[0]}",
+    ]
     b_plant = next(p for p in search.plants if p.grid_cell == (1, 2))
     assert b_plant.traits.width_m == pytest.approx(width_m(b), abs=0.01)
 
@@ -114,6 +118,7 @@ def test_points_two_stems_reach_alike_are_flagged() -> None:
     )
     shares = [p.ambiguous_share for p in search.plants]
     assert len(shares) == 2 and all(s > 0.01 for s in shares)
+    assert search.warnings(0.005)[0].startswith("plant 1: ")
     lone = search_plants(colored(left, LEAF_RGB), NO_SOIL, PlantSettings(), 0.15)
     assert lone.plants[0].ambiguous_share == 0.0
 

@@ -73,6 +73,8 @@ def test_touching_plants_are_reported_split_and_ambiguous_ones_flagged(
     assert len(split_ids) >= 4
     flagged = {p["plant"] for p in report["plants"] if p["flagged"]}
     assert flagged and flagged <= split_ids  # only a plant touching another can be ambiguous
+    said = {int(w.split(":")[0].split()[1]) for w in touching.warnings if w.startswith("plant ")}
+    assert said == flagged  # and the CLI says so
     assert all(p["from_stem"] for p in report["plants"])
 
 
