@@ -113,7 +113,7 @@ def check_plants(session_folder: Path, plants_xy_m: Sequence[tuple[float, float]
     from fieldapp.results.identity import match_positions
 
     truth = load_truth(session_folder / "truth.json").plants
-    truth_xy_m = np.array([[t.x_m, t.y_m] for t in truth], np.float64).reshape(-1, 2)
+    truth_xy_m = np.array([t.plot_xy_m for t in truth], np.float64).reshape(-1, 2)
     found_xy_m = np.array(plants_xy_m, np.float64).reshape(-1, 2)
     matches = match_positions(truth_xy_m, found_xy_m, MATCH_DISTANCE_M)
     matched = sum(match is not None for match in matches)

@@ -1,8 +1,11 @@
-"""Procedural maize seedlings: a leaning stem and 5-9 arching, tapering leaves on alternate sides.
+"""Procedural maize plants: a leaning stem and 5-9 arching, tapering leaves on alternate sides.
 
 A plant is drawn from its own seed, independently of its growth stage: ``--day N`` grows the
 same plants (leaves appear every five days, everything lengthens), and the same seed gives the
-same plants. Truth (height, width) is computed from the finished mesh.
+same plants. Two stages (:data:`STAGES`): ``seedling`` (the paper's plots, 26-35 cm on day 0)
+and ``touching`` (the later scan dates: 55-90 cm, 5-8 leaves, long leaves that reach across the
+80 cm spacing into the neighbours' space). Truth (height, width) is computed from the finished
+mesh.
 """
 
 from __future__ import annotations
@@ -22,6 +25,13 @@ HEIGHT_DAY0_M = 0.30
 GROWTH_PER_DAY = 0.05
 """Relative height gain per day (linear): 1.25 x on day 5, 2 x on day 20."""
 
+STAGES = ("seedling", "touching")
+TOUCHING_HEIGHT_M = (0.55, 0.90)
+"""Heights of the ``touching`` stage (uniform; ``--day`` does not change them)."""
+TOUCHING_LEAF_REACH = 1.8
+"""Leaf length relative to the seedling model's at the ``touching`` stage: the canopy spreads
+to 1.0-1.5 m across, so leaves cross the 80 cm spacing."""
+
 LEAF_RGB = np.array([0.14, 0.36, 0.06], dtype=np.float32)
 STEM_RGB = np.array([0.45, 0.55, 0.25], dtype=np.float32)
 LEAF_IR = 0.55
@@ -39,6 +49,7 @@ class PlantMesh:
     - ``base_m``: (3,) the stem's foot on the ground.
     - ``organ_of_vertex``: (V,) int16, :data:`STEM_PART` for the stem, k for leaf k (0 lowest);
       ``None`` when unknown. The organ truth (:mod:`devices.sim.organ_truth`) is read from it.
+    - ``leaves``: how many leaves it has.
     """
 
     vertices_m: NDArray[np.float64]
@@ -47,6 +58,7 @@ class PlantMesh:
     albedo_ir: NDArray[np.float32]
     base_m: NDArray[np.float64]
     organ_of_vertex: NDArray[np.int16] | None = None
+    leaves: int = 0
 
     @property
     def height_m(self) -> float:
@@ -70,22 +82,39 @@ def growth_factor(day: int) -> float:
     return 1.0 + GROWTH_PER_DAY * max(day, 0)
 
 
-def make_plant(seed: int, day: int, base_xy_m: tuple[float, float], ground_z_m: float) -> PlantMesh:
-    """Draw the plant of ``seed`` on ``day``, standing at ``base_xy_m`` on ground ``ground_z_m``.
+def make_plant(
+    seed: int,
+    day: int,
+    base_xy_m: tuple[float, float],
+    ground_z_m: float,
+    stage: str = "seedling",
+) -> PlantMesh:
+    """Draw the plant of ``seed`` on ``day`` at ``stage`` (one of :data:`STAGES`), standing at
+    ``base_xy_m`` on ground ``ground_z_m``.
 
     Leaf tips may droop below uneven soil: lift them with :func:`settle_on_ground`.
     """
+    if stage not in STAGES:
+        raise ValueError(f"stage must be one of {', '.join(STAGES)}, got {stage!r}")
     rng = np.random.default_rng([seed, 7])
     base_leaves = int(rng.integers(5, 8))
     count = leaves_on_day(base_leaves, day)
     azimuth0, lean_dir = rng.uniform(0.0, 2 * np.pi, 2)
     lean_deg = rng.uniform(1.0, 5.0)
     size = rng.uniform(0.85, 1.15)
+    height_m = HEIGHT_DAY0_M * size * growth_factor(day)
+    reach = 1.0
+    if stage == "touching":  # own draws: the seedling stage's plants stay as they were
+        grown = np.random.default_rng([seed, 7, 1])
+        count = int(grown.integers(5, 9))
+        height_m = float(grown.uniform(*TOUCHING_HEIGHT_M))
+        reach = TOUCHING_LEAF_REACH
+        azimuth0 = float(np.radians(grown.uniform(-30.0, 30.0)))  # leaves along the rows
     parts = [_stem(count)]
     for k in range(MAX_LEAVES):
         params = rng.uniform(0.0, 1.0, 6)  # drawn for every leaf, so growth keeps the old ones
         if k < count:
-            parts.append(_leaf(k, count, azimuth0 + np.pi * k, params))
+            parts.append(_leaf(k, count, azimuth0 + np.pi * k, params, reach))
     vertices = np.concatenate([p[0] for p in parts])
     triangles = np.concatenate(_offset_triangles([p[1] for p in parts])).astype(np.int32)
     albedo = np.concatenate([p[2] for p in parts])
@@ -96,7 +125,7 @@ def make_plant(seed: int, day: int, base_xy_m: tuple[float, float], ground_z_m: 
         rotation_z(np.degrees(lean_dir)) @ rotation_x(lean_deg) @ rotation_z(-np.degrees(lean_dir))
     )
     vertices = vertices @ leaning.T
-    vertices *= HEIGHT_DAY0_M * size * growth_factor(day) / vertices[:, 2].max()
+    vertices *= height_m / vertices[:, 2].max()
     base = np.array([base_xy_m[0], base_xy_m[1], ground_z_m])
     vertices += base
     shade = 1.0 + 0.12 * (rng.random() - 0.5)
@@ -107,6 +136,7 @@ def make_plant(seed: int, day: int, base_xy_m: tuple[float, float], ground_z_m: 
         albedo_ir=np.full(len(vertices), LEAF_IR, np.float32),
         base_m=base,
         organ_of_vertex=organ,
+        leaves=count,
     )
 
 
@@ -119,7 +149,13 @@ def settle_on_ground(mesh: PlantMesh, ground_z_m: NDArray[np.float64]) -> PlantM
     lift = above_foot & (vertices[:, 2] < floor)
     vertices[lift, 2] = floor[lift]
     return PlantMesh(
-        vertices, mesh.triangles, mesh.albedo_rgb, mesh.albedo_ir, mesh.base_m, mesh.organ_of_vertex
+        vertices,
+        mesh.triangles,
+        mesh.albedo_rgb,
+        mesh.albedo_ir,
+        mesh.base_m,
+        organ_of_vertex=mesh.organ_of_vertex,
+        leaves=mesh.leaves,
     )
 
 
@@ -152,14 +188,15 @@ def _stem(count: int) -> Part:
     return vertices, triangles, albedo
 
 
-def _leaf(k: int, count: int, azimuth: float, p: NDArray[np.float64]) -> Part:
-    """Leaf ``k`` of ``count`` (0 lowest) as a folded ribbon with three vertices per section.
+def _leaf(k: int, count: int, azimuth: float, p: NDArray[np.float64], reach: float = 1.0) -> Part:
+    """Leaf ``k`` of ``count`` (0 lowest) as a folded ribbon with three vertices per section,
+    ``reach`` times the seedling's length.
 
     Lower leaves are shorter, start flatter and arch over; the top ones stand up in the whorl.
     """
     rank = k / max(count - 1, 1)
     node_z = 0.06 + 0.035 * k
-    length = (0.20 + 0.22 * np.sin(np.pi * (0.25 + 0.6 * rank))) * (0.85 + 0.3 * p[0])
+    length = reach * (0.20 + 0.22 * np.sin(np.pi * (0.25 + 0.6 * rank))) * (0.85 + 0.3 * p[0])
     width = (0.05 + 0.06 * np.sin(np.pi * min(rank, 0.92))) * (0.85 + 0.3 * p[1])
     rise = np.radians(np.interp(rank, [0, 0.7, 1], [45, 30, 8]) + 10 * (p[2] - 0.5))
     tip = np.radians(np.interp(rank, [0, 0.7, 1], [135, 105, 35]) + 20 * (p[3] - 0.5))

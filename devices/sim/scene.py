@@ -14,6 +14,7 @@ import open3d as o3d
 from numpy.typing import NDArray
 
 from devices.sim.boards import PlacedBoard
+from devices.sim.canopy import CanopyContacts, PlantSurface, canopy_contacts
 from devices.sim.organ_truth import organ_truth
 from devices.sim.plants import PlantMesh, make_plant, settle_on_ground
 from devices.sim.soil import Soil, SoilSpec
@@ -45,8 +46,8 @@ class Body:
 
 @dataclass(frozen=True)
 class PlantTruth:
-    """A plant's base (``x_m``, ``y_m``, ground height ``z_m`` there) and traits; ``organs``:
-    the stem's diameter and every leaf (:func:`devices.sim.organ_truth.organ_truth`)."""
+    """A plant's base (``x_m``, ``y_m``, ground height ``z_m`` there), traits and leaf count;
+    ``organs``: the stem's diameter and every leaf (:func:`devices.sim.organ_truth.organ_truth`)."""
 
     name: str
     x_m: float
@@ -54,6 +55,7 @@ class PlantTruth:
     z_m: float
     height_cm: float
     width_cm: float
+    leaves: int = 0
     organs: dict[str, Any] | None = None
 
 
@@ -83,8 +85,23 @@ class Scene:
         x, y, z = (float(v) for v in mesh.base_m)
         organs = organ_truth(mesh) if mesh.organ_of_vertex is not None else None
         self.plants.append(
-            PlantTruth(name, x, y, z, 100 * mesh.height_m, 100 * mesh.width_m, organs)
+            PlantTruth(name, x, y, z, 100 * mesh.height_m, 100 * mesh.width_m, mesh.leaves, organs)
         )
+
+    def contacts(self) -> CanopyContacts:
+        """Which plants touch and whose space each reaches into (from the meshes; about 1 s
+        for 16 plants, so computed for the truth file only)."""
+        meshes = {b.name: b for b in self.bodies if b.kind == "plant"}
+        surfaces = [
+            PlantSurface(
+                p.name,
+                meshes[p.name].vertices_m,
+                meshes[p.name].triangles,
+                np.array([p.x_m, p.y_m, p.z_m]),
+            )
+            for p in self.plants
+        ]
+        return canopy_contacts(surfaces)
 
     def add_sphere(self, name: str, x_m: float, y_m: float, diameter_mm: float) -> None:
         """A foam sphere resting on the soil at (``x_m``, ``y_m``)."""
@@ -164,13 +181,17 @@ class PlotLayout:
         return grid + rng.uniform(-self.jitter_m, self.jitter_m, grid.shape)
 
 
-def add_plot(scene: Scene, seed: int, day: int, layout: PlotLayout) -> None:
-    """Sow the plot of ``seed`` (positions and plants do not depend on ``day``)."""
+def add_plot(
+    scene: Scene, seed: int, day: int, layout: PlotLayout, stage: str = "seedling"
+) -> None:
+    """Sow the plot of ``seed`` (positions and plants do not depend on ``day``) at ``stage``
+    (:data:`devices.sim.plants.STAGES`)."""
     if scene.soil is None:
         raise ValueError("a plot needs soil")
     rng = np.random.default_rng([seed, 11])
     for index, (x, y) in enumerate(layout.positions(rng)):
-        mesh = make_plant(seed * 1000 + index, day, (x, y), scene.soil.height_at(x, y))
+        ground_z = scene.soil.height_at(x, y)
+        mesh = make_plant(seed * 1000 + index, day, (x, y), ground_z, stage)
         ground = scene.soil.height_m(mesh.vertices_m[:, 0], mesh.vertices_m[:, 1])
         scene.add_plant(f"p{index + 1:02d}", settle_on_ground(mesh, ground))
 
@@ -198,11 +219,16 @@ def soil_for_plot(half_extent_m: float) -> SoilSpec:
 
 
 def plot_scene(
-    seed: int, day: int = 0, layout: PlotLayout | None = None, soil: SoilSpec | None = None
+    seed: int,
+    day: int = 0,
+    layout: PlotLayout | None = None,
+    soil: SoilSpec | None = None,
+    stage: str = "seedling",
 ) -> Scene:
-    """The paper's plot: 16 maize seedlings at 0.8 m on uneven soil (or ``layout``)."""
+    """The paper's plot: 16 maize plants at 0.8 m on uneven soil (seedlings by default; or
+    ``layout``)."""
     scene = empty_scene(seed, soil)
-    add_plot(scene, seed, day, layout or PlotLayout())
+    add_plot(scene, seed, day, layout or PlotLayout(), stage)
     return scene
 
 

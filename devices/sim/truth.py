@@ -1,8 +1,10 @@
 """``truth.json``: what was really there and where the camera really stood.
 
-Issue 3's fields (``plants`` with, per plant, the organ truth of
+Issue 3's fields (``plants``, ``spheres``, ``T_field_camera`` of view 0 of every station; plants
+also at ``map_x_m``/``map_y_m`` in the base's map frame, with the plants they are ``touching``
+and those whose space they are ``reaching_into``, and the organ truth of
 :mod:`devices.sim.organ_truth`: ``stem_diameter_mm``, ``leaf_count``, ``leaf_area_cm2`` and
-``leaves``; ``spheres``, ``T_field_camera`` of view 0 of every station) plus
+``leaves``, one entry per leaf) plus
 ``boards`` (geometry, pose, corners), ``captures`` (true pose and angle of every capture),
 ``stations`` (each station's nominal and true base pose in the map frame and its arrival error),
 ``intrinsics`` and the rig's nominal geometry.
@@ -15,6 +17,7 @@ from dataclasses import asdict
 from typing import Any
 
 from devices.camera.frames import Intrinsics
+from devices.geometry import Matrix4, invert
 from devices.sim.boards import PlacedBoard
 from devices.sim.rig import RigGeometry
 from devices.sim.scene import Scene
@@ -59,6 +62,13 @@ def station_truth(captures: list[dict[str, Any]], rig: RigGeometry) -> dict[str,
     return dict(sorted(stations.items(), key=lambda item: int(item[0])))
 
 
+def _map_xy(T_map_field: Matrix4, x_m: float, y_m: float) -> dict[str, float]:
+    """``map_x_m``, ``map_y_m``: a field position in the base's map frame (where the
+    reconstruction reports plants of a session whose captures carry base poses)."""
+    x, y, _, _ = T_map_field @ [x_m, y_m, 0.0, 1.0]
+    return {"map_x_m": float(x), "map_y_m": float(y)}
+
+
 def truth_document(
     scene: Scene,
     captures: Iterable[dict[str, Any]],
@@ -69,6 +79,8 @@ def truth_document(
     """The truth of a simulated session. ``captures``: :meth:`SimCapture.truth` of each capture;
     ``about`` (scene name, seed, day...) is kept as is."""
     captures = list(captures)
+    T_map_field = invert(rig.T_field_map)
+    contacts = scene.contacts() if scene.plants else None
     view0 = {
         str(c["station"]): c["T_field_camera"]
         for c in captures
@@ -85,6 +97,10 @@ def truth_document(
                 "z_m": p.z_m,
                 "height_cm": p.height_cm,
                 "width_cm": p.width_cm,
+                **_map_xy(T_map_field, p.x_m, p.y_m),
+                "leaf_count": p.leaves,
+                "touching": contacts.touching[p.name] if contacts else [],
+                "reaching_into": contacts.reaching_into[p.name] if contacts else [],
                 **(p.organs or {}),
             }
             for p in scene.plants

@@ -59,6 +59,12 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--seed", default="0", help="world seed (same seed, same plants)")
     parser.add_argument("--day", default="0", help="days since the first scan (plants grow)")
     parser.add_argument(
+        "--stage",
+        default="seedling",
+        help="plot growth stage: seedling (default) or touching (55-90 cm, 5-8 leaves, "
+        "canopies reaching across the 80 cm spacing)",
+    )
+    parser.add_argument(
         "--stations", default=None, help="stations to visit, e.g. 4,5 or 1-9 (default: all)"
     )
     parser.add_argument("--views", default="0-7", help="views per station, e.g. 0,1 or 0-7")
@@ -121,8 +127,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.scene not in SCENES:
         raise FieldappError(f"--scene: {args.scene!r} is not one of {', '.join(SCENES)}")
+    from devices.sim.plants import STAGES
+
     seed = parse_int("seed", args.seed, 0, 2**31 - 1)
     day = parse_int("day", args.day, 0, 120)
+    if args.stage not in STAGES:
+        raise FieldappError(f"--stage: {args.stage!r} is not one of {', '.join(STAGES)}")
     rig = RigGeometry(grid=parse_int("grid", args.grid, 2, MAX_GRID))
     last = rig.grid**2
     stations = parse_list("stations", args.stations or f"1-{last}", 1, last)
@@ -138,9 +148,9 @@ def run(args: argparse.Namespace) -> int:
         if args.scene == "turntable":
             count = _write_turntable(args.out, seed, day, views, args.depth_only)
         else:
-            world = build_world(args.scene, seed, day, rig, args.plants)
+            world = build_world(args.scene, seed, day, rig, args.plants, args.stage)
             about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
-            about["grid"] = rig.grid
+            about |= {"stage": args.stage, "grid": rig.grid}
             if arrival:
                 about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
             if args.depth_only:
@@ -162,7 +172,14 @@ def _write_turntable(out: Path, seed: int, day: int, views: list[int], depth_onl
     return write_turntable_session(out, seed, day, views, depth_only)
 
 
-def build_world(scene_name: str, seed: int, day: int, rig: RigGeometry, plants: bool) -> SimWorld:
+def build_world(
+    scene_name: str,
+    seed: int,
+    day: int,
+    rig: RigGeometry,
+    plants: bool,
+    stage: str = "seedling",
+) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.scene import (
         PlotLayout,
@@ -176,7 +193,7 @@ def build_world(scene_name: str, seed: int, day: int, rig: RigGeometry, plants: 
     layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
     soil = soil_for_plot(rig.plot_half_extent_m)
     if scene_name == "plot":
-        scene = plot_scene(seed, day, layout, soil)
+        scene = plot_scene(seed, day, layout, soil, stage)
     elif scene_name == "spheres":
         scene = spheres_scene(seed, day, plants, layout, soil)
     elif scene_name == "soil":
@@ -211,7 +228,8 @@ def write_session(
     from fieldapp.io.durable import write_json_durably
     from fieldapp.io.writer import SessionWriter
 
-    session_id = f"sim-{about['scene']}-seed{seed}-day{about['day']}"
+    stage = "" if about.get("stage", "seedling") == "seedling" else f"-{about['stage']}"
+    session_id = f"sim-{about['scene']}-seed{seed}-day{about['day']}{stage}"
     writer = SessionWriter.create(
         folder, session_id, nominal_calibration(world), extra={"simulated": about}
     )

@@ -25,6 +25,16 @@ class TruthPlant(_Model):
     y_m: float = Field(allow_inf_nan=False)
     height_cm: float = Field(ge=0.0, allow_inf_nan=False)
     width_cm: float = Field(ge=0.0, allow_inf_nan=False)
+    map_x_m: float | None = Field(default=None, allow_inf_nan=False)
+    map_y_m: float | None = Field(default=None, allow_inf_nan=False)
+
+    @property
+    def plot_xy_m(self) -> tuple[float, float]:
+        """Where ``plants.csv`` reports it: the map frame when the truth has it (simulated
+        sessions carry base poses, so plants are reported in the map frame)."""
+        if self.map_x_m is not None and self.map_y_m is not None:
+            return self.map_x_m, self.map_y_m
+        return self.x_m, self.y_m
 
 
 class TruthSphere(_Model):
@@ -100,7 +110,7 @@ def pair_with_truth(
     plants: list[PlantRecord], truth: list[TruthPlant], max_distance_m: float
 ) -> Pairing:
     """Pairs by base position in the field frame (one-to-one, within ``max_distance_m``)."""
-    truth_xy = np.array([[t.x_m, t.y_m] for t in truth], np.float64).reshape(-1, 2)
+    truth_xy = np.array([t.plot_xy_m for t in truth], np.float64).reshape(-1, 2)
     plant_xy = np.array([[p.x_m, p.y_m] for p in plants], np.float64).reshape(-1, 2)
     matches = match_positions(truth_xy, plant_xy, max_distance_m)
     pairs = []
@@ -108,7 +118,7 @@ def pair_with_truth(
         if match is None:
             continue
         t = truth[match]
-        distance = float(np.hypot(plant.x_m - t.x_m, plant.y_m - t.y_m))
+        distance = float(np.hypot(plant.x_m - t.plot_xy_m[0], plant.y_m - t.plot_xy_m[1]))
         pairs.append(
             TraitPair(
                 plant.plant,

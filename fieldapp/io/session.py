@@ -24,6 +24,7 @@ from fieldapp.io.images import (
     read_ir,
 )
 from fieldapp.io.jsonfile import load_model
+from fieldapp.io.planting import SessionPlan
 from fieldapp.io.plausible import MIN_VIEW_STEP_DEG, calibration_problems
 
 SESSION_FORMAT = "fieldapp-session/1"
@@ -114,6 +115,7 @@ class SessionDocument(SpecModel):
     calibration: RelativePath
     captures: list[Capture]
     turntable: Turntable | None = None
+    plan: SessionPlan | None = None
 
 
 @dataclass

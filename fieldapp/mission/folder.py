@@ -45,7 +45,9 @@ def start_session(folder: Path, plan: MissionPlan, calibration: Calibration) -> 
     folder.mkdir(parents=True, exist_ok=True)
     save_plan(plan, folder / PLAN_FILE)
     session_id = f"{plan.name}-{now_iso()[:19].replace(':', '')}"
-    return SessionWriter.create(folder, session_id, calibration, extra={"mission": plan.name})
+    return SessionWriter.create(
+        folder, session_id, calibration, extra={"mission": plan.name, "plan": plan.session_plan()}
+    )
 
 
 def read_plan(folder: Path) -> MissionPlan:
@@ -66,7 +68,12 @@ def reopen_session(folder: Path, calibration: Callable[[], Calibration]) -> Sess
         plan = read_plan(folder)
         log.info("%s: the mission never wrote its session; starting it now", folder)
         session_id = f"{plan.name}-{now_iso()[:19].replace(':', '')}"
-        return SessionWriter.create(folder, session_id, calibration(), extra={"mission": plan.name})
+        return SessionWriter.create(
+            folder,
+            session_id,
+            calibration(),
+            extra={"mission": plan.name, "plan": plan.session_plan()},
+        )
     return SessionWriter.open(folder)
 
 

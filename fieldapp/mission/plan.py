@@ -3,7 +3,8 @@
 A plan lists the stations in visiting order with their map poses (the base's navigation frame:
 metres, degrees), the views of each station (``count`` views ``step_deg`` apart), how many
 frames make one capture, the settle time after each table move, the capture quality limits,
-bounded retries, the devices and the calibration in force. :func:`default_plan` is the paper's:
+bounded retries, the devices, the calibration in force and, when known, the planting grid (map
+frame, written into the session's ``plan``). :func:`default_plan` is the paper's:
 a 3 x 3 grid 1.6 m apart, reference station 5 at its centre, visited in serpentine order, with
 8 views 45 degrees apart at each station.
 """
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import yaml
 from pydantic import Field, field_validator, model_validator
@@ -20,6 +21,7 @@ from pydantic import Field, field_validator, model_validator
 from fieldapp.errors import FormatError, Problem
 from fieldapp.io.durable import write_bytes_durably
 from fieldapp.io.jsonfile import validate_document
+from fieldapp.io.planting import PlantingGrid
 from fieldapp.settings import CameraQualitySettings, DeviceSettings, IncidentPolicy, Section
 
 PLAN_FORMAT: Literal["fieldapp-mission/1"] = "fieldapp-mission/1"
@@ -99,6 +101,9 @@ class MissionPlan(Section):
     """The calibration file in force; ``None`` with a simulated camera: the simulated rig's
     nominal calibration."""
     simulation: SimulationPlan = Field(default_factory=SimulationPlan)
+    planting_grid: PlantingGrid | None = None
+    """Where the plants were sown (map frame), when known: the reconstruction's stem prior,
+    and the row and column of each plant in ``plants.csv``."""
 
     @field_validator("stations")
     @classmethod
@@ -121,6 +126,17 @@ class MissionPlan(Section):
 
     def station(self, number: int) -> StationPlan:
         return next(s for s in self.stations if s.number == number)
+
+    def session_plan(self) -> dict[str, Any]:
+        """The session's ``plan`` (session-format spec): stations with their map poses, views
+        per station and the planting grid when known."""
+        document: dict[str, Any] = {
+            "stations": [s.model_dump(mode="json") for s in self.stations],
+            "views": self.views.model_dump(mode="json"),
+        }
+        if self.planting_grid is not None:
+            document["planting_grid"] = self.planting_grid.model_dump(mode="json")
+        return document
 
     def capture_keys(self) -> list[tuple[int, int]]:
         """Every (station, view) the mission captures, in plan order."""

@@ -30,6 +30,9 @@ ORGAN_COLUMNS = [
     "height_whorl_cm",
 ]
 """Organ traits (docs/TRAITS.md), after the paper's columns."""
+GRID_COLUMNS = ["row", "column"]
+"""Added to ``plants.csv`` after the traits when the session has a planting grid (1-based;
+empty: a plant off the grid)."""
 
 CSV_COLUMNS = ["plant", "x_m", "y_m", "height_cm", "width_cm", "points", *ORGAN_COLUMNS]
 
@@ -60,7 +63,8 @@ _PLY_NAMES = {"<f4": "float", "u1": "uchar", "<i4": "int"}
 
 @dataclass(frozen=True)
 class PlantRow:
-    """One line of ``plants.csv``; positions in metres, traits in centimetres."""
+    """One line of ``plants.csv``; positions in metres, traits in centimetres; the planting
+    grid's row and column (1-based) when known."""
 
     plant: int
     x_m: float
@@ -76,6 +80,8 @@ class PlantRow:
     height_max_cm: float | None = None
     height_p99_cm: float | None = None
     height_whorl_cm: float | None = None
+    row: int | None = None
+    column: int | None = None
 
 
 @dataclass(frozen=True)
@@ -151,22 +157,25 @@ def read_labelled_ply(path: Path) -> tuple[Cloud, PointLabels | None]:
     return Cloud(points, colors.astype(np.uint8)), labels
 
 
-def csv_text(rows: list[PlantRow]) -> str:
+def csv_text(rows: list[PlantRow], grid: bool | None = None) -> str:
+    """``plants.csv``; with ``row`` and ``column`` when ``grid`` (default: when a row has one)."""
+    with_grid = any(r.row is not None for r in rows) if grid is None else grid
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(CSV_COLUMNS)
+    writer.writerow(CSV_COLUMNS + (GRID_COLUMNS if with_grid else []))
     for row in rows:
-        writer.writerow(
-            [
-                row.plant,
-                f"{row.x_m:.4f}",
-                f"{row.y_m:.4f}",
-                f"{row.height_cm:.2f}",
-                f"{row.width_cm:.2f}",
-                row.points,
-                *(_optional(getattr(row, name)) for name in ORGAN_COLUMNS),
-            ]
-        )
+        cells: list[object] = [
+            row.plant,
+            f"{row.x_m:.4f}",
+            f"{row.y_m:.4f}",
+            f"{row.height_cm:.2f}",
+            f"{row.width_cm:.2f}",
+            row.points,
+            *(_optional(getattr(row, name)) for name in ORGAN_COLUMNS),
+        ]
+        if with_grid:
+            cells += ["" if row.row is None else row.row, "" if row.column is None else row.column]
+        writer.writerow(cells)
     return buffer.getvalue()
 
 

@@ -21,8 +21,15 @@ from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
 from fieldapp.recon.guards import COARSE_KEPT, UNRELIABLE
 from fieldapp.recon.levelling import T_field_reference_initial, level_stations
+from fieldapp.recon.mapframe import (
+    in_map_frame,
+    map_alignment,
+    session_grid,
+    station_map_poses,
+    turntable_axis_direction,
+)
 from fieldapp.recon.organ_traits import foot_m, measure_organs
-from fieldapp.recon.plants import find_plants
+from fieldapp.recon.plants import search_plants
 from fieldapp.recon.progress import Progress, StageTimer, progress
 from fieldapp.recon.register import StationRegistration, register_stations
 from fieldapp.recon.result import Reconstruction
@@ -126,9 +133,24 @@ def reconstruct(
         cloud, outlier_counts = remove_outliers(cloud, settings.filters, settings.threads)
     yield progress("plants", 0.5, "outliers removed")
 
-    # 7-8. Plants and their traits.
+    # 7-8. Plants from their stems and their traits, in plot coordinates (the map's x and y).
     with timer.stage("plants"):
-        plants = find_plants(cloud, soil, settings.plants, settings.ground.local_ground_radius_m)
+        T_map_field = map_alignment(
+            station_map_poses(session),
+            {s: r.T_field_station for s, r in registrations.items()},
+            turntable_axis_point(
+                calibration.view_step.matrix, calibration.view_step.views_per_turn
+            ),
+            turntable_axis_direction(calibration.view_step.matrix),
+        )
+        if T_map_field is not None:
+            cloud, soil, registrations = in_map_frame(T_map_field, cloud, soil, registrations)
+        grid, expected = session_grid(session, T_map_field, warnings)
+        search = search_plants(
+            cloud, soil, settings.plants, settings.ground.local_ground_radius_m, grid
+        )
+        plants = search.plants
+        warnings.extend(search.warnings(settings.plants.stems.flag_ambiguous_share))
     with timer.stage("organs"):
         organs = {p.id: measure_organs(p.cloud.points, foot_m(p.traits)) for p in plants}
     yield progress("traits", 1.0, f"{len(plants)} plants")
@@ -151,6 +173,11 @@ def reconstruct(
         separation=separation,
         turntable=table.report if table is not None else None,
         organs=organs,
+        search=search,
+        frame="map" if T_map_field is not None else "field",
+        T_map_field=T_map_field,
+        expected_plants=expected,
+        flag_ambiguous_share=settings.plants.stems.flag_ambiguous_share,
     )
 
 

@@ -1,23 +1,36 @@
-"""Plants: density clustering of the plant cloud, an optional planting-grid prior, stable ids.
+"""Plants: found from their stems, density clusters where no stem is seen, stable ids.
 
-Clustering is by connected components of occupied voxels (26-neighbourhood): two points are in
-one plant when a chain of occupied voxels joins them. It matches DBSCAN with eps of about one
-voxel and min_samples 1 and is an order of magnitude faster (PERFORMANCE-NOTES.md).
+:func:`search_plants` finds the stem feet (:mod:`fieldapp.recon.stems`), gives every point to
+the stem it is nearest to along the plant (:mod:`fieldapp.recon.geodesic`), clusters what no
+stem reaches by connected components of occupied voxels (26-neighbourhood: two points are in
+one cluster when a chain of occupied voxels joins them; DBSCAN with eps of about one voxel and
+min_samples 1, an order of magnitude faster, PERFORMANCE-NOTES.md), measures each plant, places
+it on the planting grid when there is one (:mod:`fieldapp.recon.grid`) and numbers the plants
+in reading order.
 """
 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.filters import voxel_keys
+from fieldapp.recon.geodesic import UNREACHED, assign_to_stems, voxel_graph
+from fieldapp.recon.grid import (
+    GridNodes,
+    apply_grid_prior_nodes,
+    prior_nodes,
+    stems_at_empty_nodes,
+)
 from fieldapp.recon.settings import GridPrior, PlantSettings
+from fieldapp.recon.stems import Stem, find_stems
 from fieldapp.recon.traits import PlantTraits, measure_plant
 
 NOISE = -1
@@ -40,8 +53,8 @@ def voxel_components(points_m: NDArray[np.float64], voxel_m: float) -> NDArray[n
         return np.zeros(0, dtype=np.intp)
     voxel_keys(points_m, voxel_m)  # validates the extent
     cells = np.floor(points_m / voxel_m).astype(np.int64)
-    unique_cells, inverse = np.unique(cells, axis=0, return_inverse=True)
-    unique = _pack(unique_cells)  # sorted, as np.unique sorts cells lexicographically
+    unique, first, inverse = np.unique(_pack(cells), return_index=True, return_inverse=True)
+    unique_cells = cells[first]  # in the order of their sorted keys
     rows, cols = [], []
     for offset in _HALF_NEIGHBOURHOOD:
         neighbour_keys = _pack(unique_cells + np.array(offset, dtype=np.int64))
@@ -65,47 +78,14 @@ def drop_small(labels: NDArray[np.intp], min_points: int) -> NDArray[np.intp]:
     return out
 
 
-def grid_nodes_m(grid: GridPrior) -> NDArray[np.float64]:
-    """(rows * columns, 2) xy of the planting grid's nodes, row by row."""
-    j, i = np.mgrid[0 : grid.rows, 0 : grid.columns]
-    x = grid.origin_x_m + i.ravel() * grid.column_spacing_m
-    y = grid.origin_y_m + j.ravel() * grid.row_spacing_m
-    return np.stack([x, y], axis=1).astype(np.float64)
-
-
 def apply_grid_prior(
     points_m: NDArray[np.float64],
     labels: NDArray[np.intp],
     grid: GridPrior,
     base_height_m: float,
 ) -> NDArray[np.intp]:
-    """Split clusters whose stems stand at several grid nodes and merge clusters whose stems
-    stand at one node.
-
-    A cluster claims a node when some of its points lower than ``base_height_m`` above the
-    ground lie within ``grid.snap_radius_m`` of the node. A cluster claiming several nodes is
-    split by the nearest node; clusters claiming the same single node become one plant.
-    Clusters claiming no node are left alone.
-    """
-    nodes = grid_nodes_m(grid)
-    distance = np.linalg.norm(points_m[:, None, :2] - nodes[None], axis=2)
-    nearest = np.argmin(distance, axis=1)
-    near = distance[np.arange(len(points_m)), nearest] <= grid.snap_radius_m
-    low = points_m[:, 2] <= base_height_m
-    out = labels.copy()
-    next_label = int(labels.max(initial=-1)) + 1
-    node_label: dict[int, int] = {}
-    for label in np.unique(labels[labels >= 0]):
-        members = labels == label
-        claimed = np.unique(nearest[members & near & low])
-        if len(claimed) == 0:
-            continue
-        targets = np.array(
-            [node_label.setdefault(int(node), next_label + int(node)) for node in claimed]
-        )
-        closest = np.argmin(distance[members][:, claimed], axis=1)
-        out[members] = targets[closest]
-    return out
+    """:func:`~fieldapp.recon.grid.apply_grid_prior_nodes` with the settings' grid."""
+    return apply_grid_prior_nodes(points_m, labels, prior_nodes(grid), base_height_m, [])
 
 
 def order_by_position(positions_m: NDArray[np.float64], row_gap_m: float) -> list[int]:
@@ -124,35 +104,244 @@ def order_by_position(positions_m: NDArray[np.float64], row_gap_m: float) -> lis
 
 @dataclass(frozen=True)
 class Plant:
-    """One plant: its id (1-based, in reading order), its traits and its points."""
+    """One plant: its id (1-based, in reading order), its traits and its points; whether it
+    was found from a stem (``False``: a density cluster where no stem was seen), the share of
+    its points that another stem reaches almost as soon, and its (row, column) in the planting
+    grid (1-based) when there is one."""
 
     id: int
     traits: PlantTraits
     cloud: Cloud
+    from_stem: bool = True
+    ambiguous_share: float = 0.0
+    grid_cell: tuple[int, int] | None = None
+
+
+@dataclass
+class PlantSearch:
+    """The plants and what the search had to decide on the way (for ``report.json``):
+
+    - ``splits``: connected canopies (one density cluster) split between plants by their stems;
+    - ``merges``: stem candidates merged into a stronger one nearby, and density clusters
+      joined into one plant at one grid node;
+    - ``missing_cells``: grid cells (row, column) where no plant was found;
+    - ``extra_plants``: ids of plants standing at no grid cell."""
+
+    plants: list[Plant]
+    splits: list[list[int]] = field(default_factory=list)
+    merges: list[str] = field(default_factory=list)
+    missing_cells: list[tuple[int, int]] = field(default_factory=list)
+    extra_plants: list[int] = field(default_factory=list)
+
+    def warnings(self, flag_ambiguous_share: float) -> list[str]:
+        """One line per plant that may hold another's points, per missing grid cell (as a
+        list) and per plant off the grid."""
+        lines = [
+            f"plant {p.id}: {100 * p.ambiguous_share:.1f} % of its points could belong to a "
+            "neighbour (canopies touch)"
+            for p in self.plants
+            if p.ambiguous_share > flag_ambiguous_share
+        ]
+        if self.missing_cells:
+            cells = ", ".join(f"row {r} column {c}" for r, c in self.missing_cells)
+            lines.append(f"{len(self.missing_cells)} planting-grid cells without a plant: {cells}")
+        if self.extra_plants:
+            ids = ", ".join(str(i) for i in self.extra_plants)
+            lines.append(f"{len(self.extra_plants)} plants off the planting grid: {ids}")
+        return lines
 
 
 def find_plants(
-    cloud: Cloud, soil_m: NDArray[np.float64], settings: PlantSettings, ground_radius_m: float
+    cloud: Cloud,
+    soil_m: NDArray[np.float64],
+    settings: PlantSettings,
+    ground_radius_m: float,
+    grid: GridNodes | None = None,
 ) -> list[Plant]:
     """Split the plot's plant cloud (field frame) into plants and measure each one."""
-    labels = drop_small(
-        voxel_components(cloud.points, settings.cluster_voxel_m), settings.min_points
+    return search_plants(cloud, soil_m, settings, ground_radius_m, grid).plants
+
+
+def search_plants(
+    cloud: Cloud,
+    soil_m: NDArray[np.float64],
+    settings: PlantSettings,
+    ground_radius_m: float,
+    grid: GridNodes | None = None,
+) -> PlantSearch:
+    """Plants from their stems (density clusters where no stem is seen), measured, in reading
+    order, with the planting grid ``grid`` (field frame) as a prior when given."""
+    if grid is None and settings.grid is not None:
+        grid = prior_nodes(settings.grid)
+    merges: list[str] = []
+    stems: list[Stem] = []
+    if settings.stems.enabled and len(cloud):
+        stems, merged = find_stems(cloud.points, soil_m, settings.stems)
+        if merged:
+            merges.append(f"{merged} stem candidates merged into a stronger stem nearby")
+        if grid is not None:
+            stems = stems + stems_at_empty_nodes(cloud.points, soil_m, stems, grid, settings.stems)
+    labels, ambiguous = _labels(cloud.points, stems, settings, merges)
+    if not stems and grid is not None:
+        labels = apply_grid_prior_nodes(
+            cloud.points, labels, grid, 2 * settings.base_slice_m, merges
+        )
+    plants, plant_labels = _measured(
+        cloud, soil_m, labels, ambiguous, len(stems), settings, ground_radius_m
     )
-    if settings.grid is not None:
-        labels = apply_grid_prior(cloud.points, labels, settings.grid, 2 * settings.base_slice_m)
-    measured: list[tuple[PlantTraits, Cloud]] = []
-    for label in np.unique(labels[labels >= 0]):
-        plant = cloud.select(labels == label)
+    search = PlantSearch(plants, merges=merges)
+    if grid is not None:
+        _place_on_grid(search, grid)
+    search.splits = _splits(cloud.points, labels, plant_labels, settings.cluster_voxel_m)
+    return search
+
+
+def _labels(
+    points_m: NDArray[np.float64], stems: list[Stem], settings: PlantSettings, merges: list[str]
+) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+    """Per point: its stem (0..S-1), a density cluster (S..) where no stem reaches, or
+    :data:`NOISE`; and whether it is ambiguous between two stems."""
+    labels = np.full(len(points_m), NOISE, dtype=np.intp)
+    ambiguous = np.zeros(len(points_m), dtype=bool)
+    if stems:
+        s = settings.stems
+        assignment = assign_to_stems(
+            voxel_graph(points_m, s.graph_voxel_m),
+            np.array([stem.xy_m for stem in stems]),
+            s.seed_radius_m,
+            s.seed_height_m,
+            s.reach_m,
+            s.ambiguity_margin_m,
+            s.inward_penalty,
+        )
+        labels[:] = assignment.stem
+        ambiguous = assignment.ambiguous
+        _join_fragments(points_m, labels, settings.cluster_voxel_m, merges)
+    rest = np.flatnonzero(labels == UNREACHED)
+    if len(rest):
+        clusters = drop_small(
+            voxel_components(points_m[rest], settings.cluster_voxel_m), settings.min_points
+        )
+        labels[rest] = np.where(clusters >= 0, clusters + len(stems), NOISE)
+    return labels, ambiguous
+
+
+def _join_fragments(
+    points_m: NDArray[np.float64], labels: NDArray[np.intp], voxel_m: float, merges: list[str]
+) -> None:
+    """Points no stem reaches along the plant (the graph joins only voxels 1.5 cm apart) but
+    that density clustering puts with reached points go to the stem of the nearest reached
+    point of their cluster: a leaf seen with a gap at its base stays with its plant."""
+    unreached = labels == UNREACHED
+    if not unreached.any() or unreached.all():
+        return
+    clusters = voxel_components(points_m, voxel_m)
+    has_stem = np.zeros(int(clusters.max()) + 1, dtype=bool)
+    has_stem[clusters[~unreached]] = True
+    joined = np.flatnonzero(unreached & has_stem[clusters])
+    if len(joined) == 0:
+        return
+    reached = np.flatnonzero(~unreached)
+    _, nearest = cKDTree(points_m[reached]).query(points_m[joined])
+    labels[joined] = labels[reached[nearest]]
+    merges.append(f"{len(joined)} points not reached along a plant joined to the nearest plant")
+
+
+def _measured(
+    cloud: Cloud,
+    soil_m: NDArray[np.float64],
+    labels: NDArray[np.intp],
+    ambiguous: NDArray[np.bool_],
+    stem_count: int,
+    settings: PlantSettings,
+    ground_radius_m: float,
+) -> tuple[list[Plant], dict[int, int]]:
+    """The labelled groups large and tall enough to be plants, measured, ids in reading order;
+    and the label each plant id came from."""
+    measured: list[tuple[PlantTraits, Cloud, bool, float]] = []
+    measured_labels: list[int] = []
+    soil_tree = cKDTree(soil_m[:, :2]) if len(soil_m) else None
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(labels.max(initial=-1) + 2))
+    for label in range(labels.max(initial=-1) + 1):
+        members = order[bounds[label] : bounds[label + 1]]
+        if len(members) < settings.min_points:
+            continue
+        plant = cloud.select(members)
         traits = measure_plant(
             plant.points,
-            soil_m,
+            _soil_near(soil_m, soil_tree, plant.points, ground_radius_m),
             settings.base_slice_m,
             ground_radius_m,
             settings.top_support_points,
             settings.top_support_radius_m,
         )
-        if traits.height_m >= settings.min_height_m and len(plant) >= settings.min_points:
-            measured.append((traits, plant))
-    positions = np.array([[t.x_m, t.y_m] for t, _ in measured]).reshape(-1, 2)
-    order = order_by_position(positions, settings.row_gap_m)
-    return [Plant(i + 1, *measured[index]) for i, index in enumerate(order)]
+        if traits.height_m >= settings.min_height_m:
+            share = float(np.mean(ambiguous[members]))
+            measured.append((traits, plant, label < stem_count, share))
+            measured_labels.append(label)
+    positions = np.array([[m[0].x_m, m[0].y_m] for m in measured]).reshape(-1, 2)
+    reading = order_by_position(positions, settings.row_gap_m)
+    plants = [Plant(i + 1, *measured[index]) for i, index in enumerate(reading)]
+    return plants, {i + 1: measured_labels[index] for i, index in enumerate(reading)}
+
+
+def _soil_near(
+    soil_m: NDArray[np.float64],
+    tree: cKDTree | None,
+    points_m: NDArray[np.float64],
+    margin_m: float,
+) -> NDArray[np.float64]:
+    """The soil points within ``margin_m`` (plan view) of the box around ``points_m``: all a
+    plant's traits look at, found without scanning the plot's soil once per plant."""
+    if tree is None:
+        return soil_m
+    low, high = points_m[:, :2].min(axis=0), points_m[:, :2].max(axis=0)
+    radius = float(np.linalg.norm(high - low)) / 2.0 + margin_m
+    near = np.asarray(tree.query_ball_point((low + high) / 2.0, radius), dtype=np.intp)
+    return soil_m[near]
+
+
+def _place_on_grid(search: PlantSearch, grid: GridNodes) -> None:
+    """Each plant to the grid node its base stands at (within the snap radius), one plant per
+    node (the nearest); the others are extra, the nodes left are missing."""
+    taken: dict[int, tuple[float, int]] = {}
+    for index, plant in enumerate(search.plants):
+        distance = np.hypot(*(grid.xy_m - [plant.traits.x_m, plant.traits.y_m]).T)
+        node = int(np.argmin(distance))
+        if distance[node] <= grid.snap_radius_m and (
+            node not in taken or distance[node] < taken[node][0]
+        ):
+            taken[node] = (float(distance[node]), index)
+    owner = {index: node for node, (_, index) in taken.items()}
+    for index, plant in enumerate(search.plants):
+        if index not in owner:
+            search.extra_plants.append(plant.id)
+            continue
+        at = owner[index]
+        search.plants[index] = replace(plant, grid_cell=(int(grid.row[at]), int(grid.column[at])))
+    search.missing_cells = [
+        (int(grid.row[n]), int(grid.column[n])) for n in range(len(grid.xy_m)) if n not in taken
+    ]
+
+
+def _splits(
+    points_m: NDArray[np.float64],
+    labels: NDArray[np.intp],
+    plant_labels: dict[int, int],
+    voxel_m: float,
+) -> list[list[int]]:
+    """Groups of plant ids that density clustering would have taken for one plant."""
+    if not plant_labels:
+        return []
+    plant_of_label = np.full(int(labels.max(initial=0)) + 2, 0, dtype=np.intp)
+    for plant_id, label in plant_labels.items():
+        plant_of_label[label] = plant_id
+    ids = np.where(labels >= 0, plant_of_label[np.maximum(labels, 0)], 0)
+    kept = ids > 0
+    clusters = voxel_components(points_m[kept], voxel_m)
+    pairs = np.unique(clusters.astype(np.int64) << 32 | ids[kept].astype(np.int64))
+    groups: dict[int, list[int]] = {}
+    for cluster, plant_id in zip(pairs >> 32, pairs & 0xFFFFFFFF, strict=True):
+        groups.setdefault(int(cluster), []).append(int(plant_id))
+    return sorted(sorted(g) for g in groups.values() if len(g) > 1)

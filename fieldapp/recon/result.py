@@ -13,7 +13,7 @@ from devices.geometry import Matrix4, invert, rotation_angle_deg
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.organ_traits import PlantOrgans
 from fieldapp.recon.outputs import LeafRow, PlantRow, PointLabels
-from fieldapp.recon.plants import Plant
+from fieldapp.recon.plants import Plant, PlantSearch
 from fieldapp.recon.register import StationRegistration
 
 REPORT_FORMAT = "fieldapp-reconstruction-report/1"
@@ -22,7 +22,10 @@ REPORT_FORMAT = "fieldapp-reconstruction-report/1"
 @dataclass
 class Reconstruction:
     """The plot reconstructed: plants (traits and points), the plant cloud in the field frame,
-    how each station was placed, and the bookkeeping that goes into ``report.json``."""
+    how each station was placed, and the bookkeeping that goes into ``report.json``.
+
+    ``frame`` is ``"map"`` when the field frame's x and y are the map's (``T_map_field`` took
+    the levelled frame onto it), ``"field"`` when the session had no map poses."""
 
     session_id: str
     reference: int
@@ -52,6 +55,12 @@ class Reconstruction:
             for line, s in by_line.items()
         ]
 
+    search: PlantSearch | None = None
+    frame: str = "field"
+    T_map_field: Matrix4 | None = None
+    expected_plants: int | None = None
+    flag_ambiguous_share: float = 0.05
+
     def rows(self) -> list[PlantRow]:
         """The lines of ``plants.csv``."""
         return [
@@ -63,6 +72,8 @@ class Reconstruction:
                 width_cm=p.traits.width_m * 100.0,
                 points=p.traits.points,
                 **_organ_columns(self.organs.get(p.id)),
+                row=p.grid_cell[0] if p.grid_cell else None,
+                column=p.grid_cell[1] if p.grid_cell else None,
             )
             for p in self.plants
         ]
@@ -124,6 +135,29 @@ class Reconstruction:
             "plant_labels": self.plant_labels(),
         }
 
+    def plant_report(self) -> dict[str, Any]:
+        """How the plants were found: from stems or clusters, ambiguous shares (flagged above
+        ``flag_ambiguous_share``), splits and merges, grid cells missing and plants extra."""
+        search = self.search or PlantSearch(self.plants)
+        return {
+            "method": "stems, geodesic assignment; density clusters where no stem is seen",
+            "expected": self.expected_plants,
+            "plants": [
+                {
+                    "plant": p.id,
+                    "from_stem": p.from_stem,
+                    "ambiguous_share": round(p.ambiguous_share, 4),
+                    "flagged": p.ambiguous_share > self.flag_ambiguous_share,
+                    "grid_cell": list(p.grid_cell) if p.grid_cell else None,
+                }
+                for p in self.plants
+            ],
+            "splits": [{"plants": ids} for ids in search.splits],
+            "merges": search.merges,
+            "missing_cells": [list(cell) for cell in search.missing_cells],
+            "extra_plants": search.extra_plants,
+        }
+
     def T_reference_station(self, station: int) -> Matrix4:
         """Where ``station`` (view 0) ended up relative to the anchoring station."""
         return invert(self.T_field_reference) @ self.registrations[station].T_field_station
@@ -135,6 +169,9 @@ class Reconstruction:
             "session": self.session_id,
             "reference_station": self.reference,
             "plants": len(self.plants),
+            "frame": self.frame,
+            "T_map_field": None if self.T_map_field is None else self.T_map_field.tolist(),
+            "plant_search": self.plant_report(),
             "stations": {str(s): _station_entry(r) for s, r in sorted(self.registrations.items())},
             "points_kept": self.kept,
             "plant_separation": {str(s): line for s, line in sorted(self.separation.items())},

@@ -98,6 +98,33 @@ class GridPrior(_Section):
     snap_radius_m: float = Field(default=0.15, gt=0.0)
 
 
+class StemSettings(_Section):
+    """Plants from their stems (``fieldapp/recon/stems.py``, ``geodesic.py``): stem feet in
+    the lowest ``band_m`` above the local ground, then every point to the stem it is nearest
+    to along the plant (a graph of ``graph_voxel_m`` voxels)."""
+
+    enabled: bool = True
+    band_m: float = Field(default=0.15, gt=0.0)
+    cell_m: float = Field(default=0.01, gt=0.0)
+    min_layer_fraction: float = Field(default=0.75, gt=0.0, le=1.0)
+    prior_layer_fraction: float = Field(default=0.3, gt=0.0, le=1.0)
+    """Near a planting-grid node without a stem, a weaker column is taken as its stem."""
+    max_foot_gap_m: float = Field(default=0.05, ge=0.0)
+    min_separation_m: float = Field(default=0.12, gt=0.0)
+    search_height_m: float = Field(default=0.3, gt=0.0)
+    graph_voxel_m: float = Field(default=0.01, gt=0.0)
+    seed_radius_m: float = Field(default=0.03, gt=0.0)
+    seed_height_m: float = Field(default=0.15, gt=0.0)
+    inward_penalty: float = Field(default=3.0, ge=0.0)
+    """Extra cost per metre a path runs back towards the stem (plants grow outwards)."""
+    reach_m: float = Field(default=1.0, gt=0.0)
+    """How far (plan view) from its stem a plant's leaves may reach."""
+    ambiguity_margin_m: float = Field(default=0.15, ge=0.0)
+    """A point a second stem reaches within this (along the plant) of the first is ambiguous."""
+    flag_ambiguous_share: float = Field(default=0.005, ge=0.0, le=1.0)
+    """A plant with more of its points ambiguous than this is flagged in the report."""
+
+
 class PlantSettings(_Section):
     """Splitting the plant cloud into plants and measuring them."""
 
@@ -108,6 +135,7 @@ class PlantSettings(_Section):
     row_gap_m: float = Field(default=0.1, gt=0.0)
     top_support_points: int = Field(default=3, ge=1)
     top_support_radius_m: float = Field(default=0.006, gt=0.0)
+    stems: StemSettings = Field(default_factory=StemSettings)
     grid: GridPrior | None = None
 
 

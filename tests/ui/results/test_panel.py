@@ -59,7 +59,7 @@ def test_run_shows_every_plant_against_the_truth(panel, plot_session, tmp_path):
     assert results is not None and len(results.plants) >= 5
     _same_plants(read_plants_csv(tmp_path / "out" / "plants.csv"), results.plants)
     truth = json.loads((plot_session / "truth.json").read_text())
-    truth_xy = np.array([[p["x_m"], p["y_m"]] for p in truth["plants"]])
+    truth_xy = np.array([[p["map_x_m"], p["map_y_m"]] for p in truth["plants"]])
     for plant in results.plants:  # every plant found stands where a true plant stands
         assert np.min(np.linalg.norm(truth_xy - [plant.x_m, plant.y_m], axis=1)) < 0.05
     assert panel.plant_model.rowCount() == len(results.plants)

@@ -1,0 +1,171 @@
+"""Every plant point to the stem it grows from, by distance *along the plant*.
+
+The plant cloud becomes a graph: occupied ``voxel_m`` voxels (their centroids) joined to their
+26 neighbours, each edge as long as the centroids are apart. From each stem foot a Dijkstra
+search runs over the voxels within ``reach_m`` (plan view) of it, so the work per plant is
+bounded and the whole step stays linear in the number of plants. A voxel goes to the stem it
+is geodesically nearest to: a leaf that crosses into a neighbour's space is reached along
+itself from its own stem, not across the gap from the neighbour's. A voxel that a second stem
+reaches within ``ambiguity_margin_m`` of the first is *ambiguous* (it could belong to either).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+UNREACHED = -1
+
+_HALF_NEIGHBOURHOOD = np.array(
+    [offset for offset in itertools.product((-1, 0, 1), repeat=3) if offset > (0, 0, 0)],
+    dtype=np.int64,
+)
+
+
+@dataclass(frozen=True)
+class VoxelGraph:
+    """Occupied voxels: ``centres_m`` (V, 3) centroids, ``point_voxel`` (N,) the voxel of each
+    point, ``edges`` the symmetric (V, V) CSR matrix of centroid distances."""
+
+    centres_m: NDArray[np.float64]
+    point_voxel: NDArray[np.intp]
+    edges: csr_matrix
+
+
+@dataclass(frozen=True)
+class Assignment:
+    """Per point: ``stem`` (N,) index of its stem (or :data:`UNREACHED`), ``ambiguous`` (N,)
+    whether a second stem reaches it almost as soon."""
+
+    stem: NDArray[np.intp]
+    ambiguous: NDArray[np.bool_]
+
+
+def _pack(cells: NDArray[np.int64]) -> NDArray[np.int64]:
+    shifted = cells + (1 << 20)
+    return (shifted[:, 0] << 42) | (shifted[:, 1] << 21) | shifted[:, 2]
+
+
+def voxel_graph(
+    points_m: NDArray[np.float64], voxel_m: float, max_edge_m: float | None = None
+) -> VoxelGraph:
+    """The graph of the occupied voxels of ``points_m`` (N, 3): each joined to those of its 26
+    neighbours whose centroid is within ``max_edge_m`` (default 1.5 voxels) of its own, so
+    two leaves passing a few centimetres apart are not joined through a corner."""
+    max_edge_m = 1.5 * voxel_m if max_edge_m is None else max_edge_m
+    cells = np.floor(points_m / voxel_m).astype(np.int64)
+    keys, first, inverse = np.unique(_pack(cells), return_index=True, return_inverse=True)
+    unique_cells, inverse = cells[first], inverse.ravel()
+    counts = np.bincount(inverse, minlength=len(unique_cells)).astype(np.float64)
+    centres = np.stack(
+        [np.bincount(inverse, points_m[:, a], len(unique_cells)) / counts for a in range(3)], 1
+    )
+    rows, cols = [], []
+    for offset in _HALF_NEIGHBOURHOOD:
+        wanted = _pack(unique_cells + offset)
+        at = np.clip(np.searchsorted(keys, wanted), 0, len(keys) - 1)
+        found = keys[at] == wanted
+        rows.append(np.flatnonzero(found))
+        cols.append(at[found])
+    row, col = np.concatenate(rows), np.concatenate(cols)
+    length = np.linalg.norm(centres[row] - centres[col], axis=1)
+    short = length <= max_edge_m
+    row, col, length = row[short], col[short], length[short] + 1e-9
+    n = len(unique_cells)
+    edges = coo_matrix(
+        (
+            np.concatenate([length, length]),
+            (np.concatenate([row, col]), np.concatenate([col, row])),
+        ),
+        shape=(n, n),
+    ).tocsr()
+    return VoxelGraph(centres, inverse.astype(np.intp), edges)
+
+
+def assign_to_stems(
+    graph: VoxelGraph,
+    stems_xy_m: NDArray[np.float64],
+    seed_radius_m: float,
+    seed_height_m: float,
+    reach_m: float,
+    ambiguity_margin_m: float,
+    inward_penalty: float = 0.0,
+) -> Assignment:
+    """Each voxel to the stem (``stems_xy_m`` (S, 2)) it is geodesically nearest to.
+
+    A stem's sources are the voxels within ``seed_radius_m`` of its foot in plan view and no
+    higher than ``seed_height_m`` above the lowest of them. Each step back towards the stem
+    (in plan view) costs ``inward_penalty`` times its inward length on top of its length
+    (:func:`_outward`)."""
+    voxels = len(graph.centres_m)
+    best = np.full(voxels, np.inf)
+    second = np.full(voxels, np.inf)
+    owner = np.full(voxels, UNREACHED, dtype=np.intp)
+    tree = cKDTree(graph.centres_m[:, :2])
+    position = np.full(voxels, -1, dtype=np.intp)  # global -> local index, reset after each stem
+    for index, xy in enumerate(stems_xy_m):
+        local = np.asarray(tree.query_ball_point(xy, reach_m), dtype=np.intp)
+        sources = _sources(graph.centres_m[local], xy, seed_radius_m, seed_height_m)
+        if len(sources) == 0:
+            continue
+        position[local] = np.arange(len(local))
+        sub = _outward(
+            _subgraph(graph.edges, local, position), graph.centres_m[local], xy, inward_penalty
+        )
+        position[local] = -1
+        distance = dijkstra(sub, directed=True, indices=sources, min_only=True)
+        reached = np.isfinite(distance)
+        where, d = local[reached], distance[reached]
+        better = d < best[where]
+        second[where] = np.where(better, best[where], np.minimum(second[where], d))
+        owner[where[better]] = index
+        best[where[better]] = d[better]
+    reached_twice = np.isfinite(second)
+    ambiguous = np.zeros(voxels, dtype=bool)
+    ambiguous[reached_twice] = second[reached_twice] - best[reached_twice] < ambiguity_margin_m
+    return Assignment(owner[graph.point_voxel], ambiguous[graph.point_voxel])
+
+
+def _subgraph(edges: csr_matrix, local: NDArray[np.intp], position: NDArray[np.intp]) -> csr_matrix:
+    """The edges among the ``local`` voxels, renumbered by ``position`` (global -> local, -1
+    elsewhere), in time proportional to their edges, not to the whole graph."""
+    rows = edges[local]
+    columns = position[rows.indices]
+    keep = columns >= 0
+    row_ids = np.repeat(np.arange(len(local)), np.diff(rows.indptr))
+    n = len(local)
+    return coo_matrix((rows.data[keep], (row_ids[keep], columns[keep])), shape=(n, n)).tocsr()
+
+
+def _outward(
+    edges: csr_matrix, centres_m: NDArray[np.float64], stem_xy: NDArray[np.float64], penalty: float
+) -> csr_matrix:
+    """``edges`` made directed: the step u -> v costs its length plus ``penalty`` times how much
+    nearer to the stem (plan view) v is than u. A plant grows outwards from its stem: a leaf
+    reached from a neighbour's stem across a contact and followed back towards that stem pays
+    for every centimetre, the same leaf reached along itself from its own stem does not."""
+    if penalty <= 0.0:
+        return edges
+    radius = np.hypot(*(centres_m[:, :2] - stem_xy).T)
+    rows = np.repeat(np.arange(edges.shape[0]), np.diff(edges.indptr))
+    inward = np.maximum(radius[rows] - radius[edges.indices], 0.0)
+    out = edges.copy()
+    out.data = edges.data + penalty * inward
+    return out
+
+
+def _sources(
+    centres_m: NDArray[np.float64], xy: NDArray[np.float64], radius_m: float, height_m: float
+) -> NDArray[np.intp]:
+    """Indices (into ``centres_m``) of the voxels at the stem's foot."""
+    near = np.flatnonzero(np.sum((centres_m[:, :2] - xy) ** 2, axis=1) <= radius_m**2)
+    if len(near) == 0:
+        return near
+    z = centres_m[near, 2]
+    return near[z <= z.min() + height_m]  # type: ignore[no-any-return]

@@ -1,0 +1,148 @@
+"""The planting grid as a prior: where plants should stand, in the reconstruction's frame.
+
+The user gives the grid in the map frame (``plan.planting_grid`` of the session, see the
+session-format spec): ``rows`` x ``columns`` nodes, plants ``plant_spacing_m`` apart along a
+row (direction ``row_direction_deg`` from the map's x axis, counter-clockwise), rows
+``row_spacing_m`` apart to its left, row 1 column 1 at ``origin``. :func:`grid_nodes` puts the
+nodes into the field frame. The prior never forces a plant: a node with no stem is searched
+again with a weaker stem test (:func:`stems_at_empty_nodes`) and otherwise reported missing; a
+plant at no node is kept and reported extra.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from devices.geometry import Matrix4
+from fieldapp.recon.settings import GridPrior, StemSettings
+from fieldapp.recon.stems import Stem, local_ground_z_m, stem_columns
+
+DEFAULT_SNAP_RADIUS_M = 0.15
+
+
+@dataclass(frozen=True)
+class GridNodes:
+    """Grid nodes in the field frame: ``xy_m`` (M, 2), their 1-based ``row`` and ``column``
+    (M,), and how far from its node a plant's base may stand (``snap_radius_m``)."""
+
+    xy_m: NDArray[np.float64]
+    row: NDArray[np.intp]
+    column: NDArray[np.intp]
+    snap_radius_m: float = DEFAULT_SNAP_RADIUS_M
+
+
+def grid_nodes(
+    rows: int,
+    columns: int,
+    row_spacing_m: float,
+    plant_spacing_m: float,
+    origin_xy_m: tuple[float, float],
+    row_direction_deg: float,
+    T_field_map: Matrix4,
+    snap_radius_m: float = DEFAULT_SNAP_RADIUS_M,
+) -> GridNodes:
+    """The nodes of a grid given in the map frame, expressed in the field frame."""
+    angle = np.radians(row_direction_deg)
+    along = np.array([np.cos(angle), np.sin(angle)])
+    across = np.array([-np.sin(angle), np.cos(angle)])
+    row, column = np.mgrid[0:rows, 0:columns]
+    row, column = row.ravel(), column.ravel()
+    xy_map = (
+        np.asarray(origin_xy_m, dtype=np.float64)
+        + column[:, None] * plant_spacing_m * along
+        + row[:, None] * row_spacing_m * across
+    )
+    xy_field = xy_map @ T_field_map[:2, :2].T + T_field_map[:2, 3]
+    return GridNodes(
+        xy_field, (row + 1).astype(np.intp), (column + 1).astype(np.intp), snap_radius_m
+    )
+
+
+def prior_nodes(grid: GridPrior) -> GridNodes:
+    """The nodes of the settings' grid (``plants.grid``: axis-aligned, in the output frame)."""
+    return grid_nodes(
+        grid.rows,
+        grid.columns,
+        grid.row_spacing_m,
+        grid.column_spacing_m,
+        (grid.origin_x_m, grid.origin_y_m),
+        0.0,
+        np.eye(4),
+        grid.snap_radius_m,
+    )
+
+
+def stems_at_empty_nodes(
+    points_m: NDArray[np.float64],
+    soil_m: NDArray[np.float64],
+    stems: list[Stem],
+    grid: GridNodes,
+    settings: StemSettings,
+) -> list[Stem]:
+    """Stems found with the weaker test (``prior_layer_fraction``) at nodes that have none."""
+    weak = settings.model_copy(update={"min_layer_fraction": settings.prior_layer_fraction})
+    found: list[Stem] = []
+    if len(points_m) == 0:
+        return found
+    tree = cKDTree(points_m[:, :2])
+    for xy in grid.xy_m:
+        if any(np.linalg.norm(stem.xy_m - xy) <= grid.snap_radius_m for stem in stems):
+            continue
+        near = np.asarray(tree.query_ball_point(xy, grid.snap_radius_m), dtype=np.intp)
+        local = points_m[near]
+        if len(local) == 0:
+            continue
+        heights = local[:, 2] - local_ground_z_m(soil_m, local[:, :2])
+        origin, cells, fractions = stem_columns(local, heights, weak)
+        if len(cells) == 0:
+            continue
+        best = int(np.argmax(fractions))
+        stem_xy = origin + (cells[best] + 0.5) * settings.cell_m
+        ground = float(local_ground_z_m(soil_m, stem_xy[None])[0])
+        found.append(Stem(stem_xy, ground, float(fractions[best])))
+    return found
+
+
+def apply_grid_prior_nodes(
+    points_m: NDArray[np.float64],
+    labels: NDArray[np.intp],
+    grid: GridNodes,
+    base_height_m: float,
+    merges: list[str],
+) -> NDArray[np.intp]:
+    """Density clusters split by the nodes their low points stand at, and clusters standing at
+    one node joined (listed in ``merges``); for clouds where no stem is seen.
+
+    A cluster claims a node when some of its points lower than ``base_height_m`` above the
+    lowest point lie within the snap radius of the node. A cluster claiming several nodes is
+    split by the nearest node; clusters claiming no node are left alone.
+    """
+    if len(points_m) == 0:
+        return labels.copy()
+    distance, nearest = cKDTree(grid.xy_m).query(points_m[:, :2])
+    low = points_m[:, 2] <= points_m[:, 2].min() + base_height_m
+    claims = (labels >= 0) & low & (distance <= grid.snap_radius_m)
+    pairs = np.unique(np.stack([labels[claims], nearest[claims]], axis=1), axis=0)
+    out = labels.copy()
+    if len(pairs) == 0:
+        return out
+    base = int(labels.max()) + 1
+    claimed_by = {int(label): pairs[pairs[:, 0] == label, 1] for label in np.unique(pairs[:, 0])}
+    node_owners: dict[int, list[int]] = {}
+    for label, nodes in claimed_by.items():
+        for node in nodes:
+            node_owners.setdefault(int(node), []).append(label)
+        members = np.flatnonzero(labels == label) if len(nodes) > 1 else None
+        if members is None:
+            out[labels == label] = base + int(nodes[0])
+            continue
+        to_nodes = np.linalg.norm(points_m[members, None, :2] - grid.xy_m[nodes][None], axis=2)
+        out[members] = base + nodes[np.argmin(to_nodes, axis=1)]
+    for node, owners in sorted(node_owners.items()):
+        if len(owners) > 1:
+            merges.append(f"{len(owners)} clusters joined at grid node {node}")
+    return out

@@ -1,0 +1,54 @@
+"""Synthetic maize-like plants whose leaves cross and touch, with each plant's own points."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .synthetic import cylinder
+
+
+def leaf(
+    rng: np.random.Generator,
+    foot_xy: tuple[float, float],
+    azimuth_deg: float,
+    node_z_m: float,
+    length_m: float,
+    rise_m: float,
+    n: int,
+) -> NDArray[np.float64]:
+    """(n, 3) points on an arching ribbon leaf from the stem at ``node_z_m``: it rises by about
+    ``rise_m``, then droops, and tapers from 6 cm wide to its tip."""
+    u = rng.uniform(0.0, 1.0, n)
+    across = rng.uniform(-0.5, 0.5, n) * 0.06 * (1.0 - 0.8 * u)
+    a = np.radians(azimuth_deg)
+    along = np.array([np.cos(a), np.sin(a)])
+    side = np.array([-np.sin(a), np.cos(a)])
+    xy = np.asarray(foot_xy) + (u * length_m)[:, None] * along + across[:, None] * side
+    z = node_z_m + rise_m * np.sin(np.pi * u) - 0.5 * rise_m * u**2
+    return np.column_stack([xy, z])
+
+
+def plant(
+    rng: np.random.Generator,
+    foot_xy: tuple[float, float],
+    leaves: list[tuple[float, float, float, float]],
+    stem_height_m: float = 0.35,
+    stem_points: int = 3000,
+    points_per_leaf: int = 4000,
+) -> NDArray[np.float64]:
+    """A stem standing at ``foot_xy`` on z = 0 and ``leaves`` (azimuth_deg, node_z_m, length_m,
+    rise_m)."""
+    parts = [cylinder(rng, foot_xy[0], foot_xy[1], 0.01, stem_height_m, stem_points)]
+    for azimuth, node_z, length, rise in leaves:
+        parts.append(leaf(rng, foot_xy, azimuth, node_z, length, rise, points_per_leaf))
+    return np.concatenate(parts)
+
+
+def crossing_pair(rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two plants 0.8 m apart whose long leaves reach across into each other's space, cross in
+    side view and touch where they cross (A's leaf along +x, B's along -x, same vertical
+    plane)."""
+    a = plant(rng, (0.0, 0.0), [(0.0, 0.12, 0.70, 0.20), (180.0, 0.18, 0.45, 0.15)])
+    b = plant(rng, (0.8, 0.0), [(180.0, 0.15, 0.70, 0.12), (0.0, 0.22, 0.40, 0.15)])
+    return a, b
