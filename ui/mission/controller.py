@@ -98,6 +98,15 @@ class MissionController(QtCore.QObject):
         """The battery levels missions check (the settings' ``battery``)."""
         self._workers = WorkerSet()
         self._stop_before_start = False
+        from ui.mission.incident_prompt import IncidentPrompt
+
+        self.prompt = IncidentPrompt(self._stop_requested)
+        """Asks the operator what to do after a lost link or a blocked path (the plan's
+        ``incidents`` policy ``ask``)."""
+
+    def _stop_requested(self) -> bool:
+        runner = self.runner
+        return runner is None or runner.gate.stop_requested
 
     @property
     def state(self) -> MissionState:
@@ -178,6 +187,7 @@ class MissionController(QtCore.QObject):
         from fieldapp.mission import MissionRunner
 
         runner = MissionRunner(plan, mission_rig, writer, self.battery)
+        runner.gate.operator_prompt = self.prompt
         runner.state_changed.connect(self._on_state)
         runner.station_reached.connect(self._on_station)
         runner.view_captured.connect(self._on_view)

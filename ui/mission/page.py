@@ -155,7 +155,10 @@ class MissionPage(QtWidgets.QWidget):
         if not self.editor.valid:
             self.context.notifier.warn("Mission", self.editor.error.text(), "Fix the plan first.")
             return
-        plan = self.editor.plan().model_copy(update={"devices": self.context.settings.devices})
+        settings = self.context.settings
+        plan = self.editor.plan().model_copy(
+            update={"devices": settings.devices, "incidents": settings.incidents}
+        )
         folder = folder if isinstance(folder, Path) else self.new_folder(plan)
         self.folder_label.setText(f"starting {folder}...")
         self.controller.start(plan, folder)
