@@ -28,7 +28,8 @@ def organ_evaluation(result: Reconstruction, truth: dict) -> OrganEvaluation:
         leaves.setdefault(leaf.plant_id, []).append(leaf.__dict__)
     pairs = []
     for plant in truth["plants"]:
-        distance = [np.hypot(r.x_m - plant["x_m"], r.y_m - plant["y_m"]) for r in rows.values()]
+        x, y = plant.get("map_x_m", plant["x_m"]), plant.get("map_y_m", plant["y_m"])  # plot coords
+        distance = [np.hypot(r.x_m - x, r.y_m - y) for r in rows.values()]
         row = list(rows.values())[int(np.argmin(distance))]
         assert min(distance) < MATCH_RADIUS_M, f"{plant['name']} not found"
         pairs.append(
