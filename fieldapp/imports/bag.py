@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from devices.camera.base import CameraUnavailable
 from devices.camera.realsense import load_binding
 from fieldapp.errors import FieldappError
-from fieldapp.imports.camera import IMPORT_STATION, import_calibration
+from fieldapp.imports.camera import IMPORT_STATION, import_calibration, turntable_fields
 from fieldapp.imports.folder import ImportResult
 from fieldapp.io.calibration import DepthCamera
 from fieldapp.io.session import now_iso
@@ -159,7 +159,10 @@ def _write(
     calibration = import_calibration(
         bag_camera(playback.intrinsics), options.step_deg, options.axis_distance_m, None
     )
-    provenance = {"imported": {"from": str(path.resolve()), "at": now_iso(), "by": "bag"}}
+    provenance: dict[str, Any] = {
+        "imported": {"from": str(path.resolve()), "at": now_iso(), "by": "bag"}
+    }
+    provenance |= turntable_fields(options.axis_distance_m)
     writer = SessionWriter.create(out, options.session_id or path.stem, calibration, provenance)
     result = ImportResult(out, 0, 0, lines)
     for index, frame in enumerate(playback.frames()):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -190,3 +191,10 @@ def camera_from_options(
         return read_camera_file(calibration, width, height, depth_scale)
     except FormatError as error:
         raise FieldappError(f"--calibration {calibration}:\n{error}") from None
+
+
+def turntable_fields(axis_distance_m: float) -> dict[str, Any]:
+    """``session.json``'s ``turntable`` entry for an import: a table axis in front of the camera
+    (``axis_distance_m`` > 0) is a plant turning before a fixed camera, which the reconstruction
+    handles apart (the room masked, the views placed about the axis)."""
+    return {"turntable": {"carries": "plant"}} if axis_distance_m > 0 else {}

@@ -7,13 +7,18 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fieldapp.errors import FieldappError
-from fieldapp.imports.camera import camera_from_options, import_calibration, read_rig_file
+from fieldapp.imports.camera import (
+    camera_from_options,
+    import_calibration,
+    read_rig_file,
+    turntable_fields,
+)
 from fieldapp.imports.captures import PlannedCapture, group_files, plan_captures
 from fieldapp.imports.images import Unusable, read_color_rgb, read_depth_m, read_ir_u16
 from fieldapp.imports.names import image_files, parse_name
@@ -70,7 +75,10 @@ def import_folder(folder: Path, out: Path, options: FolderOptions) -> ImportResu
     if calibration.stations is not None:
         _check_stations(planned, set(calibration.stations.to_reference))
         calibration = only_stations(calibration, {c.station for c in planned}, lines)
-    provenance = {"imported": {"from": str(folder.resolve()), "at": now_iso(), "by": "folder"}}
+    provenance: dict[str, Any] = {
+        "imported": {"from": str(folder.resolve()), "at": now_iso(), "by": "folder"}
+    }
+    provenance |= turntable_fields(options.axis_distance_m)
     writer = SessionWriter.create(
         out, options.session_id or folder.resolve().name, calibration, extra=provenance
     )

@@ -77,6 +77,9 @@ def test_depth_only_turntable_folder_with_plain_names(tmp_path, capsys):
     step = session.calibration.view_step
     assert step.nominal.startswith("fieldapp import")  # type: ignore[union-attr]
     assert session.missing() == []
+    # the plant turns before a fixed camera: the reconstruction's turntable path is told so
+    assert session.document.turntable is not None
+    assert session.document.turntable.carries == "plant"
 
 
 def test_turntable_step_turns_about_the_axis_before_the_camera():
