@@ -61,6 +61,9 @@ def rigidity_problem(T: NDArray[np.float64]) -> str | None:
     if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
         return f"last row must be 0 0 0 1, got {T[3].tolist()}"
     R = T[:3, :3]
+    largest = float(np.abs(R).max())
+    if largest > 1.0 + ROTATION_TOLERANCE:  # no entry of a rotation exceeds 1 (and R^T R of
+        return f"rotation part is not orthonormal (an entry is {largest:.3g})"  # 1e154 overflows)
     deviation = float(np.abs(R.T @ R - np.eye(3)).max())
     if deviation > ROTATION_TOLERANCE:
         return f"rotation part is not orthonormal (|R^T R - I| = {deviation:.2g})"

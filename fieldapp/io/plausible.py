@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -102,6 +101,8 @@ def _distortion_problem(camera: DepthCamera) -> str | None:
     if not any(camera.distortion):
         return None
     K = np.array([[camera.fx, 0, camera.cx], [0, camera.fy, camera.cy], [0, 0, 1]], np.float64)
+    import cv2  # here: the GUI loads sessions' calibrations at start-up without OpenCV
+
     rays = _rays_to_border(camera)  # (directions, steps, 2) ideal pixels
     shape = rays.shape
     with np.errstate(all="ignore"):
