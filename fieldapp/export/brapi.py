@@ -8,6 +8,7 @@ results carry the planting grid's column and row; its position in the field fram
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from fieldapp.export.data import ExportData, PlantObservation
@@ -73,6 +74,8 @@ def observations(data: ExportData) -> dict[str, Any]:
     rows = []
     for o in sorted(data.observations, key=lambda o: (o.date, o.plant_id)):
         for v in data.variables:
+            if math.isnan(o.values[v.column]):
+                continue  # not measured on this plant: no observation
             unit = unit_id(data.study, o.plant_id)
             rows.append(
                 {

@@ -72,7 +72,12 @@ def read_plants_csv(path: Path, date: dt.date) -> tuple[list[PlantObservation], 
         variables = [v for c in header if (v := variable_of(c)) is not None]
         observations = []
         for line, row in enumerate(reader, start=2):
-            values = {v.column: _number(row[v.column], path, line, v.column) for v in variables}
+            values = {
+                v.column: _number(row[v.column], path, line, v.column)
+                if (row[v.column] or "").strip()
+                else math.nan  # a trait not measured on this plant (a blank cell)
+                for v in variables
+            }
             observations.append(
                 PlantObservation(
                     int(_number(row["plant"], path, line, "plant")),
@@ -108,7 +113,15 @@ def from_results_dirs(folders: list[Path], dates: list[dt.date], study: str) -> 
         rows, found = read_plants_csv(folder / "plants.csv", date)
         observations += rows
         variables.update({v.column: v for v in found})
-    data = ExportData(study, observations, list(variables.values()), list(folders))
+    measured = [  # a column blank on every plant and date (not measured) is no variable
+        v
+        for v in variables.values()
+        if any(v.column in o.values and not math.isnan(o.values[v.column]) for o in observations)
+    ]
+    for o in observations:  # a folder without a column that another has: not measured there
+        for v in measured:
+            o.values.setdefault(v.column, math.nan)
+    data = ExportData(study, observations, measured, list(folders))
     if len(folders) > 1:
         data.notes.append(
             "plant ids are those of each results folder; for ids that hold all season record "

@@ -6,6 +6,7 @@ method, scale/unit per variable), following the MIAPPE v1.1 ISA-Tab mapping.
 from __future__ import annotations
 
 import datetime as dt
+import math
 
 from fieldapp.export.data import ExportData, PlantObservation
 
@@ -214,11 +215,16 @@ def assay(data: ExportData) -> str:
     return "".join(lines)
 
 
+def _value(value: float) -> str:
+    """A trait's cell: blank where it was not measured."""
+    return "" if math.isnan(value) else f"{value:g}"
+
+
 def trait_data(data: ExportData) -> str:
     """One row per assay (plant and date), one column per variable (its name)."""
     lines = [_row("Assay Name", "Sample Name", "Date", *(v.name for v in data.variables))]
     for o in sorted(data.observations, key=lambda o: (o.plant_id, o.date)):
-        values = (f"{o.values[v.column]:g}" for v in data.variables)
+        values = (_value(o.values[v.column]) for v in data.variables)
         lines.append(
             _row(_assay(o.plant_id, o.date), _sample(o.plant_id), o.date.isoformat(), *values)
         )

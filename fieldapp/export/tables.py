@@ -41,6 +41,8 @@ def observations_csv(data: ExportData) -> str:
     writer.writerow(["plant_id", "date", "variable", "value", "unit", "trait", "method"])
     for o in sorted(data.observations, key=lambda o: (o.date, o.plant_id)):
         for v in data.variables:
+            if o.values[v.column] != o.values[v.column]:
+                continue  # not measured on this plant (NaN): no observation
             value = _format(o.values[v.column])
             writer.writerow(
                 [o.plant_id, o.date.isoformat(), v.name, value, v.unit, v.trait, v.method]

@@ -262,3 +262,23 @@ def test_variables_are_told_from_positions_and_ids():
     assert variable_of("internode_length_mm").unit == "mm"
     for column in ("plant", "x_m", "map_x_m", "field_y_m", "grid_row", "points", "row"):
         assert variable_of(column) is None, column
+
+
+def test_organ_traits_are_exported_and_blank_cells_are_no_observation(tmp_path):
+    """plants.csv's organ columns are variables; a blank cell (not measured on that plant) gives
+    no observation and an empty cell, never "nan"; a column blank everywhere is no variable."""
+    folder = results_folder(tmp_path / "r", 0)
+    table = list(csv.DictReader(io.StringIO((folder / "plants.csv").read_text())))
+    table[0]["leaf_count"], table[1]["leaf_count"] = "6", "7"  # plant 3: not measured
+    with (folder / "plants.csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, list(table[0]), lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(table)
+    out = tmp_path / "export"
+    assert main(["export", str(folder), "--date", "2026-06-01", "--out", str(out)]) == 0
+    long = list(csv.DictReader(io.StringIO((out / "observations.csv").read_text())))
+    counts = {(r["plant_id"], r["value"]) for r in long if r["variable"].startswith("leaf_count")}
+    assert counts == {("1", "6"), ("2", "7")}
+    assert {r["variable"] for r in long} == {"plant_height_cm", "plant_width_cm", "leaf_count"}
+    observations = (out / "brapi" / "observations.json").read_text()
+    assert "nan" not in observations.lower()
