@@ -153,7 +153,9 @@ class MissionPage(QtWidgets.QWidget):
 
     def start(self, folder: Path | None = None) -> None:
         if not self.editor.valid:
-            self.context.notifier.warn("Mission", self.editor.error.text(), "Fix the plan first.")
+            self.context.notifier.warn(
+                "Mission", self.editor.error.text(), "Fix the plan first.", topic="mission"
+            )
             return
         plan = self.editor.plan().model_copy(update={"devices": self.context.settings.devices})
         folder = folder if isinstance(folder, Path) else self.new_folder(plan)
@@ -213,7 +215,7 @@ class MissionPage(QtWidgets.QWidget):
     def _failed_to_start(self, error: BaseException) -> None:
         """Nothing started: say why and what to do; Start, Resume and the plan are usable."""
         self.folder_label.setText("")
-        notice = notice_from_error("Mission not started", error)
+        notice = notice_from_error("Mission not started", error, topic="mission")
         if not notice.advice:
             notice = replace(notice, advice=START_ADVICE)
         self.context.notifier.post(notice)
@@ -245,9 +247,10 @@ class MissionPage(QtWidgets.QWidget):
         summary = result.lines()[:2]
         if result.fault is not None:  # the reason, whatever it is: a fault, a dead thread
             summary = [summary[0], f"{result.fault.device}: {result.fault.what}"]
-        self.context.notifier.post(
-            Notice(level, f"Mission {result.outcome.value}", "; ".join(summary), advice)
-        )
+        title = f"Mission {result.outcome.value}"  # the notifier drops its repeat in summary
+        message = "; ".join(summary)
+        # topic: this outcome replaces an open "Mission not started" or earlier outcome
+        self.context.notifier.post(Notice(level, title, message, advice, topic="mission"))
         if self.controller.folder is not None:
             self.context.ui_state.set_last_folder("sessions", self.controller.folder)
             if result.captured:  # a session with nothing in it has nothing to show
