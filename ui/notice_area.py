@@ -18,6 +18,8 @@ from PySide6 import QtCore, QtWidgets
 from ui.notifications import LIFETIME_S, STYLE, Level, Notice, Notifier, rich_text, stamp
 
 EXPIRY_TICK_MS = 1000
+SHOWN_CHARS = 180
+"""Longer messages are cut in the strip (with "…"); its tooltip and the log have them whole."""
 EMPTY_TEXT = "<span style='color:#78909c'>No open notices.</span>"
 
 
@@ -49,7 +51,7 @@ class NoticeCard(QtWidgets.QFrame):
         self.notice = notice
         style = STYLE[notice.level] if notice is not None else "border:1px solid transparent;"
         self.setStyleSheet(f"#noticeCard {{{style} border-radius:4px;}}")
-        self.label.setText(rich_text(notice) if notice is not None else EMPTY_TEXT)
+        self.label.setText(rich_text(notice, SHOWN_CHARS) if notice is not None else EMPTY_TEXT)
         self.label.setToolTip(rich_text(notice) if notice is not None else "")
         # hidden but still laid out: the strip keeps its size either way
         self.close_button.setEnabled(notice is not None)
@@ -84,7 +86,7 @@ class NotificationPanel(QtWidgets.QWidget):
         row.addWidget(self.card, 1)
         row.addWidget(self.more, 0, QtCore.Qt.AlignmentFlag.AlignVCenter)
         lines = self.fontMetrics().lineSpacing()
-        self.setFixedHeight(2 * lines + 12)  # two lines: the notice and what to do
+        self.setFixedHeight(3 * lines + 10)  # the notice (up to two lines), what to do
         self.timer = QtCore.QTimer(self)
         self.timer.setInterval(EXPIRY_TICK_MS)
         self.timer.timeout.connect(self.expire)

@@ -10,6 +10,7 @@ open one, so a stale "Mission not started" goes once the mission completes.
 
 from __future__ import annotations
 
+import html
 import logging
 import time
 from dataclasses import dataclass, field, replace
@@ -110,11 +111,15 @@ def stamp(notice: Notice) -> str:
     return time.strftime("%H:%M:%S", time.localtime(notice.time_s))
 
 
-def rich_text(notice: Notice) -> str:
-    """The notice as the strip and the log show it: level and title in bold, then advice."""
+def rich_text(notice: Notice, max_chars: int | None = None) -> str:
+    """The notice as the strip shows it: level and title in bold, the message (cut to
+    ``max_chars`` with "…"), then the advice."""
     text = f"<b>{notice.level.value.upper()} · {notice.title}</b> ({stamp(notice)})"
-    if notice.message:
-        text += f": {notice.message}"
+    message = notice.message
+    if max_chars is not None and len(message) > max_chars:
+        message = message[: max_chars - 1].rstrip() + "…"
+    if message:
+        text += f": {html.escape(message)}"
     if notice.advice:
-        text += f"<br><i>What to do:</i> {notice.advice}"
+        text += f"<br><i>What to do:</i> {html.escape(notice.advice)}"
     return text

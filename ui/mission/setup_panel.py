@@ -25,6 +25,12 @@ NOT_CONNECTED = "Connect the devices to move them by hand."
 READY = "Devices connected: turn the table or send the base where you need it."
 
 
+def ask(parent: QtWidgets.QWidget, title: str, text: str) -> bool:
+    """Yes/No question before the robot moves (tests replace it)."""
+    answer = QtWidgets.QMessageBox.question(parent, title, text)
+    return answer == QtWidgets.QMessageBox.StandardButton.Yes
+
+
 def _spin(low: float, high: float, suffix: str, decimals: int = 2) -> QtWidgets.QDoubleSpinBox:
     spin = QtWidgets.QDoubleSpinBox()
     spin.setRange(low, high)
@@ -162,6 +168,14 @@ class SetupPanel(QtWidgets.QWidget):
 
     def _goto(self, x_m: float, y_m: float, yaw_deg: float, what: str) -> None:
         from devices.base.protocol import Pose
+
+        if self.context.hub.rig is not None and not ask(
+            self,
+            "Move the base?",
+            f"The base will drive to {what} (x {x_m:.2f} m, y {y_m:.2f} m, yaw {yaw_deg:.0f} "
+            "deg in the map frame). Is the path clear of people and equipment?",
+        ):
+            return
 
         def go(rig: Rig) -> str:
             goal_id = f"manual-{uuid.uuid4().hex[:8]}"
