@@ -1,6 +1,6 @@
 """The mission page's follow-ups from issue 25: the thumbnail grid follows the station being
-captured, the elapsed time keeps counting while paused (on a fake clock), and the Set-up
-tab asks before the base drives."""
+captured, a double-clicked thumbnail shows its depth large, the elapsed time keeps counting
+while paused (on a fake clock), and the Set-up tab asks before the base drives."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ import pytest
 from pytestqt.qtbot import QtBot
 
 from devices.camera.quality import QualityReport
+from fieldapp.io.session import load_session
 from fieldapp.mission.events import MissionProgress, StationReached, ViewCaptured
 from ui.main_window import MainWindow
+from ui.mission.depth_view import DepthViewer, read_view_depth
 from ui.mission.progress import ProgressPanel, format_duration
 
 from .test_mission import small_plan
@@ -87,3 +89,35 @@ def test_the_base_drives_only_after_the_operator_agrees(
     setup.goto_pose()
     assert len(questions) == 2
     assert wait_until(lambda: setup.last_result.startswith("Base to pose"))
+
+
+def test_a_double_clicked_thumbnail_shows_its_depth_large(
+    make_window: Callable[..., MainWindow], wait_until: Callable[..., bool]
+) -> None:
+    window = make_window()
+    page = window.pages["mission"]
+    page.editor.set_plan(small_plan())  # type: ignore[attr-defined]
+    window.toggle_connection()
+    assert wait_until(lambda: window.context.hub.connected)
+    page.start_button.click()  # type: ignore[attr-defined]
+    assert wait_until(lambda: page.result is not None, 60.0)  # type: ignore[attr-defined]
+    grid = page.progress.grid  # type: ignore[attr-defined]
+    opened: list[tuple[int, int]] = []
+    page.progress.view_opened.connect(lambda s, v: opened.append((s, v)))  # type: ignore[attr-defined]
+    grid.cellDoubleClicked.emit(1, 2)  # station 6 (the plan's second), view 2
+    assert opened == [(6, 2)]
+    viewers = [w for w in page.findChildren(DepthViewer) if w.isVisible()]
+    assert len(viewers) == 1 and "station 6, view 2" in viewers[0].windowTitle()
+    session = load_session(page.controller.folder)  # type: ignore[attr-defined]
+    capture = next(c for c in session.captures if (c.station, c.view) == (6, 2))
+    expected = session.read_capture(capture).depth_m
+    shown = read_view_depth(session.folder, 6, 2)
+    assert np.array_equal(np.isnan(shown), np.isnan(expected))
+    assert np.allclose(shown[~np.isnan(shown)], expected[~np.isnan(expected)])
+    low, high = viewers[0].levels_m
+    assert 0.0 < low < high < 10.0
+    viewers[0].close()
+    errors_before = len(window.context.notifier.history)
+    assert page.open_view(6, 99) is None  # type: ignore[attr-defined]
+    assert len(window.context.notifier.history) == errors_before + 1
+    assert "not captured" in window.context.notifier.history[-1].message

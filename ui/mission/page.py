@@ -136,6 +136,7 @@ class MissionPage(QtWidgets.QWidget):
         c.view_captured.connect(self._view_captured)
         c.warning.connect(self.progress.add_warning)
         c.progress.connect(self.progress.set_progress)
+        self.progress.view_opened.connect(self.open_view)
         c.finished.connect(self._finished)
         hub = self.context.hub
         hub.pose_received.connect(self._show_pose)
@@ -256,6 +257,25 @@ class MissionPage(QtWidgets.QWidget):
             if result.captured:  # a session with nothing in it has nothing to show
                 self.session_finished.emit(self.controller.folder)
         self._update_buttons()
+
+    def open_view(self, station: int, view: int) -> QtWidgets.QWidget | None:
+        """Show the capture's depth large (double-click on a thumbnail); ``None`` when it
+        cannot be read (a notice says why)."""
+        from fieldapp.errors import FieldappError
+        from fieldapp.io.images import ImageError
+        from ui.mission.depth_view import DepthViewer, read_view_depth
+
+        folder = self.controller.folder
+        if folder is None:
+            return None
+        try:
+            depth_m = read_view_depth(folder, station, view)
+        except (FieldappError, ImageError) as error:
+            self.context.notifier.error(f"Station {station} view {view}", error)
+            return None
+        viewer = DepthViewer(f"station {station}, view {view}: depth", depth_m, self)
+        viewer.show()
+        return viewer
 
     def _show_pose(self, pose: Pose) -> None:
         self.map.show_base(pose.x_m, pose.y_m, pose.yaw_deg)

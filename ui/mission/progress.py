@@ -43,7 +43,10 @@ def thumbnail_icon(rgb: NDArray[np.uint8]) -> QtGui.QIcon:
 
 
 class ProgressPanel(QtWidgets.QWidget):
-    """Fed by the mission controller's signals (GUI thread)."""
+    """Fed by the mission controller's signals (GUI thread); :attr:`view_opened` (station,
+    view) when a captured thumbnail is double-clicked."""
+
+    view_opened = QtCore.Signal(int, int)
 
     def __init__(
         self,
@@ -65,6 +68,8 @@ class ProgressPanel(QtWidgets.QWidget):
         self.grid.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.grid.horizontalHeader().setDefaultSectionSize(THUMB_W + 10)
         self.grid.verticalHeader().setDefaultSectionSize(THUMB_H + 8)
+        self.grid.cellDoubleClicked.connect(self._double_clicked)
+        self.stations: dict[int, int] = {}  # row -> station
         self.log = QtWidgets.QListWidget()
         self.log.setMaximumHeight(110)
         self.rows: dict[int, int] = {}
@@ -85,6 +90,7 @@ class ProgressPanel(QtWidgets.QWidget):
         """An empty grid for ``plan`` (``done``: captures a resumed session already has)."""
         stations = plan.station_numbers()
         self.rows = {station: row for row, station in enumerate(stations)}
+        self.stations = {row: station for station, row in self.rows.items()}
         self.grid.clear()
         self.grid.setRowCount(len(stations))
         self.grid.setColumnCount(plan.views.count)
@@ -127,6 +133,11 @@ class ProgressPanel(QtWidgets.QWidget):
         item.setBackground(colour)
         self.grid.setItem(row, view, item)
         return item
+
+    def _double_clicked(self, row: int, column: int) -> None:
+        item = self.grid.item(row, column)
+        if item is not None and row in self.stations:  # an empty cell has nothing to show
+            self.view_opened.emit(self.stations[row], column)
 
     def set_progress(self, progress: MissionProgress) -> None:
         self.bar.setRange(0, progress.total)
