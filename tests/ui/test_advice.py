@@ -75,3 +75,19 @@ def test_setup_says_connect_only_while_disconnected(
     window.toggle_connection()
     assert wait_until(lambda: not window.context.hub.connected)
     assert setup.result.text() == NOT_CONNECTED
+
+
+@pytest.mark.usefixtures("qapp")
+def test_a_missing_driver_is_told_in_gui_words() -> None:
+    from ui.notifications import Notifier
+
+    notifier = Notifier()
+    notifier.error("Devices not connected", kinect_missing())
+    realsense = "RealSense needs pyrealsense2: pip install 'fieldapp[realsense]'"
+    missing = CameraUnavailable(f"{realsense} (No module named 'pyrealsense2')")
+    notifier.error("Devices not connected", missing)
+    for notice in notifier.history:
+        assert "pip" not in notice.message and "pip" not in notice.advice, notice
+        assert "packaging/README.md" in notice.advice
+    assert "install fieldapp's RealSense support" in notifier.history[1].message
+    notifier.deleteLater()
