@@ -1,6 +1,7 @@
 """The main window: a side bar of pages (Calibrate, Mission, Live, Results), a header with the
-device buttons, the SIMULATED DEVICES badge and the big STOP (Esc), one notification area,
-and the status bar. Geometry and the open page are remembered (QSettings)."""
+device buttons, the SIMULATED DEVICES badge and the big STOP (Esc), one notification strip of
+fixed height (its history in the Notices dock), the View and Help menus, and the status bar.
+Geometry and the open page are remembered (QSettings)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from ui.context import AppContext
 from ui.devices.hub import DeviceState, DeviceStatus
-from ui.notifications import NotificationPanel, notice_from_error
+from ui.notice_area import NoticeLog, NotificationPanel
+from ui.notifications import notice_from_error
 from ui.pages import PageSpec
 from ui.status import SimulatedBadge, StatusBar
 from ui.stop_everywhere import StopEverywhere
@@ -66,6 +68,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.sidebar.addItem(item)
         self.sidebar.currentRowChanged.connect(self.stack.setCurrentIndex)
         self.notices = NotificationPanel(self.context.notifier)
+        self.notices.log_requested.connect(self.show_log)
         body = QtWidgets.QWidget()
         column = QtWidgets.QVBoxLayout(body)
         column.setContentsMargins(8, 6, 8, 4)
@@ -82,6 +85,49 @@ class MainWindow(QtWidgets.QMainWindow):
         settings = self.context.settings
         self.status = StatusBar(settings.paths.sessions_dir, settings.battery)
         self.setStatusBar(self.status)
+        self._log_dock()
+        self._menus()
+
+    def _log_dock(self) -> None:
+        self.log = NoticeLog(self.context.notifier)
+        self.log_dock = QtWidgets.QDockWidget("Notices", self)
+        self.log_dock.setObjectName("noticesDock")  # saveState/restoreState need a name
+        self.log_dock.setWidget(self.log)
+        self.addDockWidget(QtCore.Qt.DockWidgetArea.BottomDockWidgetArea, self.log_dock)
+        self.log_dock.hide()
+
+    def _menus(self) -> None:
+        view = self.menuBar().addMenu("&View")
+        notices = self.log_dock.toggleViewAction()
+        notices.setText("&Notices log")
+        notices.setShortcut(QtGui.QKeySequence("Ctrl+L"))
+        view.addAction(notices)
+        help_menu = self.menuBar().addMenu("&Help")
+        about = help_menu.addAction("&About fieldapp")
+        about.triggered.connect(self.show_about)
+
+    @QtCore.Slot()
+    def show_log(self) -> None:
+        self.log_dock.show()
+        self.log_dock.raise_()
+
+    def about_text(self) -> str:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            release = version("fieldapp")
+        except PackageNotFoundError:
+            release = "unknown (not installed)"
+        return (
+            f"<b>fieldapp</b> {release}<br>Maize seedling phenotyping in the field: a Kinect v2 "
+            "depth camera on a rotary table, carried by a mobile base; reconstruction and "
+            "plant traits on the workstation.<br>Simulated devices are used until real ones "
+            "are chosen in Devices..."
+        )
+
+    @QtCore.Slot()
+    def show_about(self) -> None:
+        QtWidgets.QMessageBox.about(self, "About fieldapp", self.about_text())
 
     def _header(self) -> QtWidgets.QWidget:
         header = QtWidgets.QWidget()

@@ -28,6 +28,10 @@ REWRITES: list[tuple[str, str]] = [
     (r"devices\.table_port", "the table's port in Devices..."),
     (r"devices\.base_endpoint/base_keys_dir", "the base's endpoint and key folder in Devices..."),
     (r"devices\.camera_backend", "the camera in Devices..."),
+    (r"pip install '?fieldapp\[realsense\]'?", "install fieldapp's RealSense support "
+     "(packaging/README.md)"),
+    (r", which pip cannot build without the C library: see",
+     ", which are installed with the C library: see"),
 ]  # fmt: skip
 ANY_COMMAND = re.compile(r"\(?(?:try )?`fieldapp [^`]*`\)?")
 

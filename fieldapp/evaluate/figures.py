@@ -8,6 +8,7 @@ import io
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
@@ -63,22 +64,67 @@ def distance_histogram_png(title: str, labels: Sequence[str], percents: Sequence
     return _png(figure)
 
 
+ONE_DATE_MARGIN_D = 3
+"""Days shown either side of a single date (matplotlib would spread one date over years)."""
+SPREAD_D = 0.3
+"""Half-width, in days, over which one date's plants are spread so each point shows."""
+
+
+def growth_figure(
+    trait: str, series: Mapping[int, Sequence[tuple[dt.date, float]]], title: str
+) -> Figure:
+    """Points per plant (joined by a line over several dates) of ``trait`` against the date;
+    dates as day labels, the legend outside the data. With one date, the plants are spread
+    a little across that day (a strip) and the axis spans a week around it."""
+    figure = Figure(figsize=(7.2, 4.0), layout="constrained")
+    axes = figure.add_subplot()
+    dates = sorted({d for points in series.values() for d, _ in points})
+    plants = sorted(series)
+    for index, plant in enumerate(plants):
+        points = sorted(series[plant])
+        days = np.array([d.toordinal() for d, _ in points], dtype=np.float64)
+        if len(dates) == 1 and len(plants) > 1:
+            days = days + SPREAD_D * (2.0 * index / (len(plants) - 1) - 1.0)
+        style = "-o" if len(points) > 1 else "o"
+        axes.plot(days, [v for _, v in points], style, markersize=4, label=f"{plant}")
+    _date_axis(axes, dates)
+    axes.set_ylabel(UNITS.get(trait, trait))
+    count = f"{len(plants)} plant{'s' if len(plants) != 1 else ''} on {len(dates)} "
+    count += "date" if len(dates) == 1 else "dates"
+    axes.set_title(f"{title} ({count})", fontsize=10)
+    axes.grid(alpha=0.3)
+    if 0 < len(series) <= 24:
+        axes.legend(
+            title="plant", fontsize=7, ncols=1 + len(series) // 13,
+            loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
+        )  # fmt: skip
+    return figure
+
+
+def _date_axis(axes: Axes, dates: Sequence[dt.date]) -> None:
+    """Day labels (``2026-05-14``) on an axis of day ordinals; one date gets a week around it."""
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
+
+    if not dates:
+        return
+    first, last = dates[0].toordinal(), dates[-1].toordinal()
+    margin = ONE_DATE_MARGIN_D if first == last else max(1.0, 0.05 * (last - first))
+    axes.set_xlim(first - margin, last + margin)
+    axes.xaxis.set_major_locator(MaxNLocator(nbins=8, integer=True, min_n_ticks=1))
+    if first == last:
+        axes.set_xticks([first])
+    axes.xaxis.set_major_formatter(
+        FuncFormatter(lambda x, _pos: dt.date.fromordinal(round(x)).isoformat())
+    )
+    axes.set_xlabel("date")
+    axes.tick_params(axis="x", labelrotation=30)
+
+
 def growth_png(
     trait: str, series: Mapping[int, Sequence[tuple[dt.date, float]]], title: str
 ) -> bytes:
-    """One line per plant: ``trait`` against the date."""
-    figure = Figure(figsize=(6.4, 4.0), layout="constrained")
-    axes = figure.add_subplot()
-    for plant, points in sorted(series.items()):
-        dates = np.array([d for d, _ in points], dtype="datetime64[D]")
-        axes.plot(dates, [v for _, v in points], marker="o", markersize=3, label=f"{plant}")
-    axes.set_xlabel("date")
-    axes.set_ylabel(UNITS.get(trait, trait))
-    axes.set_title(title, fontsize=10)
-    if 0 < len(series) <= 24:
-        axes.legend(title="plant", fontsize=7, ncols=2, loc="upper left")
-    figure.autofmt_xdate()
-    return _png(figure)
+    """:func:`growth_figure` as PNG bytes."""
+    return _png(growth_figure(trait, series, title))
 
 
 def map_png(

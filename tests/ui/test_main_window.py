@@ -15,7 +15,6 @@ from fieldapp.rig import RigError
 from fieldapp.settings import Settings
 from ui.devices.hub import DeviceState, failed_device
 from ui.main_window import MainWindow
-from ui.notifications import NoticeCard
 from ui.state import UiState
 
 pytestmark = pytest.mark.usefixtures("no_leaks")
@@ -110,16 +109,3 @@ def test_window_remembers_page_and_folders(
     assert again.size() == size
     assert UiState(tmp_path / "ui.ini").last_folder("plans") == tmp_path
     assert UiState(tmp_path / "ui.ini").last_folder("gone") == Path.home()
-
-
-def test_notices_keep_the_newest_four(
-    make_window: Callable[..., MainWindow], never_within: Callable[..., bool]
-) -> None:
-    window = make_window()
-    for n in range(6):
-        window.context.notifier.warn(f"warning {n}", "text", "advice")
-    never_within(lambda: False, 0.1)  # let the panel lay the cards out
-    titles = [c.notice.title for c in window.notices.cards()]
-    assert sorted(titles) == ["warning 2", "warning 3", "warning 4", "warning 5"]
-    assert len(window.context.notifier.history) == 6
-    assert all(isinstance(c, NoticeCard) for c in window.notices.cards())

@@ -30,6 +30,7 @@ from devices.camera.frames import Frame, Intrinsics
 from devices.camera.quality import QualityReport, QualityThresholds
 from ui.live.cloud_view import CloudView
 from ui.live.frame_math import depth_indices, depth_lut, ir_for_display, read_pixel, save_frame
+from ui.live.help import QUALITY_HELP, STREAM_HELP
 from ui.live.quality_monitor import QualityMonitor
 from ui.workers import WorkerSet
 
@@ -204,6 +205,7 @@ class LivePreview(QtWidgets.QWidget):
     def _side_panel(self) -> QtWidgets.QWidget:
         self.stream_label = QtWidgets.QLabel("No camera: press Connect.")
         self.stream_label.setWordWrap(True)
+        self.stream_label.setToolTip(STREAM_HELP)
         self.quality_table = QtWidgets.QWidget()
         grid = QtWidgets.QGridLayout(self.quality_table)
         grid.setContentsMargins(0, 0, 0, 0)
@@ -356,6 +358,8 @@ class LivePreview(QtWidgets.QWidget):
             self.quality_values, rows, strict=True
         ):
             name_label.setText(name)
+            name_label.setToolTip(QUALITY_HELP.get(name, ""))
+            value_label.setToolTip(QUALITY_HELP.get(name, ""))
             colour, mark = ("#2e8b3a", "✔") if ok else ("#c62828", "✘")
             value_label.setText(f"<span style='color:{colour}'>{mark} {value}</span>")
         if problems:

@@ -136,6 +136,7 @@ class MissionPage(QtWidgets.QWidget):
         c.view_captured.connect(self._view_captured)
         c.warning.connect(self.progress.add_warning)
         c.progress.connect(self.progress.set_progress)
+        self.progress.view_opened.connect(self.open_view)
         c.finished.connect(self._finished)
         hub = self.context.hub
         hub.pose_received.connect(self._show_pose)
@@ -153,7 +154,9 @@ class MissionPage(QtWidgets.QWidget):
 
     def start(self, folder: Path | None = None) -> None:
         if not self.editor.valid:
-            self.context.notifier.warn("Mission", self.editor.error.text(), "Fix the plan first.")
+            self.context.notifier.warn(
+                "Mission", self.editor.error.text(), "Fix the plan first.", topic="mission"
+            )
             return
         settings = self.context.settings
         plan = self.editor.plan().model_copy(
@@ -216,7 +219,7 @@ class MissionPage(QtWidgets.QWidget):
     def _failed_to_start(self, error: BaseException) -> None:
         """Nothing started: say why and what to do; Start, Resume and the plan are usable."""
         self.folder_label.setText("")
-        notice = notice_from_error("Mission not started", error)
+        notice = notice_from_error("Mission not started", error, topic="mission")
         if not notice.advice:
             notice = replace(notice, advice=START_ADVICE)
         self.context.notifier.post(notice)
@@ -248,14 +251,34 @@ class MissionPage(QtWidgets.QWidget):
         summary = result.lines()[:2]
         if result.fault is not None:  # the reason, whatever it is: a fault, a dead thread
             summary = [summary[0], f"{result.fault.device}: {result.fault.what}"]
-        self.context.notifier.post(
-            Notice(level, f"Mission {result.outcome.value}", "; ".join(summary), advice)
-        )
+        title = f"Mission {result.outcome.value}"  # the notifier drops its repeat in summary
+        message = "; ".join(summary)
+        # topic: this outcome replaces an open "Mission not started" or earlier outcome
+        self.context.notifier.post(Notice(level, title, message, advice, topic="mission"))
         if self.controller.folder is not None:
             self.context.ui_state.set_last_folder("sessions", self.controller.folder)
             if result.captured:  # a session with nothing in it has nothing to show
                 self.session_finished.emit(self.controller.folder)
         self._update_buttons()
+
+    def open_view(self, station: int, view: int) -> QtWidgets.QWidget | None:
+        """Show the capture's depth large (double-click on a thumbnail); ``None`` when it
+        cannot be read (a notice says why)."""
+        from fieldapp.errors import FieldappError
+        from fieldapp.io.images import ImageError
+        from ui.mission.depth_view import DepthViewer, read_view_depth
+
+        folder = self.controller.folder
+        if folder is None:
+            return None
+        try:
+            depth_m = read_view_depth(folder, station, view)
+        except (FieldappError, ImageError) as error:
+            self.context.notifier.error(f"Station {station} view {view}", error)
+            return None
+        viewer = DepthViewer(f"station {station}, view {view}: depth", depth_m, self)
+        viewer.show()
+        return viewer
 
     def _show_pose(self, pose: Pose) -> None:
         self.map.show_base(pose.x_m, pose.y_m, pose.yaw_deg)

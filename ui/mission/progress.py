@@ -5,6 +5,7 @@ of warnings and retries."""
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -14,6 +15,7 @@ from fieldapp.mission.events import MissionProgress, MissionWarning, StationReac
 from fieldapp.mission.plan import MissionPlan
 
 THUMB_W, THUMB_H = 64, 53
+ELAPSED_TICK_MS = 1000
 OK_COLOUR = QtGui.QColor("#c8e6c9")
 LOW_COLOUR = QtGui.QColor("#ffe0b2")
 
@@ -41,10 +43,22 @@ def thumbnail_icon(rgb: NDArray[np.uint8]) -> QtGui.QIcon:
 
 
 class ProgressPanel(QtWidgets.QWidget):
-    """Fed by the mission controller's signals (GUI thread)."""
+    """Fed by the mission controller's signals (GUI thread); :attr:`view_opened` (station,
+    view) when a captured thumbnail is double-clicked."""
 
-    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+    view_opened = QtCore.Signal(int, int)
+
+    def __init__(
+        self,
+        parent: QtWidgets.QWidget | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         super().__init__(parent)
+        self.clock = clock
+        self._last: tuple[MissionProgress, float] | None = None  # latest progress, when
+        self.ticker = QtCore.QTimer(self)
+        self.ticker.setInterval(ELAPSED_TICK_MS)
+        self.ticker.timeout.connect(self.tick)
         self.bar = QtWidgets.QProgressBar()
         self.bar.setFormat("%v of %m captures")
         self.times = QtWidgets.QLabel("No mission yet.")
@@ -54,6 +68,8 @@ class ProgressPanel(QtWidgets.QWidget):
         self.grid.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.grid.horizontalHeader().setDefaultSectionSize(THUMB_W + 10)
         self.grid.verticalHeader().setDefaultSectionSize(THUMB_H + 8)
+        self.grid.cellDoubleClicked.connect(self._double_clicked)
+        self.stations: dict[int, int] = {}  # row -> station
         self.log = QtWidgets.QListWidget()
         self.log.setMaximumHeight(110)
         self.rows: dict[int, int] = {}
@@ -74,6 +90,7 @@ class ProgressPanel(QtWidgets.QWidget):
         """An empty grid for ``plan`` (``done``: captures a resumed session already has)."""
         stations = plan.station_numbers()
         self.rows = {station: row for row, station in enumerate(stations)}
+        self.stations = {row: station for station, row in self.rows.items()}
         self.grid.clear()
         self.grid.setRowCount(len(stations))
         self.grid.setColumnCount(plan.views.count)
@@ -103,6 +120,7 @@ class ProgressPanel(QtWidgets.QWidget):
         if item is not None:
             item.setIcon(thumbnail_icon(event.thumbnail))
             item.setText(f"{q.fill_rate:.0%}")
+            self.follow(event.station, event.view)
 
     def _cell(
         self, station: int, view: int, tip: str, colour: QtGui.QColor
@@ -116,17 +134,37 @@ class ProgressPanel(QtWidgets.QWidget):
         self.grid.setItem(row, view, item)
         return item
 
+    def _double_clicked(self, row: int, column: int) -> None:
+        item = self.grid.item(row, column)
+        if item is not None and row in self.stations:  # an empty cell has nothing to show
+            self.view_opened.emit(self.stations[row], column)
+
     def set_progress(self, progress: MissionProgress) -> None:
         self.bar.setRange(0, progress.total)
         self.bar.setValue(progress.done)
-        self.times.setText(
-            f"elapsed {format_duration(progress.elapsed_s)} · "
-            f"remaining {format_duration(progress.remaining_s)}"
-        )
+        self._last = (progress, self.clock())
+        self._show_times(progress.elapsed_s)
         self.step.setText(progress.step)
+        if not self.ticker.isActive():
+            self.ticker.start()
+
+    @QtCore.Slot()
+    def tick(self) -> None:
+        """The elapsed time keeps counting between progress reports, pauses included."""
+        if self._last is not None:
+            progress, at_s = self._last
+            self._show_times(progress.elapsed_s + self.clock() - at_s)
+
+    def _show_times(self, elapsed_s: float) -> None:
+        remaining_s = self._last[0].remaining_s if self._last is not None else None
+        self.times.setText(
+            f"elapsed {format_duration(elapsed_s)} · remaining {format_duration(remaining_s)}"
+        )
 
     def finish(self, text: str) -> None:
         """The mission ended: ``text`` replaces the time remaining."""
+        self._last = None
+        self.ticker.stop()
         self.times.setText(text)
         self.step.clear()
 
@@ -135,6 +173,15 @@ class ProgressPanel(QtWidgets.QWidget):
             f"at station {event.station} (x {event.x_m:.2f} m, y {event.y_m:.2f} m, "
             f"yaw {event.yaw_deg:.0f} deg)"
         )
+        self.follow(event.station)
+
+    def follow(self, station: int, view: int = 0) -> None:
+        """Scroll the grid to the station being captured and mark its row."""
+        row = self.rows.get(station)
+        if row is None:
+            return
+        self.grid.setCurrentCell(row, min(view, max(0, self.grid.columnCount() - 1)))
+        self.grid.scrollTo(self.grid.model().index(row, view))
 
     def add_warning(self, event: MissionWarning) -> None:
         stamp = time.strftime("%H:%M:%S")

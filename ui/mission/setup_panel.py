@@ -21,6 +21,14 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 MANUAL_GOTO_TIMEOUT_S = 120.0
+NOT_CONNECTED = "Connect the devices to move them by hand."
+READY = "Devices connected: turn the table or send the base where you need it."
+
+
+def ask(parent: QtWidgets.QWidget, title: str, text: str) -> bool:
+    """Yes/No question before the robot moves (tests replace it)."""
+    answer = QtWidgets.QMessageBox.question(parent, title, text)
+    return answer == QtWidgets.QMessageBox.StandardButton.Yes
 
 
 def _spin(low: float, high: float, suffix: str, decimals: int = 2) -> QtWidgets.QDoubleSpinBox:
@@ -43,10 +51,20 @@ class SetupPanel(QtWidgets.QWidget):
         layout = QtWidgets.QVBoxLayout(self)
         layout.addWidget(self._table_group())
         layout.addWidget(self._base_group())
-        self.result = QtWidgets.QLabel("Connect the devices to move them by hand.")
+        self.result = QtWidgets.QLabel()
         self.result.setWordWrap(True)
         layout.addWidget(self.result)
         layout.addStretch(1)
+        context.hub.state_changed.connect(lambda _status: self._show_connection())
+        context.hub.rig_changed.connect(lambda _rig: self._show_connection())
+        self._show_connection()
+
+    def _show_connection(self) -> None:
+        """Say what the panel can do now, unless it shows the last move's result."""
+        if self.last_result and self.context.hub.connected:
+            return
+        self.last_result = ""
+        self.result.setText(READY if self.context.hub.connected else NOT_CONNECTED)
 
     def _table_group(self) -> QtWidgets.QGroupBox:
         self.angle = _spin(-360.0, 360.0, " deg")
@@ -150,6 +168,14 @@ class SetupPanel(QtWidgets.QWidget):
 
     def _goto(self, x_m: float, y_m: float, yaw_deg: float, what: str) -> None:
         from devices.base.protocol import Pose
+
+        if self.context.hub.rig is not None and not ask(
+            self,
+            "Move the base?",
+            f"The base will drive to {what} (x {x_m:.2f} m, y {y_m:.2f} m, yaw {yaw_deg:.0f} "
+            "deg in the map frame). Is the path clear of people and equipment?",
+        ):
+            return
 
         def go(rig: Rig) -> str:
             goal_id = f"manual-{uuid.uuid4().hex[:8]}"

@@ -158,6 +158,8 @@ def test_history_records_runs_and_draws_growth(panel, plot_session, tmp_path):
     _run(panel, plot_session, tmp_path / "out")
     panel.history.plot_name.setText("plot-A")
     panel.history.record("plot-A", plot_session, tmp_path / "out")
+    assert "✓ Recorded" in panel.history.status.text()  # a visible confirmation
+    assert "on 1 date (" in panel.history.status.text()
     observations = panel.history.load("plot-A")
     assert len(observations) == len(panel.results.plants)
     series = panel.history.series()
