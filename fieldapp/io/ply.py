@@ -175,20 +175,38 @@ def _ascii(body: bytes, elements: list[_Element], name: str) -> NDArray[np.void]
             raise PlyError(
                 f"{name}: PLY file is truncated: {element.count} vertices, {len(rows)} lines"
             )
-        vertices = np.empty(element.count, dtype)
-        width = len(element.properties)
-        for index, row in enumerate(rows):
-            values = row.split()
-            if len(values) != width:
-                raise PlyError(
-                    f"{name}: PLY vertex {index}: {len(values)} values, {width} properties"
-                )
-            try:
-                vertices[index] = tuple(float(v) for v in values)
-            except (ValueError, OverflowError):
-                raise PlyError(f"{name}: PLY vertex {index}: not numbers: {row!r}") from None
-        return vertices
+        return _ascii_rows(rows, dtype, name)
     raise AssertionError("unreachable: the header has a vertex element")
+
+
+def _ascii_rows(rows: list[str], dtype: np.dtype[np.void], name: str) -> NDArray[np.void]:
+    """The vertex lines as one table (numpy's C parser); a bad line is found and named."""
+    names = dtype.names or ()
+    vertices = np.empty(len(rows), dtype)
+    if not rows:
+        return vertices
+    try:
+        table = np.loadtxt(rows, np.float64, comments=None, ndmin=2)
+    except ValueError:
+        table = np.empty((0, 0))
+    if table.shape != (len(rows), len(names)):
+        raise PlyError(f"{name}: {_bad_row(rows, len(names))}")
+    for column, field_name in enumerate(names):
+        vertices[field_name] = table[:, column]
+    return vertices
+
+
+def _bad_row(rows: list[str], width: int) -> str:
+    """What is wrong with the first vertex line that is not ``width`` numbers."""
+    for index, row in enumerate(rows):
+        values = row.split()
+        if len(values) != width:
+            return f"PLY vertex {index}: {len(values)} values, {width} properties"
+        try:
+            [float(v) for v in values]
+        except ValueError:
+            return f"PLY vertex {index}: not numbers: {row!r}"
+    return "PLY vertices are not a table of numbers"
 
 
 def points_of(vertices: NDArray[np.void], name: str = "PLY data") -> NDArray[np.float64]:
