@@ -5,34 +5,25 @@ from __future__ import annotations
 import shutil
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from fieldapp import __version__
-from fieldapp.io.calibration import CALIBRATION_FORMAT, Calibration, DepthCamera, load_calibration
+from fieldapp.io.calibration import Calibration, Provenance
 from fieldapp.io.calibration import save_calibration as _save
 from fieldapp.io.durable import fsync_folder
 
 
-def provenance(rig_serial: str | None, **quality: Any) -> dict[str, Any]:
+def provenance(rig_serial: str | None, **quality: Any) -> Provenance:
     """What a calibration result carries: date, software, rig serial and its quality figures."""
-    return {
-        "date": datetime.now().astimezone().isoformat(timespec="seconds"),
-        "software": f"fieldapp {__version__}",
-        "rig_serial": rig_serial or "unknown",
-        **quality,
-    }
-
-
-def with_depth_camera(path: Path, camera: DepthCamera) -> Calibration:
-    """The calibration in ``path`` with ``camera`` in place (a new file when absent).
-
-    Raises FormatError when ``path`` exists but is not a valid calibration file.
-    """
-    if not path.exists():
-        return Calibration(format=CALIBRATION_FORMAT, depth_camera=camera)
-    calibration = load_calibration(path)
-    camera.depth_scale = calibration.depth_camera.depth_scale
-    return calibration.model_copy(update={"depth_camera": camera})
+    return cast(
+        Provenance,
+        {
+            "date": datetime.now().astimezone().isoformat(timespec="seconds"),
+            "software": f"fieldapp {__version__}",
+            "rig_serial": rig_serial or "unknown",
+            **quality,
+        },
+    )
 
 
 def save_keeping_previous(path: Path, calibration: Calibration) -> Path | None:

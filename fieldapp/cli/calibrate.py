@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from fieldapp.calib.verdict import Verdict
 
 
 def register(subparsers: Any) -> None:
@@ -98,11 +101,11 @@ def _board_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run_intrinsics(args: argparse.Namespace) -> int:
+    from fieldapp.calib import service
     from fieldapp.calib.board import Board
     from fieldapp.calib.image_files import expand_image_paths, read_images
     from fieldapp.calib.intrinsics import calibrate_intrinsics
-    from fieldapp.calib.store import provenance, save_keeping_previous, with_depth_camera
-    from fieldapp.io.calibration import DepthCamera
+    from fieldapp.calib.verdict import intrinsics_verdict
 
     board = Board.parse(args.board, args.square_mm)
     images, skipped = read_images(expand_image_paths(args.images))
@@ -112,19 +115,11 @@ def run_intrinsics(args: argparse.Namespace) -> int:
     result = calibrate_intrinsics(
         images, board, max_view_error_px=args.max_view_error_px, options=options
     )
-    k = result.intrinsics
-    camera = DepthCamera.from_intrinsics(k)
-    camera.calibrated = provenance(  # type: ignore[attr-defined]
-        args.serial,
-        method="zhang",
-        board=f"{board.cols}x{board.rows}@{board.square_mm}mm",
-        rms_px=round(result.rms_px, 4),
-        views_used=len(result.used),
-        coverage=round(result.coverage, 3),
-        per_image_px={v.name: round(v.error_px, 4) for v in result.used if v.error_px},
-        fixed=[name for name, on in _fixed(options).items() if on],
+    calibration = service.merge_intrinsics(
+        service.in_force(args.out), result, board, args.serial, options
     )
-    previous = save_keeping_previous(args.out, with_depth_camera(args.out, camera))
+    previous = service.save(args.out, calibration)
+    k = result.intrinsics
     print(f"fx {k.fx:.4f}  fy {k.fy:.4f}  cx {k.cx:.4f}  cy {k.cy:.4f}")
     print("distortion (k1 k2 p1 p2 k3): " + " ".join(f"{d:.6f}" for d in k.distortion))
     print(f"RMS reprojection error {result.rms_px:.4f} px over {len(result.used)} views")
@@ -134,7 +129,7 @@ def run_intrinsics(args: argparse.Namespace) -> int:
         else:
             print(f"  {view.name}: REJECTED: {view.rejected}")
     print(f"corner coverage {100 * result.coverage:.0f} % of the image")
-    return _finish(result.warnings, args.out, previous)
+    return _finish(result.warnings, intrinsics_verdict(result), args.out, previous)
 
 
 def _solve_options(args: argparse.Namespace) -> Any:
@@ -158,14 +153,6 @@ def _solve_options(args: argparse.Namespace) -> Any:
     )
 
 
-def _fixed(options: Any) -> dict[str, bool]:
-    return {
-        "aspect": options.fix_aspect,
-        "principal_point": options.fix_principal_point,
-        "k3": options.fix_k3,
-    }
-
-
 def _load(path: Path) -> Any:
     from fieldapp.errors import FieldappError, FormatError
     from fieldapp.io.session import load_session
@@ -177,28 +164,18 @@ def _load(path: Path) -> Any:
 
 
 def run_views(args: argparse.Namespace) -> int:
+    from fieldapp.calib import service
     from fieldapp.calib.board import Board
-    from fieldapp.calib.store import provenance, save_keeping_previous
+    from fieldapp.calib.verdict import views_verdict
     from fieldapp.calib.views import calibrate_view_step
-    from fieldapp.io.calibration import ViewStep, load_calibration
 
     session = _load(args.session)
     board = Board.parse(args.board, args.square_mm)
     result = calibrate_view_step(session, board, args.station)
-    nominal = session.calibration.view_step
-    assert nominal is not None  # a loaded session always has one
-    view_step = ViewStep(angle_deg=nominal.angle_deg, matrix=result.T_view_k_view_k1)
-    view_step.calibrated = provenance(  # type: ignore[attr-defined]
-        args.serial,
-        method="weighted SVD of checkerboard corners",
-        rmse_mm=round(1000 * result.rmse_m, 3),
-        solved_angle_deg=round(result.angle_deg, 4),
-        points=result.points,
-        pairs=result.pairs,
-    )
-    base = load_calibration(args.out) if args.out.exists() else session.calibration
-    calibration = base.model_copy(update={"view_step": view_step})
-    previous = save_keeping_previous(args.out, calibration)
+    nominal_deg = service.nominal_step_deg(session)
+    base = service.in_force(args.out) or session.calibration
+    calibration = service.merge_view_step(base, result, nominal_deg, args.serial)
+    previous = service.save(args.out, calibration)
     print(
         f"view_step: turn {result.angle_deg:.4f} degrees, translation "
         + " ".join(f"{x:+.4f}" for x in result.T_view_k_view_k1[:3, 3])
@@ -207,42 +184,21 @@ def run_views(args: argparse.Namespace) -> int:
     print(f"feature point RMSE {1000 * result.rmse_m:.2f} mm over {result.points} corners")
     for pair in result.pairs:
         print(f"  {pair}")
-    return _finish(result.warnings, args.out, previous)
+    return _finish(result.warnings, views_verdict(result, nominal_deg), args.out, previous)
 
 
 def run_stations(args: argparse.Namespace) -> int:
-    from devices.geometry import rotation_angle_deg
+    from fieldapp.calib import service
     from fieldapp.calib.board import Board
-    from fieldapp.calib.stations import calibrate_stations
-    from fieldapp.calib.store import provenance, save_keeping_previous
-    from fieldapp.errors import FieldappError
-    from fieldapp.io.calibration import Stations, load_calibration
+    from fieldapp.calib.verdict import stations_verdict
+    from fieldapp.io.calibration import load_calibration
 
     session = _load(args.session)
     calibration = load_calibration(args.calibration)
-    if calibration.view_step is None:
-        raise FieldappError(f"{args.calibration}: view_step is missing: calibrate views first")
     board = Board.parse(args.board, args.square_mm)
-    in_force = calibration.stations or session.calibration.stations
-    prior = in_force.to_reference if in_force else None
-    result = calibrate_stations(session, board, calibration.view_step, args.reference, prior)
-    stations = Stations(reference=args.reference, to_reference=result.T_reference_station)
-    stations.calibrated = provenance(  # type: ignore[attr-defined]
-        args.serial,
-        method="checkerboards between stations: spanning tree, then joint refinement",
-        pairs={f"{p.station_a}-{p.station_b}": round(1000 * p.fit.rmse_m, 3) for p in result.pairs},
-        tree={str(s): parent for s, parent in sorted(result.tree.items())},
-        joint_rmse_mm=round(1000 * result.bundle.rmse_m, 3),
-        boards=result.bundle.boards,
-        sightings=result.bundle.sightings,
-    )
-    view_step = calibration.view_step.model_copy(update={"matrix": result.T_view_k_view_k1})
-    view_step.refined_with_stations = provenance(  # type: ignore[attr-defined]
-        args.serial, solved_angle_deg=round(rotation_angle_deg(result.T_view_k_view_k1[:3, :3]), 4)
-    )
-    previous = save_keeping_previous(
-        args.out, calibration.model_copy(update={"stations": stations, "view_step": view_step})
-    )
+    job = service.stations_job(calibration, session, board, args.reference, str(args.calibration))
+    result = job()
+    previous = service.save(args.out, service.merge_stations(calibration, result, args.serial))
     for pair in result.pairs:
         print(
             f"stations {pair.station_a}-{pair.station_b} via {', '.join(pair.boards)}: "
@@ -256,30 +212,20 @@ def run_stations(args: argparse.Namespace) -> int:
         f"{result.bundle.boards} boards: RMSE {1000 * result.bundle.rmse_m:.2f} mm "
         "(view_step refined too)"
     )
-    return _finish(result.warnings, args.out, previous)
+    return _finish(result.warnings, stations_verdict(result), args.out, previous)
 
 
 def run_ground(args: argparse.Namespace) -> int:
-    from fieldapp.calib.ground import calibrate_ground
-    from fieldapp.calib.store import provenance, save_keeping_previous
-    from fieldapp.io.calibration import Ground, load_calibration
+    from fieldapp.calib import service
+    from fieldapp.calib.verdict import ground_verdict
+    from fieldapp.io.calibration import load_calibration
     from fieldapp.settings import load_settings
 
     session = _load(args.session)
     calibration = load_calibration(args.calibration)
     settings = load_settings().reconstruction
-    result = calibrate_ground(session, calibration, settings)
-    ground = Ground(matrix=result.T_field_reference)
-    ground.calibrated = provenance(  # type: ignore[attr-defined]
-        args.serial,
-        method="RANSAC plane of the reference station",
-        camera_height_m=round(result.camera_height_m, 4),
-        camera_pitch_deg=round(result.camera_pitch_deg, 3),
-        station=result.station,
-        inlier_fraction=round(result.inlier_fraction, 3),
-        inlier_rms_mm=round(1000 * result.rms_m, 2),
-    )
-    previous = save_keeping_previous(args.out, calibration.model_copy(update={"ground": ground}))
+    result = service.ground_job(session, calibration, settings)()
+    previous = service.save(args.out, service.merge_ground(calibration, result, args.serial))
     print(
         f"camera {result.camera_height_m:.3f} m above the ground, pitched "
         f"{result.camera_pitch_deg:.2f} degrees down"
@@ -292,12 +238,13 @@ def run_ground(args: argparse.Namespace) -> int:
     if result.change_from_previous is not None:
         moved_m, turned_deg = result.change_from_previous
         print(f"change from the ground in force: {100 * moved_m:.1f} cm, {turned_deg:.2f} degrees")
-    return _finish(result.warnings, args.out, previous)
+    return _finish(result.warnings, ground_verdict(result), args.out, previous)
 
 
-def _finish(warnings: list[str], out: Path, previous: Path | None) -> int:
-    """Every solver's last lines: its warnings, where it wrote, what it kept."""
+def _finish(warnings: list[str], verdict: Verdict, out: Path, previous: Path | None) -> int:
+    """Every solver's last lines: its warnings, the verdict, where it wrote, what it kept."""
     for warning in warnings:
         print(f"warning: {warning}")
+    print(f"quality: {verdict.text()}")
     print(f"written to {out}" + (f" (previous kept as {previous})" if previous else ""))
     return 0

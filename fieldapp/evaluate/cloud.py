@@ -8,25 +8,24 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fieldapp.errors import FormatError, Problem
+from fieldapp.io import ply
 
 
 def read_cloud(path: Path) -> tuple[NDArray[np.float64], NDArray[np.uint8] | None]:
     """Points (N, 3) float64 metres and colours (N, 3) uint8 (``None`` when the file has none).
     Raises :class:`FormatError` when the file is missing, unreadable or holds no points."""
-    import open3d as o3d
-
     if not path.is_file():
         raise FormatError([Problem(str(path), "", "file is missing")])
     with path.open("rb") as file:
         if file.read(4) != b"ply\n":
             raise FormatError([Problem(str(path), "", "not a PLY file")])
-    cloud = o3d.io.read_point_cloud(path, format="ply")
-    points = np.asarray(cloud.points, dtype=np.float64)
+    try:
+        vertices = ply.read_ply(path)
+        points = ply.points_of(vertices, str(path))
+    except ply.PlyError as error:
+        raise FormatError([Problem(str(path), "", str(error).removeprefix(f"{path}: "))]) from None
     if len(points) == 0:
         raise FormatError([Problem(str(path), "", "no points could be read")])
     if not np.isfinite(points).all():
         raise FormatError([Problem(str(path), "vertex", "non-finite coordinates")])
-    colors = None
-    if cloud.has_colors():
-        colors = np.clip(np.rint(np.asarray(cloud.colors) * 255.0), 0, 255).astype(np.uint8)
-    return points, colors
+    return points, ply.colors_of(vertices)

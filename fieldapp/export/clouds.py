@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from fieldapp.errors import FieldappError
 from fieldapp.io.durable import write_bytes_durably
+from fieldapp.io.ply import ply_bytes
 from fieldapp.recon.outputs import read_ply
 
 ORGANS = {0: "unknown", 1: "stem", 2: "leaf", 3: "soil"}
@@ -101,8 +102,8 @@ _PLY_VERTEX = np.dtype(
         ("red", "u1"),
         ("green", "u1"),
         ("blue", "u1"),
-        ("plant_id", "<u4"),
-        ("organ", "u1"),
+        ("scalar_plant_id", "<u4"),
+        ("scalar_organ", "u1"),
     ]
 )
 
@@ -117,13 +118,7 @@ def ply_with_fields(cloud: LabelledCloud) -> bytes:
         vertices[name] = cloud.points[:, i]
     for i, name in enumerate(("red", "green", "blue")):
         vertices[name] = cloud.colors[:, i]
-    vertices["plant_id"], vertices["organ"] = cloud.plant_id, cloud.organ
-    header = (
-        "ply\nformat binary_little_endian 1.0\n"
-        "comment fieldapp export: field frame, metres; organ 0 unknown 1 stem 2 leaf 3 soil\n"
-        f"element vertex {len(vertices)}\n"
-        "property float x\nproperty float y\nproperty float z\n"
-        "property uchar red\nproperty uchar green\nproperty uchar blue\n"
-        "property uint scalar_plant_id\nproperty uchar scalar_organ\nend_header\n"
+    vertices["scalar_plant_id"], vertices["scalar_organ"] = cloud.plant_id, cloud.organ
+    return ply_bytes(
+        vertices, ["fieldapp export: field frame, metres; organ 0 unknown 1 stem 2 leaf 3 soil"]
     )
-    return header.encode("ascii") + vertices.tobytes()

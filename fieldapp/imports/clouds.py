@@ -1,4 +1,5 @@
-"""Reading point clouds of other tools: PLY, PCD, XYZ (Open3D) and LAS/LAZ (laspy).
+"""Reading point clouds of other tools: PLY (:mod:`fieldapp.io.ply`), PCD, XYZ (Open3D) and
+LAS/LAZ (laspy).
 
 Every reader returns a :class:`~fieldapp.recon.cloud.Cloud` in metres with z up: ``units``
 scales the file's coordinates, ``up`` names the file's up axis (``z``, ``y``, ``-y``...).
@@ -14,11 +15,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fieldapp.errors import FieldappError
+from fieldapp.io import ply
 from fieldapp.recon.cloud import Cloud
 
-OPEN3D_SUFFIXES = {".ply", ".pcd", ".xyz", ".xyzn", ".xyzrgb", ".pts"}
+OPEN3D_SUFFIXES = {".pcd", ".xyz", ".xyzn", ".xyzrgb", ".pts"}
 LAS_SUFFIXES = {".las", ".laz"}
-CLOUD_SUFFIXES = OPEN3D_SUFFIXES | LAS_SUFFIXES
+CLOUD_SUFFIXES = OPEN3D_SUFFIXES | LAS_SUFFIXES | {".ply"}
 UNITS_M = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 GREY = 128
 
@@ -53,6 +55,8 @@ def read_cloud(path: Path, units: str = "m", up: str = "z") -> LoadedCloud:
     suffix = path.suffix.lower()
     if suffix in LAS_SUFFIXES:
         points, colors = _read_las(path)
+    elif suffix == ".ply":
+        points, colors = _read_ply(path)
     elif suffix in OPEN3D_SUFFIXES:
         points, colors = _read_open3d(path)
     else:
@@ -67,6 +71,18 @@ def read_cloud(path: Path, units: str = "m", up: str = "z") -> LoadedCloud:
     has_color = colors is not None
     rgb = colors[finite] if colors is not None else np.full(points.shape, GREY, np.uint8)
     return LoadedCloud(Cloud(np.ascontiguousarray(points), rgb), has_color)
+
+
+def _read_ply(path: Path) -> tuple[NDArray[np.float64], NDArray[np.uint8] | None]:
+    try:
+        vertices = ply.read_ply(path)
+        points = ply.points_of(vertices, str(path))
+    except ply.PlyError as error:
+        reason = str(error).removeprefix(f"{path}: ")
+        raise FieldappError(f"{path}: no point read ({reason})") from None
+    if len(points) == 0:
+        raise FieldappError(f"{path}: no point read (not a point cloud, or empty)")
+    return points, ply.colors_of(vertices)
 
 
 def _read_open3d(path: Path) -> tuple[NDArray[np.float64], NDArray[np.uint8] | None]:

@@ -16,7 +16,9 @@ from pydantic import (
     StrictInt,
     field_validator,
     model_validator,
+    with_config,
 )
+from typing_extensions import TypedDict
 
 from devices.camera.frames import Intrinsics
 from devices.geometry import make_transform
@@ -41,6 +43,18 @@ class SpecModel(BaseModel):
     model_config = ConfigDict(extra="allow", arbitrary_types_allowed=True)
 
 
+@with_config(ConfigDict(extra="allow"))
+class Provenance(TypedDict, total=False):
+    """Where a calibrated section came from (``calibrated``, ``refined_with_stations``): the
+    date, the software, the rig's serial, the method, and the solver's quality figures as
+    further keys (``rms_px``, ``rmse_mm``, ...), all kept when read and written back."""
+
+    date: str
+    software: str
+    rig_serial: str
+    method: str
+
+
 class DepthCamera(SpecModel):
     width: StrictInt = Field(gt=0)
     height: StrictInt = Field(gt=0)
@@ -50,6 +64,7 @@ class DepthCamera(SpecModel):
     cy: FiniteFloat
     distortion: list[FiniteFloat] = Field(default_factory=lambda: [0.0] * 5)
     depth_scale: FiniteFloat = Field(default=1000.0, gt=0)
+    calibrated: Provenance | None = None
 
     @field_validator("distortion")
     @classmethod
@@ -102,6 +117,8 @@ class ViewStep(SpecModel):
 
     angle_deg: FiniteFloat
     matrix: RigidMatrix
+    calibrated: Provenance | None = None
+    refined_with_stations: Provenance | None = None
 
     @field_validator("angle_deg")
     @classmethod
@@ -123,6 +140,7 @@ class ViewStep(SpecModel):
 class Stations(SpecModel):
     reference: StrictInt
     to_reference: dict[int, RigidMatrix]
+    calibrated: Provenance | None = None
 
     @field_validator("to_reference", mode="before")
     @classmethod
@@ -144,6 +162,7 @@ class Ground(SpecModel):
     """``matrix`` maps the reference frame into the field frame (z up, 0 on the ground)."""
 
     matrix: RigidMatrix
+    calibrated: Provenance | None = None
 
 
 class Calibration(SpecModel):

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fieldapp.io import ply
 from fieldapp.io.durable import write_bytes_durably, write_json_durably
 from fieldapp.recon.cloud import Cloud
 
@@ -57,8 +58,6 @@ _PLY_BASE = [
     ("blue", "u1"),
 ]
 _PLY_LABELS = [("plant_id", "<i4"), ("organ", "u1"), ("leaf_id", "u1")]
-_PLY_TYPES = {"float": "<f4", "uchar": "u1", "int": "<i4", "double": "<f8", "ushort": "<u2"}
-_PLY_NAMES = {"<f4": "float", "u1": "uchar", "<i4": "int"}
 
 
 @dataclass(frozen=True)
@@ -120,12 +119,7 @@ def ply_bytes(cloud: Cloud, labels: PointLabels | None = None) -> bytes:
     if labels is not None:
         for name, _ in _PLY_LABELS:
             vertices[name] = getattr(labels, name)
-    properties = "".join(f"property {_PLY_NAMES[kind]} {name}\n" for name, kind in fields)
-    header = (
-        "ply\nformat binary_little_endian 1.0\ncomment fieldapp reconstruction, field frame, m\n"
-        f"element vertex {len(cloud)}\n{properties}end_header\n"
-    )
-    return header.encode("ascii") + vertices.tobytes()
+    return ply.ply_bytes(vertices, ["fieldapp reconstruction, field frame, m"])
 
 
 def read_ply(path: Path) -> Cloud:
@@ -134,19 +128,12 @@ def read_ply(path: Path) -> Cloud:
 
 
 def read_labelled_ply(path: Path) -> tuple[Cloud, PointLabels | None]:
-    """Read a PLY written by :func:`ply_bytes`: the cloud and its labels when it has them."""
-    data = path.read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    fields = []
-    for line in data[:end].decode("ascii").splitlines():
-        parts = line.split()
-        if len(parts) == 3 and parts[0] == "property":
-            if parts[1] not in _PLY_TYPES:
-                raise ValueError(f"{path}: PLY property type {parts[1]!r} is not supported")
-            fields.append((parts[2], _PLY_TYPES[parts[1]]))
-    vertices = np.frombuffer(data[end:], dtype=np.dtype(fields))
-    points = np.stack([vertices[a] for a in "xyz"], axis=1).astype(np.float64)
-    colors = np.stack([vertices[c] for c in ("red", "green", "blue")], axis=1)
+    """Read a PLY written by :func:`ply_bytes`: the cloud and its labels when it has them.
+    Raises :class:`~fieldapp.io.ply.PlyError` (a ValueError) naming the file."""
+    vertices = ply.read_ply(path)
+    colors = ply.colors_of(vertices)
+    if colors is None:
+        raise ply.PlyError(f"{path}: PLY vertices have no red, green, blue")
     labels = None
     if all(name in (vertices.dtype.names or ()) for name, _ in _PLY_LABELS):
         labels = PointLabels(
@@ -154,7 +141,7 @@ def read_labelled_ply(path: Path) -> tuple[Cloud, PointLabels | None]:
             vertices["organ"].astype(np.uint8),
             vertices["leaf_id"].astype(np.uint8),
         )
-    return Cloud(points, colors.astype(np.uint8)), labels
+    return Cloud(ply.points_of(vertices, str(path)), colors), labels
 
 
 def csv_text(rows: list[PlantRow], grid: bool | None = None) -> str:

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from PySide6 import QtWidgets
 
 from devices.camera.stream import FrameStream
+from fieldapp.calib import service
 from fieldapp.calib.board import Board, detect_corners
 from fieldapp.calib.intrinsics import (
     MIN_VIEWS,
@@ -22,13 +23,12 @@ from fieldapp.calib.intrinsics import (
     coverage_of,
     read_calibration_image,
 )
-from fieldapp.calib.store import provenance
+from fieldapp.calib.verdict import Verdict, intrinsics_verdict
 from fieldapp.errors import FieldappError
-from fieldapp.io.calibration import CALIBRATION_FORMAT, Calibration, DepthCamera
+from fieldapp.io.calibration import Calibration
 from ui.calibration.board_form import BoardForm
 from ui.calibration.live import BoardPreview, CoverageMap
 from ui.calibration.pages import PreparePage, SavePage, SolvePage
-from ui.calibration.verdict import Verdict, intrinsics_verdict
 
 DEFAULT_BOARD = Board(9, 6, 40.0)
 PREPARE = f"""<p>Calibrates the depth camera's lens (focal lengths, centre, distortion) by
@@ -171,20 +171,7 @@ class IntrinsicsWizard(QtWidgets.QWizard):
 
     def _update(self, current: Calibration | None) -> Calibration:
         result: IntrinsicsResult = self.solve.result
-        board = self.board_form.board()
-        camera = DepthCamera.from_intrinsics(result.intrinsics)
-        camera.calibrated = provenance(  # type: ignore[attr-defined]
-            self.serial,
-            method="zhang",
-            board=f"{board.cols}x{board.rows}@{board.square_mm}mm",
-            rms_px=round(result.rms_px, 4),
-            views_used=len(result.used),
-            coverage=round(result.coverage, 3),
-        )
-        if current is None:
-            return Calibration(format=CALIBRATION_FORMAT, depth_camera=camera)
-        camera.depth_scale = current.depth_camera.depth_scale
-        return current.model_copy(update={"depth_camera": camera})
+        return service.merge_intrinsics(current, result, self.board_form.board(), self.serial)
 
     def done(self, result: int) -> None:
         self.capture.preview.stop()

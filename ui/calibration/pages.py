@@ -11,10 +11,10 @@ from typing import Any
 from PySide6 import QtCore, QtWidgets
 from superqt.utils import create_worker
 
-from fieldapp.calib.store import save_keeping_previous
+from fieldapp.calib import service
+from fieldapp.calib.verdict import Level, Verdict
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Calibration
-from ui.calibration.verdict import Level, Verdict
 
 log = logging.getLogger(__name__)
 
@@ -162,14 +162,8 @@ class SavePage(QtWidgets.QWizardPage):
 
     def save(self) -> Path:
         """Write the calibration; raises FieldappError (bad existing file, unwritable)."""
-        from fieldapp.io.calibration import load_calibration
-
         path = Path(self.path.text().strip())
-        current = load_calibration(path) if path.exists() else None
-        try:
-            self.previous = save_keeping_previous(path, self.update_calibration(current))
-        except OSError as error:
-            raise FieldappError(f"{path}: cannot write ({error.strerror})") from None
+        self.previous = service.save(path, self.update_calibration(service.in_force(path)))
         self.saved = path
         self.status.setText(
             f"Saved to {path}"

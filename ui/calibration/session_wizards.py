@@ -10,24 +10,23 @@ from pathlib import Path
 from PySide6 import QtWidgets
 
 from devices.camera.stream import FrameStream
-from devices.geometry import rotation_angle_deg
+from fieldapp.calib import service
 from fieldapp.calib.board import Board
-from fieldapp.calib.ground import GroundResult, calibrate_ground
-from fieldapp.calib.stations import StationsResult, calibrate_stations
-from fieldapp.calib.store import provenance
-from fieldapp.calib.views import ViewStepResult, calibrate_view_step
-from fieldapp.errors import FieldappError
-from fieldapp.io.calibration import Calibration, Ground, Stations, ViewStep, load_calibration
-from fieldapp.io.session import Session
-from ui.calibration.board_form import BoardForm
-from ui.calibration.pages import PreparePage, SavePage, SolvePage
-from ui.calibration.session_page import SessionPage
-from ui.calibration.verdict import (
+from fieldapp.calib.ground import GroundResult
+from fieldapp.calib.stations import StationsResult
+from fieldapp.calib.verdict import (
     Verdict,
     ground_verdict,
     stations_verdict,
     views_verdict,
 )
+from fieldapp.calib.views import ViewStepResult, calibrate_view_step
+from fieldapp.errors import FieldappError
+from fieldapp.io.calibration import Calibration
+from fieldapp.io.session import Session
+from ui.calibration.board_form import BoardForm
+from ui.calibration.pages import PreparePage, SavePage, SolvePage
+from ui.calibration.session_page import SessionPage
 
 VIEWS_TEXT = """<p>Solves the turntable's view step (view k+1 into view k, the paper's Eq. 9)
 from a checkerboard seen whole at two consecutive views.</p><ul>
@@ -75,7 +74,7 @@ class _SessionWizard(QtWidgets.QWizard):
         path = (
             Path(self.save.path.text().strip()) if hasattr(self, "save") else self.calibration_path
         )
-        return load_calibration(path) if path.exists() else None
+        return service.in_force(path)
 
     @property
     def session(self) -> Session:
@@ -113,8 +112,7 @@ class ViewsWizard(_SessionWizard):
         )
 
     def _nominal_deg(self) -> float:
-        step = self.session.calibration.view_step
-        return step.angle_deg if step is not None else 45.0
+        return service.nominal_step_deg(self.session)
 
     def _describe(self, result: ViewStepResult) -> tuple[list[str], Verdict]:
         t = result.T_view_k_view_k1[:3, 3]
@@ -130,14 +128,7 @@ class ViewsWizard(_SessionWizard):
 
     def _update(self, current: Calibration | None) -> Calibration:
         result: ViewStepResult = self.solve.result
-        step = ViewStep(angle_deg=self._nominal_deg(), matrix=result.T_view_k_view_k1)
-        step.calibrated = provenance(  # type: ignore[attr-defined]
-            self.serial,
-            method="weighted SVD of checkerboard corners",
-            rmse_mm=round(1000 * result.rmse_m, 3),
-            pairs=result.pairs,
-        )
-        return self.base(current).model_copy(update={"view_step": step})
+        return service.merge_view_step(self.base(current), result, self._nominal_deg(), self.serial)
 
 
 class StationsWizard(_SessionWizard):
@@ -165,20 +156,8 @@ class StationsWizard(_SessionWizard):
         )
 
     def _solve(self) -> Callable[[], StationsResult]:
-        calibration = self.base(self.in_force())
-        if calibration.view_step is None:
-            raise FieldappError(
-                "the calibration has no view_step: run the view-to-view wizard first"
-            )
-        in_force = calibration.stations or self.session.calibration.stations
-        prior = in_force.to_reference if in_force else None
-        return partial(
-            calibrate_stations,
-            self.session,
-            self.board_form.board(),
-            calibration.view_step,
-            self.reference,
-            prior,
+        return service.stations_job(
+            self.base(self.in_force()), self.session, self.board_form.board(), self.reference
         )
 
     def _describe(self, result: StationsResult) -> tuple[list[str], Verdict]:
@@ -202,23 +181,7 @@ class StationsWizard(_SessionWizard):
 
     def _update(self, current: Calibration | None) -> Calibration:
         result: StationsResult = self.solve.result
-        calibration = self.base(current)
-        stations = Stations(reference=result.reference, to_reference=result.T_reference_station)
-        stations.calibrated = provenance(  # type: ignore[attr-defined]
-            self.serial,
-            method="checkerboards between stations: spanning tree, then joint refinement",
-            joint_rmse_mm=round(1000 * result.bundle.rmse_m, 3),
-        )
-        update: dict[str, object] = {"stations": stations}
-        if calibration.view_step is not None:
-            update["view_step"] = calibration.view_step.model_copy(
-                update={"matrix": result.T_view_k_view_k1}
-            )
-            update["view_step"].refined_with_stations = provenance(  # type: ignore[attr-defined]
-                self.serial,
-                solved_angle_deg=round(rotation_angle_deg(result.T_view_k_view_k1[:3, :3]), 4),
-            )
-        return calibration.model_copy(update=update)
+        return service.merge_stations(self.base(current), result, self.serial)
 
 
 class GroundWizard(_SessionWizard):
@@ -237,7 +200,7 @@ class GroundWizard(_SessionWizard):
         )
 
     def _solve(self) -> Callable[[], GroundResult]:
-        return partial(calibrate_ground, self.session, self.base(self.in_force()))
+        return service.ground_job(self.session, self.base(self.in_force()))
 
     def _describe(self, result: GroundResult) -> tuple[list[str], Verdict]:
         lines = [
@@ -256,11 +219,4 @@ class GroundWizard(_SessionWizard):
 
     def _update(self, current: Calibration | None) -> Calibration:
         result: GroundResult = self.solve.result
-        ground = Ground(matrix=result.T_field_reference)
-        ground.calibrated = provenance(  # type: ignore[attr-defined]
-            self.serial,
-            method="RANSAC plane of the reference station",
-            camera_height_m=round(result.camera_height_m, 4),
-            rms_mm=round(1000 * result.rms_m, 2),
-        )
-        return self.base(current).model_copy(update={"ground": ground})
+        return service.merge_ground(self.base(current), result, self.serial)

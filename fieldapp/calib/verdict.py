@@ -17,6 +17,8 @@ from fieldapp.calib.views import ViewStepResult
 
 
 class Level(StrEnum):
+    """good: use it; usable: use it, better redone; redo: do not use it."""
+
     GOOD = "good"
     USABLE = "usable"
     REDO = "redo"
@@ -24,6 +26,8 @@ class Level(StrEnum):
 
 @dataclass
 class Verdict:
+    """The level of a result and the reasons for it."""
+
     level: Level = Level.GOOD
     reasons: list[str] = field(default_factory=list)
 
@@ -35,6 +39,7 @@ class Verdict:
         self.reasons.append(reason)
 
     def text(self) -> str:
+        """``Good``, ``Usable`` or ``Redo``, then the reasons."""
         head = {Level.GOOD: "Good", Level.USABLE: "Usable", Level.REDO: "Redo"}[self.level]
         return head + (": " + "; ".join(self.reasons) if self.reasons else "")
 
@@ -48,6 +53,7 @@ def grade(verdict: Verdict, value: float, good: float, usable: float, what: str)
 
 
 def intrinsics_verdict(result: IntrinsicsResult) -> Verdict:
+    """Zhang RMS, number of good views, corner coverage."""
     verdict = Verdict()
     grade(verdict, result.rms_px, 0.3, 0.8, f"RMS reprojection error {result.rms_px:.2f} px")
     used = len(result.used)
@@ -65,6 +71,7 @@ def intrinsics_verdict(result: IntrinsicsResult) -> Verdict:
 
 
 def views_verdict(result: ViewStepResult, nominal_deg: float) -> Verdict:
+    """Feature RMSE, turn against the angle set, cross-check by several pairs."""
     verdict = Verdict()
     grade(verdict, 1000 * result.rmse_m, 2.0, 5.0, f"feature RMSE {1000 * result.rmse_m:.2f} mm")
     off = abs(abs(result.angle_deg) - abs(nominal_deg))
@@ -75,6 +82,7 @@ def views_verdict(result: ViewStepResult, nominal_deg: float) -> Verdict:
 
 
 def stations_verdict(result: StationsResult) -> Verdict:
+    """Joint and pairwise RMSE, refused pairs."""
     verdict = Verdict()
     rmse_mm = 1000 * result.bundle.rmse_m
     grade(verdict, rmse_mm, 3.0, 8.0, f"joint RMSE {rmse_mm:.2f} mm")
@@ -92,6 +100,7 @@ def stations_verdict(result: StationsResult) -> Verdict:
 
 
 def ground_verdict(result: GroundResult) -> Verdict:
+    """Plane RMS, share of points on the ground, the solver's warnings."""
     verdict = Verdict()
     grade(verdict, 1000 * result.rms_m, 4.0, 8.0, f"plane RMS {1000 * result.rms_m:.1f} mm")
     if result.inlier_fraction < 0.5:
