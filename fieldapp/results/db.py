@@ -81,6 +81,18 @@ class LeafObservation:
     traits: dict[str, float | None]
 
 
+_LATEST_RUNS = (
+    "FROM {table} JOIN runs ON runs.id = {table}.run_id "
+    "JOIN sessions ON sessions.id = runs.session_id "
+    "JOIN plants ON plants.id = {table}.plant_id "
+    "JOIN plots ON plots.id = sessions.plot_id "
+    "WHERE plots.name = ? AND runs.id = (SELECT MAX(r.id) FROM runs r "
+    "WHERE r.session_id = sessions.id AND r.status = 'complete') "
+)
+"""The rows of ``{table}`` (traits or leaves) of a plot (the ``?``) in each session's latest
+complete run: what the history queries share."""
+
+
 class ResultsDB:
     """The results database. ``open`` it, use it, ``close`` it (or use it as a context)."""
 
@@ -240,13 +252,8 @@ class ResultsDB:
         rows = self.connection.execute(
             "SELECT plants.id, plants.number, sessions.date, sessions.session_id, runs.id, "
             "traits.x_m, traits.y_m, traits.height_cm, traits.width_cm "
-            "FROM traits JOIN runs ON runs.id = traits.run_id "
-            "JOIN sessions ON sessions.id = runs.session_id "
-            "JOIN plants ON plants.id = traits.plant_id "
-            "JOIN plots ON plots.id = sessions.plot_id "
-            "WHERE plots.name = ? AND runs.id = (SELECT MAX(r.id) FROM runs r "
-            "WHERE r.session_id = sessions.id AND r.status = 'complete') "
-            "ORDER BY plants.number, sessions.date, sessions.session_id",
+            + _LATEST_RUNS.format(table="traits")
+            + "ORDER BY plants.number, sessions.date, sessions.session_id",
             (plot,),
         )
         return [Observation(r[0], r[1], dt.date.fromisoformat(r[2]), *r[3:]) for r in rows]
@@ -258,13 +265,8 @@ class ResultsDB:
         rows = self.connection.execute(
             "SELECT plants.number, leaves.leaf_id, sessions.date, sessions.session_id, runs.id, "
             f"{', '.join('leaves.' + t for t in LEAF_TRAITS)} "
-            "FROM leaves JOIN runs ON runs.id = leaves.run_id "
-            "JOIN sessions ON sessions.id = runs.session_id "
-            "JOIN plants ON plants.id = leaves.plant_id "
-            "JOIN plots ON plots.id = sessions.plot_id "
-            "WHERE plots.name = ? AND runs.id = (SELECT MAX(r.id) FROM runs r "
-            "WHERE r.session_id = sessions.id AND r.status = 'complete') "
-            "ORDER BY plants.number, leaves.leaf_id, sessions.date, sessions.session_id",
+            + _LATEST_RUNS.format(table="leaves")
+            + "ORDER BY plants.number, leaves.leaf_id, sessions.date, sessions.session_id",
             (plot,),
         )
         return [
@@ -285,13 +287,9 @@ class ResultsDB:
         _plot_id(self.connection, plot, create=False)
         rows = self.connection.execute(
             "SELECT plants.number, sessions.date, traits.leaf_count, traits.leaf_area_cm2, "
-            "traits.stem_diameter_mm FROM traits JOIN runs ON runs.id = traits.run_id "
-            "JOIN sessions ON sessions.id = runs.session_id "
-            "JOIN plants ON plants.id = traits.plant_id "
-            "JOIN plots ON plots.id = sessions.plot_id "
-            "WHERE plots.name = ? AND runs.id = (SELECT MAX(r.id) FROM runs r "
-            "WHERE r.session_id = sessions.id AND r.status = 'complete') "
-            "ORDER BY plants.number, sessions.date, sessions.session_id",
+            "traits.stem_diameter_mm "
+            + _LATEST_RUNS.format(table="traits")
+            + "ORDER BY plants.number, sessions.date, sessions.session_id",
             (plot,),
         )
         return [
