@@ -22,7 +22,6 @@ from .conftest import Sessions
 pytestmark = pytest.mark.slow
 
 DASK = Path(sys.executable).with_name("dask")
-START_WAIT_S = 60.0  # how long the processes may take to come up on a loaded machine
 
 
 def _start(argv: list[str], log: Path) -> subprocess.Popen[bytes]:
@@ -60,10 +59,10 @@ def dask_cluster(tmp_path: Path) -> Iterator[str]:
     )
     workers = None
     try:
-        deadline = time.monotonic() + START_WAIT_S
+        # no deadline of our own: a process that never comes up is a hang, which the per-test
+        # timeout reports; one that dies is reported here with its log
         while not scheduler_file.exists():
             assert scheduler.poll() is None, (tmp_path / "scheduler.log").read_text()
-            assert time.monotonic() < deadline, "the scheduler did not start"
             time.sleep(0.1)
         worker_options = ["--nworkers", "2", "--nthreads", "1", "--scheduler-file"]
         workers = _start(
@@ -72,7 +71,6 @@ def dask_cluster(tmp_path: Path) -> Iterator[str]:
         )
         while _workers_seen(scheduler_file) < 2:
             assert workers.poll() is None, (tmp_path / "workers.log").read_text()
-            assert time.monotonic() < deadline, "the workers did not join"
             time.sleep(0.2)
         yield json.loads(scheduler_file.read_text())["address"]
     finally:

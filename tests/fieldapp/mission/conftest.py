@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from devices.camera import CameraInfo, DepthCamera, Intrinsics
 from devices.sim.world import SimWorld
 from fieldapp.mission import MissionPlan, MissionSetup, new_mission
 from fieldapp.mission.plan import RetryLimits, ViewPlan, grid_stations
@@ -57,3 +58,25 @@ def open_mission(tmp_path: Path, sim_world: SimWorld) -> Iterator[Callable[..., 
     yield make
     for setup in setups:
         setup.close()
+
+
+class WrappedCamera(DepthCamera):
+    """A camera that reads through ``inner`` (a simulated camera) and lets a test change what
+    ``_read`` does: the fault-injecting cameras of these tests subclass it."""
+
+    def __init__(self, inner: DepthCamera) -> None:
+        super().__init__()
+        self.inner = inner
+        self._is_open = True
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        return self.inner.intrinsics
+
+    @property
+    def info(self) -> CameraInfo:
+        return self.inner.info
+
+    def _open(self) -> None: ...
+
+    def _close(self) -> None: ...

@@ -11,38 +11,25 @@ import numpy as np
 import pytest
 
 from devices.base import SimFault
-from devices.camera import CameraInfo, CameraTimeout, DepthCamera, Frame, Intrinsics
+from devices.camera import CameraTimeout, DepthCamera, Frame
 from fieldapp.io.session import load_session
 from fieldapp.mission import MissionResult, MissionSetup, MissionState, Outcome
 from fieldapp.mission.folder import STATUS_FILE
 from fieldapp.mission.plan import RetryLimits
 from fieldapp.settings import CameraQualitySettings, IncidentPolicy
 
-from .conftest import HANG_S, small_plan
+from .conftest import HANG_S, WrappedCamera, small_plan
 
 Opener = Callable[..., MissionSetup]
 
 
-class FaultyCamera(DepthCamera):
+class FaultyCamera(WrappedCamera):
     """Wraps a camera: the first ``timeouts`` reads time out, the next ``covered`` captures see
     nothing (a covered lens: no depth at all)."""
 
     def __init__(self, inner: DepthCamera, timeouts: int = 0, covered: int = 0) -> None:
-        super().__init__()
-        self.inner, self.timeouts, self.covered = inner, timeouts, covered
-        self._is_open = True
-
-    @property
-    def intrinsics(self) -> Intrinsics:
-        return self.inner.intrinsics
-
-    @property
-    def info(self) -> CameraInfo:
-        return self.inner.info
-
-    def _open(self) -> None: ...
-
-    def _close(self) -> None: ...
+        super().__init__(inner)
+        self.timeouts, self.covered = timeouts, covered
 
     def _read(self, timeout_s: float) -> Frame:
         if self.timeouts > 0:

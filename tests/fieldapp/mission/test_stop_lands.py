@@ -11,11 +11,11 @@ from typing import Any
 
 import pytest
 
-from devices.camera import CameraInfo, DepthCamera, Frame, Intrinsics
+from devices.camera import DepthCamera, Frame
 from fieldapp.mission import MissionRunner, MissionSetup, MissionState, Outcome
 from fieldapp.mission.folder import STATUS_FILE
 
-from .conftest import HANG_S, small_plan
+from .conftest import HANG_S, WrappedCamera, small_plan
 
 Opener = Callable[..., MissionSetup]
 
@@ -33,27 +33,14 @@ class SteppingClock:
             return self.now_s
 
 
-class BlockingCamera(DepthCamera):
+class BlockingCamera(WrappedCamera):
     """Wraps a camera; a read blocks until :attr:`release` is set (a hung USB transfer), or
     raises ``error`` when one is given."""
 
     def __init__(self, inner: DepthCamera, error: BaseException | None = None) -> None:
-        super().__init__()
-        self.inner, self.error = inner, error
+        super().__init__(inner)
+        self.error = error
         self.entered, self.release = threading.Event(), threading.Event()
-        self._is_open = True
-
-    @property
-    def intrinsics(self) -> Intrinsics:
-        return self.inner.intrinsics
-
-    @property
-    def info(self) -> CameraInfo:
-        return self.inner.info
-
-    def _open(self) -> None: ...
-
-    def _close(self) -> None: ...
 
     def _read(self, timeout_s: float) -> Frame:
         self.entered.set()
