@@ -51,36 +51,55 @@ class BagFrame:
 
 
 class _Playback:
-    """The SDK pipeline playing ``path`` as fast as it can decode, colour-aligned when present."""
+    """The recording played sensor by sensor as fast as it can be decoded, colour-aligned when
+    present.
+
+    Not through ``rs.pipeline``: a pipeline starts playing before real time can be turned off,
+    so on a loaded machine its first frame sets are dropped as late (issues #1180, #2360 of
+    librealsense). Here the playback device is loaded, set to non-real time, and only then are
+    its depth and colour streams opened into one ``rs.syncer``; in non-real time the playback
+    waits for each frame to be taken, so every recorded frame set comes out.
+    """
 
     def __init__(self, rs: Any, path: Path) -> None:
         self.rs = rs
-        config = rs.config()
-        config.enable_device_from_file(str(path), repeat_playback=False)
-        self.pipeline = rs.pipeline()
         try:
-            profile = self.pipeline.start(config)
+            device = rs.context().load_device(str(path))
         except RuntimeError as error:
             raise FieldappError(f"{path}: the RealSense SDK cannot play it ({error})") from None
-        self.playback = profile.get_device().as_playback()
+        self.playback = device.as_playback()
         self.playback.set_real_time(False)
-        streams = {s.stream_type(): s for s in profile.get_streams()}
+        wanted = (rs.stream.depth, rs.stream.color)
+        streams: dict[Any, Any] = {}
+        self.opened: list[Any] = []
+        others: set[str] = set()
+        for sensor in device.query_sensors():
+            profiles = []
+            for profile in sensor.get_stream_profiles():
+                kind = profile.stream_type()
+                if kind in wanted and kind not in streams and profile.is_video_stream_profile():
+                    streams[kind] = profile
+                    profiles.append(profile)
+                elif kind not in wanted:
+                    others.add(str(kind).split(".")[-1])
+            if profiles:
+                sensor.open(profiles)
+                self.opened.append(sensor)
         if rs.stream.depth not in streams:
-            self.pipeline.stop()
+            self._close()
             raise FieldappError(f"{path}: the recording has no depth stream")
         self.has_color = rs.stream.color in streams
         camera_stream = streams[rs.stream.color if self.has_color else rs.stream.depth]
         self.intrinsics = camera_stream.as_video_stream_profile().get_intrinsics()
         self.align = rs.align(rs.stream.color) if self.has_color else None
-        self.others = sorted(
-            str(kind).split(".")[-1]
-            for kind in streams
-            if kind not in (rs.stream.depth, rs.stream.color)
-        )
+        self.others = sorted(others)
+        self.syncer = rs.syncer()
+        for sensor in self.opened:
+            sensor.start(self.syncer)
 
     def frames(self) -> Iterator[BagFrame]:
         while True:
-            ok, frames = self.pipeline.try_wait_for_frames(WAIT_MS)
+            ok, frames = self.syncer.try_wait_for_frames(WAIT_MS)
             if not ok:
                 if self.playback.current_status() == self.rs.playback_status.stopped:
                     return
@@ -89,16 +108,26 @@ class _Playback:
                 frames = self.align.process(frames)
                 depth, color = frames.get_depth_frame(), frames.get_color_frame()
                 if not (depth and color):
-                    continue
+                    continue  # the syncer hands out the first frames unpaired
                 yield BagFrame(_depth_m(depth), _rgb(self.rs, color))
             elif depth := frames.get_depth_frame():
                 yield BagFrame(_depth_m(depth), None)
 
     def stop(self) -> None:
-        try:
-            self.pipeline.stop()
-        except RuntimeError:
-            log.exception("stopping the RealSense playback")
+        for sensor in self.opened:
+            try:
+                sensor.stop()
+            except RuntimeError:
+                log.exception("stopping the RealSense playback")
+        self._close()
+
+    def _close(self) -> None:
+        for sensor in self.opened:
+            try:
+                sensor.close()
+            except RuntimeError:
+                log.exception("closing the RealSense playback")
+        self.opened = []
 
 
 def _depth_m(depth: Any) -> NDArray[np.float32]:
