@@ -199,6 +199,22 @@ def _cell(value: Any) -> str:
     return str(value) if isinstance(value, int) else f"{value:.2f}"
 
 
+def provenance_section(report: dict[str, Any]) -> str:
+    """Where the results came from (``report.json``'s provenance: devices, calibration,
+    software, settings hash) in one visible line with the details below it, and when this
+    report was written."""
+    from fieldapp.provenance import details_text, summary_line
+
+    provenance = report.get("provenance")
+    document = provenance if isinstance(provenance, dict) else None
+    written = dt.datetime.now().astimezone().isoformat(timespec="seconds")
+    return (
+        f"<p class=provenance><b>{_e(summary_line(document))}</b></p>"
+        f"<pre class=provenance>{_e(details_text(document))}</pre>"
+        f"<p>report written by fieldapp {_e(__version__)}, {_e(written)}</p>"
+    )
+
+
 def build_report(results_dir: Path, inputs: ReportInputs) -> str:
     """The HTML text of the report of ``results_dir``."""
     from fieldapp.evaluate.figures import trait_bars_png
@@ -220,8 +236,7 @@ def build_report(results_dir: Path, inputs: ReportInputs) -> str:
         f"<title>fieldapp report {_e(report.get('session', ''))}</title>",
         f"<style>{STYLE}</style></head><body>",
         f"<h1>Reconstruction report: {_e(report.get('session', results_dir.name))}</h1>",
-        f"<p>fieldapp {_e(__version__)}, "
-        f"{_e(dt.datetime.now().astimezone().isoformat(timespec='seconds'))}</p>",
+        provenance_section(report),
         "<h2>Session</h2>",
         _table(["", ""], summary),
         "<h2>Calibration used</h2>",
