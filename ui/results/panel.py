@@ -17,7 +17,13 @@ from fieldapp.settings import Settings
 from ui.results.data import PlotResults, load_results_dir
 from ui.results.history import HistoryPanel
 from ui.results.manual import ManualPanel
-from ui.results.runner import Outcome, ReconstructionRunner, default_results_dir
+from ui.results.provenance import show_provenance
+from ui.results.runner import (
+    Outcome,
+    ReconstructionRunner,
+    choose_results_dir,
+    default_results_dir,
+)
 from ui.results.scene import CloudScene, build_scene
 from ui.results.tables import PlantTableModel, leaf_model, station_model
 from ui.results.topmap import TopMap
@@ -69,7 +75,12 @@ class ResultsPanel(QtWidgets.QWidget):
         if self.session is None:
             raise FieldappError("open a session first")
         folder = Path(self.results_dir.text().strip() or default_results_dir(self.session.folder))
-        self.runner.start(self.session, self.settings.reconstruction, folder)
+        chosen = choose_results_dir(self, folder)
+        if chosen is None:
+            self.stage.setText(f"not reconstructed: the results in {folder} are kept")
+            return
+        self.results_dir.setText(str(chosen))
+        self.runner.start(self.session, self.settings.reconstruction, chosen)
         self.stage.setText("starting…")
         self.progress.setValue(0)
         self._set_running(True)
@@ -98,6 +109,7 @@ class ResultsPanel(QtWidgets.QWidget):
             f"{results.session_id}: {len(results.plants)} plants, {len(results.cloud)} points "
             f"→ {results.results_dir}"
         )
+        show_provenance(self.provenance, results.report.get("provenance"))
         self.export_button.setEnabled(True)
         self.history.record_button.setEnabled(True)
         self.results_shown.emit(results)
@@ -162,6 +174,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self.progress.setRange(0, 1000)
         self.stage = QtWidgets.QLabel("")
         self.summary = QtWidgets.QLabel("")
+        self.provenance = QtWidgets.QLabel("")  # where the results came from; details as tooltip
         row1 = QtWidgets.QHBoxLayout()
         for widget in (open_session, open_results, self.session_label):
             row1.addWidget(widget)
@@ -224,6 +237,7 @@ class ResultsPanel(QtWidgets.QWidget):
         layout.addLayout(row1)
         layout.addLayout(row2)
         layout.addWidget(self.summary)
+        layout.addWidget(self.provenance)
         layout.addWidget(splitter, 1)
         self.export_button.setEnabled(False)
         self.history.record_button.setEnabled(False)
