@@ -185,3 +185,38 @@ def test_reconstruct_refuses_to_overwrite_results(small_session, tmp_path, capsy
     (out / "report.json").write_text("{}")  # so a replaced report can be told from the old
     assert main([*args, "--overwrite"]) == 0
     assert _report(out)["provenance"]["session"]["id"] == load_session(small_session).id
+
+
+@pytest.mark.parametrize(
+    ("devices", "kind"),
+    [
+        ({}, "simulated"),
+        ({"table_port": "/dev/ttyUSB0"}, "mixed"),
+        (
+            {"camera_backend": "kinect2", "table_port": "/dev/ttyUSB0", "base_endpoint": "tcp://b"},
+            "real",
+        ),
+    ],
+)
+def test_a_mission_session_names_its_devices_and_rig_file(small_session, tmp_path, devices, kind):
+    from fieldapp.mission.folder import PLAN_FILE
+    from fieldapp.mission.plan import default_plan, save_plan
+    from fieldapp.settings import DeviceSettings
+
+    folder = tmp_path / "mission"
+    shutil.copytree(small_session, folder)
+    document = json.loads((folder / "session.json").read_text())
+    (folder / "session.json").write_text(json.dumps(document | {"mission": "north"}))
+    rig_file = tmp_path / "rig-calibration.json"
+    shutil.copyfile(folder / "calibration.json", rig_file)
+    plan = default_plan(DeviceSettings(**devices)).model_copy(update={"calibration": rig_file})
+    save_plan(plan, folder / PLAN_FILE)
+    found = provenance_of(load_session(folder), ReconstructionSettings()).document
+    assert found["source"]["kind"] == kind
+    assert found["source"]["devices"]["table"] == devices.get("table_port", "simulated")
+    rig = found["calibration"]["rig_file"]
+    assert rig["path"] == str(rig_file) and rig["same"] is True
+    assert rig["sha256"] == hashlib.sha256(rig_file.read_bytes()).hexdigest()
+    rig_file.write_text(rig_file.read_text().replace('"reference": 5', '"reference": 4'))
+    changed = provenance_of(load_session(folder), ReconstructionSettings()).document
+    assert changed["calibration"]["rig_file"]["same"] is False
