@@ -208,9 +208,11 @@ def write_outputs(
     """Write every output file into ``folder`` (created); returns the paths written. Plant
     clouds left in ``plants/`` by an earlier run with more plants are removed. ``leaves``
     (``leaves.csv``, written when given) and the per-point ``labels`` of ``cloud`` and
-    ``plant_labels`` of each plant cloud come from the organ step. ``provenance`` goes into
-    ``report.json`` (``provenance``, ``settings``, ``software_version``); ``provenance.json``
-    is written whenever the report has one (also when results are exported again)."""
+    ``plant_labels`` of each plant cloud come from the organ step. ``provenance`` (given by a
+    new reconstruction, not by a re-export) goes into ``report.json`` (``provenance``,
+    ``settings``, ``software_version``), and then a ``leaves.csv`` an earlier run left is
+    removed when this run has none; ``provenance.json`` is written whenever the report has a
+    provenance (also when results are exported again)."""
     if provenance is not None:
         report = report | {
             "provenance": provenance.document,
@@ -233,6 +235,8 @@ def write_outputs(
     if leaves is not None:
         write_bytes_durably(folder / "leaves.csv", leaves_csv_text(leaves).encode("utf-8"))
         written.append(folder / "leaves.csv")
+    elif provenance is not None and (folder / "leaves.csv").exists():
+        (folder / "leaves.csv").unlink()  # an earlier run's leaves are not this run's plants
     if isinstance(report.get("provenance"), dict):
         write_json_durably(folder / PROVENANCE_FILE, report["provenance"])
         written.append(folder / PROVENANCE_FILE)

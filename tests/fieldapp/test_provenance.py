@@ -11,6 +11,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fieldapp import __version__, provenance
@@ -220,3 +221,20 @@ def test_a_mission_session_names_its_devices_and_rig_file(small_session, tmp_pat
     rig_file.write_text(rig_file.read_text().replace('"reference": 5', '"reference": 4'))
     changed = provenance_of(load_session(folder), ReconstructionSettings()).document
     assert changed["calibration"]["rig_file"]["same"] is False
+
+
+def test_a_new_run_without_organs_removes_the_earlier_leaves(tmp_path):
+    from fieldapp.provenance import RunProvenance
+    from fieldapp.recon.cloud import Cloud
+    from fieldapp.recon.outputs import LeafRow, PlantRow, write_outputs
+
+    cloud = Cloud(np.zeros((3, 3)), np.zeros((3, 3), np.uint8))
+    rows = [PlantRow(1, 0.0, 0.0, 10.0, 5.0, 3)]
+    leaves = [LeafRow(1, 1, 10.0, 2.0, 15.0, 40.0, 90.0, 3.0)]
+    write_outputs(tmp_path, rows, cloud, {1: cloud}, {}, leaves=leaves)
+    write_outputs(tmp_path, rows, cloud, {1: cloud}, {})  # a re-export keeps them
+    assert (tmp_path / "leaves.csv").is_file()
+    run = RunProvenance({"software": {"version": "0.1.0"}}, {"threads": 1})
+    write_outputs(tmp_path, rows, cloud, {1: cloud}, {}, provenance=run)
+    assert not (tmp_path / "leaves.csv").exists()
+    assert _report(tmp_path)["settings"] == {"threads": 1}
