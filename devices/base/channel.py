@@ -17,6 +17,7 @@ import logging
 import secrets
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import zmq
@@ -29,6 +30,8 @@ from devices.base.protocol import ProtocolError, Reply, decode_reply
 log = logging.getLogger(__name__)
 
 _monitor_ids = itertools.count()
+
+POLL_SLICE_S = 0.05
 
 _KEY_HINT = "is base.key the base's public key, and do both ends use CURVE?"
 _HANDSHAKE_FAILURES: dict[int, str] = {
@@ -53,11 +56,15 @@ class RequestChannel:
         context: zmq.Context[zmq.Socket[bytes]],
         endpoint: str,
         keys: ClientKeys | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        """``clock`` times each try's wait (a fake one in tests); the socket is polled at
+        least every ``POLL_SLICE_S`` of real time to look at it."""
         require_loopback_without_keys(endpoint, keys is not None)
         self.endpoint = endpoint
         self._context = context
         self._keys = keys
+        self._clock = clock
         self._lock = threading.Lock()
         self._socket: zmq.Socket[bytes] | None = None
         self._monitor: zmq.Socket[bytes] | None = None
@@ -109,9 +116,10 @@ class RequestChannel:
         poller = zmq.Poller()
         poller.register(sock, zmq.POLLIN)
         poller.register(monitor, zmq.POLLIN)
-        deadline_s = time.monotonic() + timeout_s
-        while (remaining_s := deadline_s - time.monotonic()) > 0:
-            events = dict(poller.poll(timeout=max(1, round(remaining_s * 1000))))
+        deadline_s = self._clock() + timeout_s
+        while (remaining_s := deadline_s - self._clock()) > 0:
+            wait_s = min(remaining_s, POLL_SLICE_S)
+            events = dict(poller.poll(timeout=max(1, round(wait_s * 1000))))
             if monitor in events:
                 self._read_monitor(monitor)
             if sock in events:

@@ -16,7 +16,7 @@ import logging
 import threading
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
@@ -269,14 +269,18 @@ def open_base(
     keys: ClientKeys | None = None,
     timing: ClientTiming | None = None,
     context: Context | None = None,
+    clock: Callable[[], float] = time.monotonic,
 ) -> BaseClient:
     """A client of the base at ``endpoint`` (subscribed to ``telemetry_endpoint`` if given).
 
     Over ``tcp://`` (CURVE with ``keys``; loopback only without, else :class:`InsecureEndpoint`)
     the client has its own ZeroMQ context; an in-process base on ``inproc://`` is reached
-    through its ``context``. Nothing is sent yet (call :meth:`BaseClient.hello`).
+    through its ``context``. ``clock`` times each request's tries (``timing``; a fake clock in
+    tests). Nothing is sent yet (call :meth:`BaseClient.hello`).
     """
-    transport = open_transport(endpoint, telemetry_endpoint, keys=keys, context=context)
+    transport = open_transport(
+        endpoint, telemetry_endpoint, keys=keys, context=context, clock=clock
+    )
     try:
         return BaseClient(transport, timing=timing)
     except BaseException:

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import itertools
 import logging
+import time
+from collections.abc import Callable
 from typing import Protocol
 
 import zmq
@@ -80,10 +82,12 @@ class ZmqTransport:
         keys: ClientKeys | None = None,
         *,
         owns_context: bool = False,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        """``clock`` times each request's tries (a fake one in tests)."""
         if telemetry_endpoint is not None:
             require_loopback_without_keys(telemetry_endpoint, keys is not None)
-        self._channel = RequestChannel(context, endpoint, keys)
+        self._channel = RequestChannel(context, endpoint, keys, clock)
         self._context = context
         self._owns_context = owns_context
         self._keys = keys
@@ -131,12 +135,13 @@ def open_transport(
     *,
     keys: ClientKeys | None = None,
     context: Context | None = None,
+    clock: Callable[[], float] = time.monotonic,
 ) -> ZmqTransport:
     """The transport to a base at ``endpoint`` (and its telemetry, if given).
 
     ``context``: the one the base binds on, required for ``inproc://`` (an in-process base);
-    otherwise the transport makes its own. Raises :class:`InsecureEndpoint` for a
-    non-loopback address without ``keys``.
+    otherwise the transport makes its own. ``clock`` times each request's tries. Raises
+    :class:`InsecureEndpoint` for a non-loopback address without ``keys``.
     """
     in_process = [e for e in (endpoint, telemetry_endpoint) if e and e.startswith(INPROC_SCHEME)]
     if context is None and in_process:
@@ -147,7 +152,7 @@ def open_transport(
     own = context is None
     used: Context = zmq.Context() if context is None else context
     try:
-        return ZmqTransport(used, endpoint, telemetry_endpoint, keys, owns_context=own)
+        return ZmqTransport(used, endpoint, telemetry_endpoint, keys, owns_context=own, clock=clock)
     except BaseException:
         if own:
             used.term()

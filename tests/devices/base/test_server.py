@@ -30,11 +30,19 @@ from devices.base.motion import wrap_deg
 from devices.base.protocol import Command, Status
 from devices.base.server import ServerTiming, TelemetrySchedule
 
-from ..fake_clock import FakeClock
+from ..fake_clock import FakeClock, wait_real
 
 MakeSim = Callable[..., SimulatedBase]
 MakeClient = Callable[..., BaseClient]
 WaitFor = Callable[[Callable[[], bool], float], float]
+
+
+def _advance_until(clock: FakeClock, done: Callable[[], bool], step_s: float = 0.05) -> bool:
+    """Move ``clock`` on by ``step_s`` unless ``done()``; for ``wait_real``."""
+    if done():
+        return True
+    clock.advance(step_s)
+    return False
 
 
 def _request(sock: zmq.Socket[bytes], body: bytes, timeout_ms: int = 1000) -> dict[str, Any] | None:
@@ -371,7 +379,8 @@ def test_frozen_or_crashed_base_is_reported_offline_after_the_retries(
     make_sim: MakeSim, make_client: MakeClient, fault: SimFault
 ) -> None:
     sim = make_sim(time_scale=1.0)
-    client = make_client(sim.command_endpoint)
+    clock = FakeClock()  # each try waits 0.5 s of it: replies are never late until it moves
+    client = make_client(sim.command_endpoint, clock=clock)
     client.goto("g", Pose(3.0, 0.0, 0.0), wait=False)
     failed: list[BaseException] = []
 
@@ -386,6 +395,7 @@ def test_frozen_or_crashed_base_is_reported_offline_after_the_retries(
     thread.start()
     time.sleep(0.3)
     sim.inject_fault(fault)
+    wait_real(lambda: _advance_until(clock, lambda: not thread.is_alive()))
     thread.join(timeout=30.0)  # the retry budget is 3 x 0.5 s; benchmarks/ measures it
     assert len(failed) == 1
     assert isinstance(failed[0], BaseOffline)

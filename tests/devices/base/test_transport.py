@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -16,6 +17,7 @@ from devices.base import (
     BaseTransport,
     ClientTiming,
     Pose,
+    SimFault,
     SimulatedBase,
     Status,
     open_base,
@@ -24,6 +26,8 @@ from devices.base import (
 from devices.base.channel import RetryPolicy
 from devices.base.protocol import Reply
 from devices.base.telemetry import PoseCallback, StateCallback
+
+from ..fake_clock import FakeClock, wait_real
 
 MakeSim = Callable[..., SimulatedBase]
 MakeClient = Callable[..., BaseClient]
@@ -134,3 +138,36 @@ def test_an_in_process_base_is_reached_without_a_port_and_its_end_is_offline(
     sim.close()  # its socket is gone, and over inproc:// with it the client's only pipe:
     with pytest.raises(BaseOffline):  # a send must not block for want of a peer
         client.status()
+
+
+def test_each_try_waits_on_the_client_s_clock(make_sim: MakeSim, make_client: MakeClient) -> None:
+    """A frozen base: two tries of 30 s of the client's clock, gone in a moment of real time."""
+    sim = make_sim()
+    clock = FakeClock()
+    client = make_client(sim.command_endpoint, clock=clock, timing=ClientTiming(30.0, retries=1))
+    client.hello()
+    sim.inject_fault(SimFault.FREEZE)
+    failed: list[BaseException] = []
+
+    def ask() -> None:
+        try:
+            while True:  # the request the loop was serving when it froze is still answered
+                client.status()
+        except BaseException as error:
+            failed.append(error)
+
+    thread = threading.Thread(target=ask)
+    thread.start()
+    start_s = clock()
+    assert wait_real(lambda: _advance_unless(clock, bool(failed)))
+    thread.join(timeout=20.0)
+    assert isinstance(failed[0], BaseOffline)
+    assert "no reply in 2 tries over 60.0 s" in str(failed[0])
+    assert clock() - start_s >= 60.0
+
+
+def _advance_unless(clock: FakeClock, done: bool) -> bool:
+    """``done``, after moving ``clock`` on by half a second when it is not."""
+    if not done:
+        clock.advance(0.5)
+    return done
