@@ -233,7 +233,7 @@ class BaseClient:
 
     def _beat(self) -> None:
         while not self._closed.is_set():
-            if not self._goal_event.wait(timeout=0.1):
+            if not self._goal_event.wait(timeout=0.1) or self._closed.is_set():
                 continue
             try:
                 self.heartbeat()
@@ -246,8 +246,9 @@ class BaseClient:
     def close(self) -> None:
         """Stop heartbeats, then close the transport (the base is not told)."""
         self._closed.set()
-        self._end_goal()
+        self._goal_event.set()  # wakes the heartbeat thread, which sees it is closed
         self._heartbeat.join(timeout=5.0)
+        self._end_goal()
         self._transport.close()
 
     def __enter__(self) -> BaseClient:
