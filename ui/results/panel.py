@@ -16,7 +16,9 @@ from fieldapp.recon.progress import Progress
 from fieldapp.settings import Settings
 from ui.results.data import PlotResults, load_results_dir
 from ui.results.history import HistoryPanel
+from ui.results.inspector import PlantInspector
 from ui.results.manual import ManualPanel
+from ui.results.organ_accuracy import OrganAccuracyPanel
 from ui.results.runner import Outcome, ReconstructionRunner, default_results_dir
 from ui.results.scene import CloudScene, build_scene
 from ui.results.tables import PlantTableModel, leaf_model, station_model
@@ -109,6 +111,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self.selected = plant
         self.view3d.select(plant)
         self.map.select(plant)
+        self.inspector.show_plant(plant)
         self.leaves.setModel(
             leaf_model([] if plant is None else self.results.leaves.get(plant, []))
         )
@@ -134,7 +137,13 @@ class ResultsPanel(QtWidgets.QWidget):
         from ui.results.export import export_results  # matplotlib: only when exporting
 
         return partial(
-            export_results, self.results, folder, self.manual.evaluation, growth, calibration
+            export_results,
+            self.results,
+            folder,
+            self.manual.evaluation,
+            growth,
+            calibration,
+            organ_evaluation=self.organ_accuracy.evaluation,
         )
 
     def shutdown(self) -> None:
@@ -227,6 +236,20 @@ class ResultsPanel(QtWidgets.QWidget):
         layout.addWidget(splitter, 1)
         self.export_button.setEnabled(False)
         self.history.record_button.setEnabled(False)
+        self._build_organ_views()
+
+    def _build_organ_views(self) -> None:
+        """The per-plant inspector (linked both ways with the plant table, the 3D view and
+        the map through :meth:`select_plant`) and the organ accuracy."""
+        self.inspector = PlantInspector()
+        self.inspector.plant_selected.connect(self.select_plant)
+        self.tabs.insertTab(1, self.inspector, "Plant")
+        self.organ_accuracy = OrganAccuracyPanel()
+        self.tabs.insertTab(
+            self.tabs.indexOf(self.manual) + 1, self.organ_accuracy, "Organ accuracy"
+        )
+        self.results_shown.connect(self.inspector.set_results)
+        self.results_shown.connect(self.organ_accuracy.set_results)
 
     # --- slots -------------------------------------------------------------------------
 
