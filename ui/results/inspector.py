@@ -63,6 +63,7 @@ class PlantInspector(QtWidgets.QWidget):
         splitter.addWidget(self.leaves)
         splitter.setStretchFactor(0, 3)
         splitter.setStretchFactor(1, 2)
+        splitter.setSizes([540, 460])
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(top)
         layout.addWidget(splitter, 1)
@@ -117,6 +118,7 @@ class PlantInspector(QtWidgets.QWidget):
 
     def _set_leaves(self, leaves: list[dict[str, object]]) -> None:
         self.leaves.setModel(leaf_model(leaves))  # type: ignore[arg-type]
+        self.leaves.resizeColumnsToContents()
         self.leaves.selectionModel().selectionChanged.connect(self._leaf_row_selected)
 
     def _leaf_row_selected(self) -> None:
@@ -138,7 +140,7 @@ class _GLPlantView(gl.GLViewWidget):  # type: ignore[misc]
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.setBackgroundColor((20, 22, 26))
-        self.cloud = gl.GLScatterPlotItem(pxMode=True, size=3.0, glOptions="opaque")
+        self.cloud = gl.GLScatterPlotItem(pxMode=True, size=4.0, glOptions="opaque")
         self.height_line = gl.GLLinePlotItem(color=HEIGHT_RGBA, width=3.0, antialias=True)
         self.width_circle = gl.GLLinePlotItem(color=WIDTH_RGBA, width=2.0, antialias=True)
         self.grid = gl.GLGridItem(color=(255, 255, 255, 50))
@@ -161,20 +163,24 @@ class _GLPlantView(gl.GLViewWidget):  # type: ignore[misc]
         self.grid.setSpacing(x=0.05, y=0.05)
         foot = drawing.height_line_m[0]
         self.grid.translate(float(foot[0]), float(foot[1]), float(ground))
-        centre = QtGui.QVector3D(float(foot[0]), float(foot[1]), float(ground) + size / 3)
-        self.setCameraPosition(pos=centre, distance=2.2 * size, elevation=20, azimuth=-60)
+        middle = float(ground) + 0.45 * drawing.height_cm / 100.0
+        centre = QtGui.QVector3D(float(foot[0]), float(foot[1]), middle)
+        self.setCameraPosition(
+            pos=centre, distance=1.5 * size, elevation=18, azimuth=drawing.view_azimuth_deg
+        )
 
     def color(self, drawing: PlantDrawing, leaf_id: int | None) -> None:
         self.cloud.setData(color=drawing.colors_for_leaf(leaf_id))
 
 
 class _SidePlantView(pg.PlotWidget):  # type: ignore[misc]
-    """The plant from the side: one scatter per organ instance, each with one brush
-    (per-point brush lists, replaced, crash PySide6 6.12)."""
+    """The plant from the side, across its leaves (horizontal: along the direction the
+    leaves spread most, from the foot; vertical: height). One scatter per organ instance, each
+    with one brush (per-point brush lists, replaced, crash PySide6 6.12)."""
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
-        self.setLabel("bottom", "x (m, field frame)")
+        self.setLabel("bottom", "along the leaves, from the foot (m)")
         self.setLabel("left", "height (m)")
         self.setAspectLocked(True)
         self.groups: dict[tuple[int, int], pg.ScatterPlotItem] = {}
@@ -196,11 +202,14 @@ class _SidePlantView(pg.PlotWidget):  # type: ignore[misc]
             mine = (drawing.organ == organ) & (drawing.leaf_id == leaf)
             item = pg.ScatterPlotItem(size=3, pen=None)
             points = drawing.points_m[mine]
-            item.setData(x=points[:, 0], y=points[:, 2])
+            item.setData(x=drawing.along_fan_m(points), y=points[:, 2])
             self.addItem(item)
             self.groups[(int(organ), int(leaf))] = item
-        self.height_line.setData(drawing.height_line_m[:, 0], drawing.height_line_m[:, 2])
-        self.width_segment.setData(drawing.width_segment_m[:, 0], drawing.width_segment_m[:, 2])
+        self.height_line.setData([0.0, 0.0], drawing.height_line_m[:, 2])
+        centre = drawing.along_fan_m(drawing.width_circle_m[:-1].mean(axis=0, keepdims=True))[0]
+        radius = drawing.width_cm / 200.0
+        ground = drawing.width_circle_m[0, 2]
+        self.width_segment.setData([centre - radius, centre + radius], [ground, ground])
         self.color(drawing, None)
 
     def color(self, drawing: PlantDrawing, leaf_id: int | None) -> None:

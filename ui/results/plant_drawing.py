@@ -41,7 +41,7 @@ LEAF_RGB = (
     (1.00, 0.50, 0.05),
 )
 """One colour per leaf, by leaf number (repeating after eight leaves)."""
-DIM = 0.25
+DIM = 0.4
 CIRCLE_VERTICES = 96
 
 
@@ -74,14 +74,24 @@ class PlantDrawing:
     """(2, 3) from the local ground at the foot up to the plant's top."""
     width_circle_m: NDArray[np.float64]
     """(CIRCLE_VERTICES + 1, 3) closed circle on the local ground."""
-    width_segment_m: NDArray[np.float64]
-    """(2, 3) the circle's diameter along x (what a side view shows of it)."""
+    fan_xy: NDArray[np.float64]
+    """(2,) unit horizontal direction the leaves spread along most (a maize plant's leaves
+    stand in about one plane): the views look across it, and the side view draws along it."""
     height_cm: float
     width_cm: float
     caption: str
     """The traits drawn, with their definitions named."""
     leaves: list[dict[str, Any]]
     """The plant's ``leaves.csv`` rows, from the bottom."""
+
+    @property
+    def view_azimuth_deg(self) -> float:
+        """The camera's azimuth (from +x, counter-clockwise) looking across the leaves."""
+        return float(np.degrees(np.arctan2(self.fan_xy[1], self.fan_xy[0]))) + 90.0
+
+    def along_fan_m(self, points_m: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
+        """(N,) horizontal position of ``points_m`` (N, 3) along the fan, from the foot."""
+        return (np.asarray(points_m[:, :2], np.float64) - self.height_line_m[0, :2]) @ self.fan_xy
 
     def colors_for_leaf(self, leaf_id: int | None) -> NDArray[np.float32]:
         """(N, 4) the colours with leaf ``leaf_id`` alone at full strength (None: all)."""
@@ -101,6 +111,14 @@ def organ_colors(organ: NDArray[np.uint8], leaf_id: NDArray[np.uint8]) -> NDArra
     for leaf in np.unique(leaf_id[organ == ORGAN_LEAF]):
         rgba[(organ == ORGAN_LEAF) & (leaf_id == leaf), :3] = leaf_rgb(int(leaf))
     return rgba
+
+
+def fan_direction(points_xy_m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(2,) unit direction of the largest spread of ``points_xy_m`` (N, 2)."""
+    if len(points_xy_m) < 2:
+        return np.array([1.0, 0.0])
+    _, vectors = np.linalg.eigh(np.cov(points_xy_m.T))
+    return np.asarray(vectors[:, -1], np.float64)
 
 
 def plant_drawing(
@@ -129,7 +147,7 @@ def plant_drawing(
             [[record.x_m, record.y_m, ground_z], [record.x_m, record.y_m, top_z]]
         ),
         width_circle_m=ring,
-        width_segment_m=centre + np.array([[-circle.radius_m, 0, 0], [circle.radius_m, 0, 0]]),
+        fan_xy=fan_direction(points[:, :2]),
         height_cm=record.height_cm,
         width_cm=record.width_cm,
         caption=(
