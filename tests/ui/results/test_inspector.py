@@ -104,8 +104,24 @@ def test_a_leaf_row_highlights_that_leaf(panel, plot_results: Path) -> None:
         full = drawing.colors[(drawing.organ == organ) & (drawing.leaf_id == leaf)][0, :3]
         expected = full if leaf == leaf_id else DIM * full
         assert rgb == pytest.approx(expected, abs=1 / 255)
+    for (organ, leaf), item in inspector.view.groups.items():  # drawn across the leaves
+        mine = drawing.points_m[(drawing.organ == organ) & (drawing.leaf_id == leaf)]
+        assert item.data["x"] == pytest.approx(drawing.along_fan_m(mine), abs=1e-6)
     inspector.select_leaf(None)
     assert inspector.leaves.selectionModel().selectedRows() == []
+
+
+def test_the_view_looks_across_the_leaves() -> None:
+    from ui.results.plant_drawing import fan_direction
+
+    rng = np.random.default_rng(3)
+    for angle_deg in (0.0, 30.0, 115.0):
+        along = rng.uniform(-0.2, 0.2, 500)
+        across = rng.normal(0.0, 0.01, 500)
+        a = np.radians(angle_deg)
+        xy = np.c_[along * np.cos(a) - across * np.sin(a), along * np.sin(a) + across * np.cos(a)]
+        direction = fan_direction(xy + np.array([1.0, 2.0]))
+        assert abs(direction @ [np.cos(a), np.sin(a)]) == pytest.approx(1.0, abs=1e-3)
 
 
 def test_organ_accuracy_against_the_truth_and_in_the_export(
@@ -149,3 +165,30 @@ def test_organ_accuracy_against_hand_measured_leaves(panel, plot_results: Path, 
     manual.write_text("plant_id,leaf_id,length_cm\n1,x,3\n")
     with pytest.raises(FieldappError, match="column leaf_id"):
         accuracy.compare(manual_leaves=manual)
+
+
+def test_an_export_carries_the_organ_accuracy(tmp_path: Path) -> None:
+    from fieldapp.recon.cloud import Cloud
+    from fieldapp.recon.outputs import LeafRow, PlantRow, write_outputs
+    from ui.results.export import export_results
+
+    rng = np.random.default_rng(2)
+    cloud = Cloud(rng.random((40, 3)), rng.integers(0, 255, (40, 3), dtype=np.uint8))
+    rows = [PlantRow(1, 0.5, 0.5, 30.0, 40.0, 40, leaf_count=2, leaf_area_cm2=100.0)]
+    leaves = [LeafRow(1, k, 20.0 + k, 4.0, 50.0, 40.0, 90.0, 5.0 * k) for k in (1, 2)]
+    report = {"format": "fieldapp-reconstruction-report/1", "session": "s", "warnings": []}
+    write_outputs(tmp_path / "r", rows, cloud, {1: cloud}, report, leaves=leaves)
+    manual = tmp_path / "manual_leaves.csv"
+    manual.write_text("plant_id,leaf_id,length_cm\n1,1,20\n1,2,21\n")
+    evaluation, _ = evaluate_organ_references(tmp_path / "r", manual_leaves=manual)
+    written = export_results(
+        load_results_dir(tmp_path / "r"), tmp_path / "e", organ_evaluation=evaluation
+    )
+    assert {tmp_path / "e" / "organs_metrics.csv", tmp_path / "e" / "leaf_pairs.csv"} <= set(
+        written
+    )
+    metrics = (tmp_path / "e" / "organs_metrics.csv").read_text()
+    assert "length_cm,leaf,2,,1.000," in metrics  # both leaves 1 cm longer than by hand
+    html = (tmp_path / "e" / "report.html").read_text()
+    assert "Organ accuracy against the reference" in html
+    assert "Leaf count exact on 1 of 1 plants" in html
