@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from fieldapp.evaluate.metrics import Agreement, agreement
 
@@ -54,6 +53,8 @@ def pair_leaves(
 ) -> list[tuple[int, int]]:
     """Pairs (index in ``found``, index in ``reference``) of leaves (dicts with at least
     ``azimuth_deg`` and ``insertion_height_cm``)."""
+    from scipy.optimize import linear_sum_assignment  # SciPy loads when first used
+
     if not found or not reference:
         return []
     cost = np.array(

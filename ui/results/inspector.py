@@ -20,6 +20,7 @@ import pyqtgraph.opengl as gl
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from fieldapp.errors import FieldappError
+from fieldapp.recon.settings import PlantSettings
 from ui.results.data import PlotResults
 from ui.results.plant_drawing import PlantDrawing, plant_drawing
 from ui.results.tables import leaf_model
@@ -36,8 +37,12 @@ class PlantInspector(QtWidgets.QWidget):
 
     plant_selected = QtCore.Signal(int)
 
-    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+    def __init__(
+        self, settings: PlantSettings | None = None, parent: QtWidgets.QWidget | None = None
+    ) -> None:
+        """``settings``: the reconstruction's plant settings (the height's top support)."""
         super().__init__(parent)
+        self.settings = settings or PlantSettings()
         self.results: PlotResults | None = None
         self.drawing: PlantDrawing | None = None
         self.highlighted_leaf: int | None = None
@@ -89,7 +94,7 @@ class PlantInspector(QtWidgets.QWidget):
         drawing = None
         if plant is not None:
             try:
-                drawing = plant_drawing(self.results, plant)
+                drawing = plant_drawing(self.results, plant, self.settings)
             except (FieldappError, KeyError) as error:
                 self._show(None)
                 self.caption.setText(f"⚠ plant {plant} cannot be drawn: {error}")

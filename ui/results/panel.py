@@ -241,7 +241,7 @@ class ResultsPanel(QtWidgets.QWidget):
     def _build_organ_views(self) -> None:
         """The per-plant inspector (linked both ways with the plant table, the 3D view and
         the map through :meth:`select_plant`) and the organ accuracy."""
-        self.inspector = PlantInspector()
+        self.inspector = PlantInspector(self.settings.reconstruction.plants)
         self.inspector.plant_selected.connect(self.select_plant)
         self.tabs.insertTab(1, self.inspector, "Plant")
         self.organ_accuracy = OrganAccuracyPanel()

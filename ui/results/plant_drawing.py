@@ -6,8 +6,9 @@ of its height and the circle of its width, both as ``plants.csv`` defines them
 The height line stands at the plant's foot, from the local ground up to the highest supported
 point (the point :func:`fieldapp.recon.traits.robust_top_z_m` finds, with the reconstruction's
 settings); the local ground is that top less the height. The width circle is the smallest
-circle enclosing the plant's projection (:func:`smallest_enclosing_circle`), drawn on the
-local ground.
+circle enclosing the plant's projection (:func:`fieldapp.recon.traits.smallest_enclosing_circle`),
+drawn on the local ground. SciPy (which those use) is imported when a plant is first drawn,
+not with the GUI (``tests/ui/test_startup.py``).
 """
 
 from __future__ import annotations
@@ -21,10 +22,8 @@ from numpy.typing import NDArray
 
 from fieldapp.errors import FieldappError
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_STEM, ORGAN_WHORL
 from fieldapp.recon.outputs import read_labelled_ply
 from fieldapp.recon.settings import PlantSettings
-from fieldapp.recon.traits import robust_top_z_m, smallest_enclosing_circle
 from ui.results.data import PlotResults
 
 STEM_RGB = (0.55, 0.33, 0.16)
@@ -104,6 +103,8 @@ class PlantDrawing:
 
 def organ_colors(organ: NDArray[np.uint8], leaf_id: NDArray[np.uint8]) -> NDArray[np.float32]:
     """(N, 4) RGBA: stem, whorl, each leaf and the rest in their colours."""
+    from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_STEM, ORGAN_WHORL  # SciPy: when used
+
     rgba = np.ones((len(organ), 4), np.float32)
     rgba[:, :3] = OTHER_RGB
     rgba[organ == ORGAN_STEM, :3] = STEM_RGB
@@ -127,6 +128,8 @@ def plant_drawing(
     """The drawing of ``plant``: its labelled PLY (``plants/<plant>.ply``) when the results
     folder has one, else its cloud in memory (organs unknown). Raises ``KeyError`` for a plant
     not in ``results``, :class:`FieldappError` for a plant without points or a bad PLY."""
+    from fieldapp.recon.traits import robust_top_z_m, smallest_enclosing_circle  # SciPy
+
     settings = settings or PlantSettings()
     record = results.plant(plant)
     points, organ, leaf = _labelled_points(results, plant)
