@@ -100,7 +100,7 @@ class OrganAccuracyPanel(QtWidgets.QWidget):
         self._set_enabled(True)
         truth = results.session_folder / "truth.json" if results.session_folder else None
         if truth is not None and truth.is_file():
-            self.compare(truth=truth)
+            self._try(lambda: self.compare(truth=truth))
         else:
             self.status.setText("Import hand-measured leaves (or a simulator's truth.json).")
 

@@ -145,6 +145,16 @@ def test_organ_accuracy_against_the_truth_and_in_the_export(
     assert job.keywords["organ_evaluation"] is shown
 
 
+def test_a_bad_truth_is_named_not_raised(panel, plot_results: Path, tmp_path: Path) -> None:
+    (tmp_path / "truth.json").write_text('{"format": "fieldapp-sim-truth/1", "plants": [{}]}')
+    results = load_results_dir(plot_results)
+    results.session_folder = tmp_path
+    panel.show_results(results)
+    assert panel.organ_accuracy.evaluation is None
+    assert panel.organ_accuracy.status.text().startswith("⚠")
+    assert str(tmp_path / "truth.json") in panel.organ_accuracy.status.text()
+
+
 def test_organ_accuracy_against_hand_measured_leaves(panel, plot_results: Path, tmp_path) -> None:
     from fieldapp.errors import FieldappError
 
