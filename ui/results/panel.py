@@ -16,9 +16,7 @@ from fieldapp.recon.progress import Progress
 from fieldapp.settings import Settings
 from ui.results.data import PlotResults, load_results_dir
 from ui.results.history import HistoryPanel
-from ui.results.inspector import PlantInspector
 from ui.results.manual import ManualPanel
-from ui.results.organ_accuracy import OrganAccuracyPanel
 from ui.results.runner import Outcome, ReconstructionRunner, default_results_dir
 from ui.results.scene import CloudScene, build_scene
 from ui.results.tables import PlantTableModel, leaf_model, station_model
@@ -240,7 +238,11 @@ class ResultsPanel(QtWidgets.QWidget):
 
     def _build_organ_views(self) -> None:
         """The per-plant inspector (linked both ways with the plant table, the 3D view and
-        the map through :meth:`select_plant`) and the organ accuracy."""
+        the map through :meth:`select_plant`) and the organ accuracy: one block, its imports
+        with it."""
+        from ui.results.inspector import PlantInspector
+        from ui.results.organ_accuracy import OrganAccuracyPanel
+
         self.inspector = PlantInspector(self.settings.reconstruction.plants)
         self.inspector.plant_selected.connect(self.select_plant)
         self.tabs.insertTab(1, self.inspector, "Plant")
