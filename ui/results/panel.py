@@ -121,6 +121,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self.selected = plant
         self.view3d.select(plant)
         self.map.select(plant)
+        self.inspector.show_plant(plant)
         self.leaves.setModel(
             leaf_model([] if plant is None else self.results.leaves.get(plant, []))
         )
@@ -146,7 +147,13 @@ class ResultsPanel(QtWidgets.QWidget):
         from ui.results.export import export_results  # matplotlib: only when exporting
 
         return partial(
-            export_results, self.results, folder, self.manual.evaluation, growth, calibration
+            export_results,
+            self.results,
+            folder,
+            self.manual.evaluation,
+            growth,
+            calibration,
+            organ_evaluation=self.organ_accuracy.evaluation,
         )
 
     def shutdown(self) -> None:
@@ -241,6 +248,24 @@ class ResultsPanel(QtWidgets.QWidget):
         layout.addWidget(splitter, 1)
         self.export_button.setEnabled(False)
         self.history.record_button.setEnabled(False)
+        self._build_organ_views()
+
+    def _build_organ_views(self) -> None:
+        """The per-plant inspector (linked both ways with the plant table, the 3D view and
+        the map through :meth:`select_plant`) and the organ accuracy: one block, its imports
+        with it."""
+        from ui.results.inspector import PlantInspector
+        from ui.results.organ_accuracy import OrganAccuracyPanel
+
+        self.inspector = PlantInspector(self.settings.reconstruction.plants)
+        self.inspector.plant_selected.connect(self.select_plant)
+        self.tabs.insertTab(1, self.inspector, "Plant")
+        self.organ_accuracy = OrganAccuracyPanel()
+        self.tabs.insertTab(
+            self.tabs.indexOf(self.manual) + 1, self.organ_accuracy, "Organ accuracy"
+        )
+        self.results_shown.connect(self.inspector.set_results)
+        self.results_shown.connect(self.organ_accuracy.set_results)
 
     # --- slots -------------------------------------------------------------------------
 
