@@ -1,0 +1,260 @@
+"""Manual corrections of plants on a small labelled plot made here (two synthetic seedlings):
+merge, split by stems, delete, renumber, undo, re-application after a new reconstruction, and a
+bad corrections file named by file and field."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from fieldapp.errors import FormatError
+from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.organ_traits import foot_m, measure_organs
+from fieldapp.recon.outputs import LeafRow, PlantRow, PointLabels, read_labelled_ply, write_outputs
+from fieldapp.recon.settings import ReconstructionSettings
+from fieldapp.recon.traits import PlantTraits, measure_plant
+from fieldapp.results.corrected import (
+    AUTO_PLANTS,
+    CorrectionError,
+    add_correction,
+    apply_corrections,
+    undo_correction,
+)
+from fieldapp.results.corrections import (
+    Corrections,
+    Delete,
+    Merge,
+    PlantRef,
+    Relabel,
+    Split,
+    load_corrections,
+    read_corrections,
+)
+from fieldapp.results.organ_tables import read_table
+
+from ..recon.synthetic import ground_patch, seedling
+
+SETTINGS = ReconstructionSettings()
+STEMS = ((0.0, 0.0), (0.3, 0.02))
+"""Two seedlings 30 cm apart: 20 cm wide leaf discs, 10 cm of air between them."""
+
+
+def _plants(seed: int) -> list[NDArray[np.float64]]:
+    rng = np.random.default_rng(seed)
+    return [seedling(rng, x, y, 0.2, h, 3000) for (x, y), h in zip(STEMS, (0.22, 0.3), strict=True)]
+
+
+SOIL = ground_patch(np.random.default_rng(9), 0.6, 4000, noise_m=0.0)
+
+
+def _traits(points: NDArray[np.float64]) -> PlantTraits:
+    """What the reconstruction's trait code gives for these points (flat soil at z = 0)."""
+    p = SETTINGS.plants
+    return measure_plant(
+        points,
+        SOIL,
+        p.base_slice_m,
+        SETTINGS.ground.local_ground_radius_m,
+        p.top_support_points,
+        p.top_support_radius_m,
+    )
+
+
+def write_plot(folder: Path, groups: list[NDArray[np.float64]], ids: list[int]) -> Path:
+    """A results folder as the reconstruction writes it: plants ``ids`` of points ``groups``,
+    measured (traits and organs), labelled cloud, plant clouds, leaves, report."""
+    points = np.concatenate(groups)
+    cloud = Cloud(points, np.tile(np.array([50, 110, 25], np.uint8), (len(points), 1)))
+    n = len(points)
+    labels = PointLabels(np.zeros(n, np.int32), np.zeros(n, np.uint8), np.zeros(n, np.uint8))
+    rows, leaves, clouds, plant_labels = [], [], {}, {}
+    start = 0
+    for plant, group in zip(ids, groups, strict=True):
+        index = np.arange(start, start + len(group))
+        start += len(group)
+        traits = _traits(group)
+        organs = measure_organs(group, foot_m(traits))
+        labels.plant_id[index] = plant
+        labels.organ[index] = organs.organs.organ
+        labels.leaf_id[index] = organs.organs.leaf_id
+        rows.append(_row(plant, traits, organs))
+        leaves += [
+            LeafRow(plant, leaf.leaf_id, 100 * leaf.length_m, 0.0, 0.0, 0.0, 0.0, 0.0)
+            for leaf in organs.leaves
+        ]
+        clouds[plant] = cloud.select(index)
+        plant_labels[plant] = PointLabels(
+            labels.plant_id[index], labels.organ[index], labels.leaf_id[index]
+        )
+    report = {"format": "fieldapp-reconstruction-report/1", "session": "s1", "warnings": []}
+    report["run"] = str(folder) + str(ids)  # a new run writes a new report
+    write_outputs(folder, rows, cloud, clouds, report, leaves, labels, plant_labels)
+    return folder
+
+
+def _row(plant: int, traits: PlantTraits, organs) -> PlantRow:  # type: ignore[no-untyped-def]
+    return PlantRow(
+        plant,
+        traits.x_m,
+        traits.y_m,
+        100 * traits.height_m,
+        100 * traits.width_m,
+        traits.points,
+        leaf_count=organs.leaf_count,
+        height_max_cm=100 * organs.height_max_m,
+    )
+
+
+@pytest.fixture(scope="module")
+def auto_plots(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Two automatic results of the same plot: plants apart (1, 2) and both as one plant."""
+    base = tmp_path_factory.mktemp("corrections")
+    groups = _plants(0)
+    return {
+        "apart": write_plot(base / "apart", groups, [1, 2]),
+        "merged": write_plot(base / "merged", [np.concatenate(groups)], [1]),
+    }
+
+
+@pytest.fixture
+def apart(auto_plots: dict[str, Path], tmp_path: Path) -> Path:
+    return Path(shutil.copytree(auto_plots["apart"], tmp_path / "apart"))
+
+
+@pytest.fixture
+def merged(auto_plots: dict[str, Path], tmp_path: Path) -> Path:
+    return Path(shutil.copytree(auto_plots["merged"], tmp_path / "merged"))
+
+
+def _csv(folder: Path, name: str = "plants.csv") -> dict[int, dict]:  # type: ignore[type-arg]
+    return {int(r["plant"]): r for r in read_table(folder / name, ("plant",))}
+
+
+def _ref(folder: Path, plant: int) -> PlantRef:
+    cloud, labels = read_labelled_ply(folder / "cloud.ply")
+    assert labels is not None
+    xy = cloud.points[labels.plant_id == plant, :2].mean(axis=0)
+    return PlantRef(plant=plant, xy_m=(float(xy[0]), float(xy[1])))
+
+
+def _close_to_traits(row: dict, points: NDArray[np.float64]) -> None:  # type: ignore[type-arg]
+    traits = _traits(points)
+    assert row["height_cm"] == pytest.approx(100 * traits.height_m, abs=0.011)
+    assert row["width_cm"] == pytest.approx(100 * traits.width_m, abs=0.006)
+    assert row["x_m"] == pytest.approx(traits.x_m, abs=6e-5)
+    assert row["points"] == len(points)
+
+
+def test_merge_recomputes_traits_with_the_reconstructions_code(apart: Path) -> None:
+    merge = Merge(plants=[_ref(apart, 1), _ref(apart, 2)], into=1, author="tester")
+    result = add_correction(apart, Corrections(session="s1"), merge)
+    rows = _csv(apart)
+    assert list(rows) == [1]
+    _close_to_traits(rows[1], np.concatenate(_plants(0)))
+    organs = measure_organs(np.concatenate(_plants(0)), foot_m(_traits(np.concatenate(_plants(0)))))
+    assert rows[1]["leaf_count"] == organs.leaf_count
+    assert not (apart / "plants" / "2.ply").exists()
+    assert result.corrections.applied is not None
+    assert result.corrections.applied.corrected == [1]
+    assert _csv(apart, AUTO_PLANTS).keys() == {1, 2}  # the automatic result is kept
+    saved = read_corrections(apart)
+    assert saved is not None and saved.operations[0].author == "tester"
+
+
+def test_split_by_stems_gives_each_seedling_its_points(merged: Path) -> None:
+    split = Split(plant=_ref(merged, 1), stems_xy_m=[STEMS[1], STEMS[0]], into=[1, 2])
+    add_correction(merged, Corrections(), split)
+    rows = _csv(merged)
+    assert list(rows) == [1, 2]
+    a, b = _plants(0)
+    _close_to_traits(rows[1], b)  # the first stem picked keeps the plant's number
+    _close_to_traits(rows[2], a)
+    leaves = read_table(merged / "leaves.csv", ("plant_id",))
+    assert {int(r["plant_id"]) for r in leaves} <= {1, 2}
+
+
+def test_a_stem_picked_off_the_plant_is_refused_and_nothing_written(merged: Path) -> None:
+    before = (merged / "plants.csv").read_bytes()
+    split = Split(plant=_ref(merged, 1), stems_xy_m=[STEMS[0], (1.0, 1.0)], into=[1, 2])
+    with pytest.raises(CorrectionError, match="from plant 1"):
+        add_correction(merged, Corrections(), split)
+    assert (merged / "plants.csv").read_bytes() == before
+    assert read_corrections(merged) is None
+
+
+def test_delete_relabel_and_undo(apart: Path) -> None:
+    auto = (apart / "plants.csv").read_text()
+    first = add_correction(apart, Corrections(), Delete(plant=_ref(apart, 2)))
+    assert list(_csv(apart)) == [1]
+    cloud, labels = read_labelled_ply(apart / "cloud.ply")
+    assert labels is not None and not (labels.plant_id == 2).any() and len(cloud) > 6000 - 1
+    second = add_correction(apart, first.corrections, Relabel(plant=_ref(apart, 1), into=7))
+    rows = _csv(apart)
+    assert list(rows) == [7]
+    assert rows[7]["height_cm"] == _csv(apart, AUTO_PLANTS)[1]["height_cm"]  # not remeasured
+    assert {int(r["plant_id"]) for r in read_table(apart / "leaves.csv", ("plant_id",))} == {7}
+    assert (apart / "plants" / "7.ply").is_file() and not (apart / "plants" / "1.ply").exists()
+    undone = undo_correction(apart, second.corrections)
+    assert list(_csv(apart)) == [1]
+    undo_correction(apart, undone.corrections)
+    assert (apart / "plants.csv").read_text() == auto
+    assert load_corrections(apart / "corrections.json").operations == []
+
+
+def test_renumbering_onto_a_taken_number_is_refused(apart: Path) -> None:
+    with pytest.raises(CorrectionError, match="taken"):
+        add_correction(apart, Corrections(), Relabel(plant=_ref(apart, 1), into=2))
+
+
+def test_a_new_reconstruction_gets_the_corrections_again_by_position(apart: Path) -> None:
+    merge = Merge(plants=[_ref(apart, 1), _ref(apart, 2)], into=2)
+    phantom = Delete(plant=PlantRef(plant=5, xy_m=(2.0, 2.0)))
+    saved = add_correction(apart, Corrections(), merge).corrections
+    saved = saved.adding(phantom)
+    # a new run into the same folder numbers the plants the other way round, 5 mm apart
+    a, b = _plants(0)
+    shift = np.array([0.005, 0.0, 0.0])
+    write_plot(apart, [b + shift, a + shift], [1, 2])
+    result = apply_corrections(apart, saved)
+    rows = _csv(apart)
+    assert list(rows) == [1]  # plant 2 then is plant 1 now: the kept number follows the plant
+    _close_to_traits(rows[1], np.concatenate([b, a]) + shift)
+    applied = result.corrections.applied
+    assert applied is not None and len(applied.unmatched) == 1
+    assert "operation 2 (delete plant 5)" in applied.unmatched[0]
+    assert len(load_corrections(apart / "corrections.json").operations) == 2  # kept
+    assert _csv(apart, AUTO_PLANTS).keys() == {1, 2}  # the new automatic result is kept
+
+
+def test_corrections_carried_to_a_new_results_folder(apart: Path, tmp_path: Path) -> None:
+    saved = add_correction(apart, Corrections(), Delete(plant=_ref(apart, 1))).corrections
+    other = write_plot(tmp_path / "rerun", _plants(0)[::-1], [1, 2])
+    apply_corrections(other, saved.model_copy(update={"applied": None}))
+    rows = _csv(other)
+    assert list(rows) == [1] and rows[1]["x_m"] == pytest.approx(STEMS[1][0], abs=0.02)
+
+
+@pytest.mark.parametrize(
+    ("document", "field"),
+    [
+        ({"operations": [{"kind": "merge", "plants": [], "into": 1}]}, "operations[0].merge"),
+        ({"operations": [{"kind": "delete", "plant": {"plant": 0, "xy_m": [0, 0]}}]}, "plant"),
+        ({"operations": [{"kind": "squash"}]}, "operations[0]"),
+        ({"format": "other/1"}, "format"),
+    ],
+)
+def test_a_bad_corrections_file_names_the_file_and_the_field(
+    tmp_path: Path,
+    document: dict,
+    field: str,  # type: ignore[type-arg]
+) -> None:
+    path = tmp_path / "corrections.json"
+    path.write_text(json.dumps(document))
+    with pytest.raises(FormatError) as error:
+        load_corrections(path)
+    assert str(path) in str(error.value) and field in str(error.value)
