@@ -96,6 +96,15 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
             PRIMARY KEY (run_id, plant_id, leaf_id))""",
         "CREATE INDEX leaves_by_plant ON leaves(plant_id, leaf_id)",
     ),
+    (  # manual corrections (fieldapp/results/corrections.py): the traits rows they changed,
+        # and each session's corrections.json, kept for a re-run into another folder
+        "ALTER TABLE traits ADD COLUMN corrected INTEGER NOT NULL DEFAULT 0",
+        """CREATE TABLE corrections (
+            session_id TEXT PRIMARY KEY,
+            results_dir TEXT NOT NULL,
+            document TEXT NOT NULL,
+            saved TEXT NOT NULL)""",
+    ),
 )
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -4,6 +4,7 @@ bad corrections file named by file and field."""
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import shutil
 from pathlib import Path
@@ -35,7 +36,9 @@ from fieldapp.results.corrections import (
     load_corrections,
     read_corrections,
 )
+from fieldapp.results.db import ResultsDB
 from fieldapp.results.organ_tables import read_table
+from fieldapp.results.schema import connect, migrate
 
 from ..recon.synthetic import ground_patch, seedling
 
@@ -258,3 +261,27 @@ def test_a_bad_corrections_file_names_the_file_and_the_field(
     with pytest.raises(FormatError) as error:
         load_corrections(path)
     assert str(path) in str(error.value) and field in str(error.value)
+
+
+def test_the_database_keeps_corrected_traits_and_the_corrections(
+    apart: Path, tmp_path: Path
+) -> None:
+    path = tmp_path / "results.sqlite"
+    connection = connect(path)
+    migrate(connection, path, target=3)  # a database from before corrections
+    connection.close()
+    with ResultsDB.open(path) as db:
+        run = db.record_run("plot", None, apart, date=dt.date(2026, 6, 1))
+        assert db.corrected_plants(run) == [] and db.corrections("s1") is None
+        merge = Merge(plants=[_ref(apart, 1), _ref(apart, 2)], into=1)
+        add_correction(apart, Corrections(session="s1"), merge)
+        assert db.save_corrections("s1", apart) == run
+        history = db.history("plot")
+        assert [(o.plant_number, o.run_id) for o in history] == [(1, run)]
+        assert history[0].height_cm == pytest.approx(_csv(apart)[1]["height_cm"])
+        assert db.corrected_plants(run) == [1]
+        saved = db.corrections("s1")
+        assert saved is not None and saved[0] == apart.resolve()
+        assert saved[1]["operations"][0]["kind"] == "merge"
+        again = db.record_run("plot", None, apart, date=dt.date(2026, 6, 1))
+        assert db.corrected_plants(again) == [1]  # recorded from a corrected folder
