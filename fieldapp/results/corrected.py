@@ -125,14 +125,7 @@ def snapshot_auto(folder: Path, corrections: Corrections) -> bool:
     """Make sure ``folder``'s automatic result is kept in the ``*.auto.*`` files; True when
     they were taken now from the folder's files (a first correction or a new reconstruction),
     so operations must find their plants by position."""
-    applied = corrections.applied
-    if (
-        applied is not None
-        and (folder / AUTO_PLANTS).is_file()
-        and (folder / AUTO_CLOUD).is_file()
-        and applied.plants_csv_sha256 == file_sha256(folder / "plants.csv")
-        and applied.report_sha256 == file_sha256(folder / "report.json")
-    ):
+    if snapshot_is_current(folder, corrections):
         return False
     cloud, labels = _labelled_cloud(folder)
     from fieldapp.recon.outputs import ply_bytes
@@ -144,6 +137,19 @@ def snapshot_auto(folder: Path, corrections: Corrections) -> bool:
     else:
         (folder / AUTO_LEAVES).unlink(missing_ok=True)
     return True
+
+
+def snapshot_is_current(folder: Path, corrections: Corrections) -> bool:
+    """Whether ``folder`` holds what ``corrections`` were last applied to and wrote: its
+    ``*.auto.*`` files are then the automatic result (no reconstruction has run since)."""
+    applied = corrections.applied
+    return (
+        applied is not None
+        and (folder / AUTO_PLANTS).is_file()
+        and (folder / AUTO_CLOUD).is_file()
+        and applied.plants_csv_sha256 == file_sha256(folder / "plants.csv")
+        and applied.report_sha256 == file_sha256(folder / "report.json")
+    )
 
 
 def _labelled_cloud(folder: Path) -> tuple[Cloud, PointLabels]:

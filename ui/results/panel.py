@@ -14,6 +14,7 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.session import Session, load_session
 from fieldapp.recon.progress import Progress
 from fieldapp.settings import Settings
+from ui.results.correction import CorrectionBar
 from ui.results.data import PlotResults, load_results_dir
 from ui.results.history import HistoryPanel
 from ui.results.manual import ManualPanel
@@ -44,6 +45,8 @@ class ResultsPanel(QtWidgets.QWidget):
         self.runner.failed.connect(self._failed)
         self.runner.cancelled.connect(self._cancelled)
         self._build()
+        self.correction = CorrectionBar(self)  # merge, split, delete, renumber, undo
+        self.layout().insertWidget(3, self.correction)  # type: ignore[attr-defined]
         self._set_running(False)
 
     # --- public API --------------------------------------------------------------------
@@ -117,7 +120,8 @@ class ResultsPanel(QtWidgets.QWidget):
             self.table.clearSelection()
         else:
             index = self.proxy.mapFromSource(self.plant_model.index(row, 0))
-            self.table.selectRow(index.row())
+            if not self.table.selectionModel().isSelected(index):  # keep a multiple selection
+                self.table.selectRow(index.row())
             self.table.scrollTo(index)
 
     def export_to(self, folder: Path) -> list[Path]:
@@ -141,6 +145,7 @@ class ResultsPanel(QtWidgets.QWidget):
         """Stop a running reconstruction (the main window calls this as it closes)."""
         self.runner.cancel()
         self.runner.wait()
+        self.correction.shutdown()
 
     # --- building ----------------------------------------------------------------------
 
@@ -185,7 +190,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self.table.setSortingEnabled(True)
         self.table.sortByColumn(0, QtCore.Qt.SortOrder.AscendingOrder)
         self.table.setSelectionBehavior(QtWidgets.QAbstractItemView.SelectionBehavior.SelectRows)
-        self.table.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.SingleSelection)
+        self.table.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.ExtendedSelection)
         self.table.verticalHeader().hide()
         self.table.horizontalHeader().setSectionResizeMode(
             QtWidgets.QHeaderView.ResizeMode.ResizeToContents

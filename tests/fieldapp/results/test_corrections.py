@@ -14,11 +14,8 @@ import pytest
 from numpy.typing import NDArray
 
 from fieldapp.errors import FormatError
-from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.organ_traits import foot_m, measure_organs
-from fieldapp.recon.outputs import LeafRow, PlantRow, PointLabels, read_labelled_ply, write_outputs
-from fieldapp.recon.settings import ReconstructionSettings
-from fieldapp.recon.traits import PlantTraits, measure_plant
+from fieldapp.recon.outputs import read_labelled_ply
 from fieldapp.results.corrected import (
     AUTO_PLANTS,
     CorrectionError,
@@ -40,84 +37,14 @@ from fieldapp.results.db import ResultsDB
 from fieldapp.results.organ_tables import read_table
 from fieldapp.results.schema import connect, migrate
 
-from ..recon.synthetic import ground_patch, seedling
-
-SETTINGS = ReconstructionSettings()
-STEMS = ((0.0, 0.0), (0.3, 0.02))
-"""Two seedlings 30 cm apart: 20 cm wide leaf discs, 10 cm of air between them."""
-
-
-def _plants(seed: int) -> list[NDArray[np.float64]]:
-    rng = np.random.default_rng(seed)
-    return [seedling(rng, x, y, 0.2, h, 3000) for (x, y), h in zip(STEMS, (0.22, 0.3), strict=True)]
-
-
-SOIL = ground_patch(np.random.default_rng(9), 0.6, 4000, noise_m=0.0)
-
-
-def _traits(points: NDArray[np.float64]) -> PlantTraits:
-    """What the reconstruction's trait code gives for these points (flat soil at z = 0)."""
-    p = SETTINGS.plants
-    return measure_plant(
-        points,
-        SOIL,
-        p.base_slice_m,
-        SETTINGS.ground.local_ground_radius_m,
-        p.top_support_points,
-        p.top_support_radius_m,
-    )
-
-
-def write_plot(folder: Path, groups: list[NDArray[np.float64]], ids: list[int]) -> Path:
-    """A results folder as the reconstruction writes it: plants ``ids`` of points ``groups``,
-    measured (traits and organs), labelled cloud, plant clouds, leaves, report."""
-    points = np.concatenate(groups)
-    cloud = Cloud(points, np.tile(np.array([50, 110, 25], np.uint8), (len(points), 1)))
-    n = len(points)
-    labels = PointLabels(np.zeros(n, np.int32), np.zeros(n, np.uint8), np.zeros(n, np.uint8))
-    rows, leaves, clouds, plant_labels = [], [], {}, {}
-    start = 0
-    for plant, group in zip(ids, groups, strict=True):
-        index = np.arange(start, start + len(group))
-        start += len(group)
-        traits = _traits(group)
-        organs = measure_organs(group, foot_m(traits))
-        labels.plant_id[index] = plant
-        labels.organ[index] = organs.organs.organ
-        labels.leaf_id[index] = organs.organs.leaf_id
-        rows.append(_row(plant, traits, organs))
-        leaves += [
-            LeafRow(plant, leaf.leaf_id, 100 * leaf.length_m, 0.0, 0.0, 0.0, 0.0, 0.0)
-            for leaf in organs.leaves
-        ]
-        clouds[plant] = cloud.select(index)
-        plant_labels[plant] = PointLabels(
-            labels.plant_id[index], labels.organ[index], labels.leaf_id[index]
-        )
-    report = {"format": "fieldapp-reconstruction-report/1", "session": "s1", "warnings": []}
-    report["run"] = str(folder) + str(ids)  # a new run writes a new report
-    write_outputs(folder, rows, cloud, clouds, report, leaves, labels, plant_labels)
-    return folder
-
-
-def _row(plant: int, traits: PlantTraits, organs) -> PlantRow:  # type: ignore[no-untyped-def]
-    return PlantRow(
-        plant,
-        traits.x_m,
-        traits.y_m,
-        100 * traits.height_m,
-        100 * traits.width_m,
-        traits.points,
-        leaf_count=organs.leaf_count,
-        height_max_cm=100 * organs.height_max_m,
-    )
+from .seedlings import STEMS, seedlings, traits_of, write_plot
 
 
 @pytest.fixture(scope="module")
 def auto_plots(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """Two automatic results of the same plot: plants apart (1, 2) and both as one plant."""
     base = tmp_path_factory.mktemp("corrections")
-    groups = _plants(0)
+    groups = seedlings(0)
     return {
         "apart": write_plot(base / "apart", groups, [1, 2]),
         "merged": write_plot(base / "merged", [np.concatenate(groups)], [1]),
@@ -146,7 +73,7 @@ def _ref(folder: Path, plant: int) -> PlantRef:
 
 
 def _close_to_traits(row: dict, points: NDArray[np.float64]) -> None:  # type: ignore[type-arg]
-    traits = _traits(points)
+    traits = traits_of(points)
     assert row["height_cm"] == pytest.approx(100 * traits.height_m, abs=0.011)
     assert row["width_cm"] == pytest.approx(100 * traits.width_m, abs=0.006)
     assert row["x_m"] == pytest.approx(traits.x_m, abs=6e-5)
@@ -158,8 +85,10 @@ def test_merge_recomputes_traits_with_the_reconstructions_code(apart: Path) -> N
     result = add_correction(apart, Corrections(session="s1"), merge)
     rows = _csv(apart)
     assert list(rows) == [1]
-    _close_to_traits(rows[1], np.concatenate(_plants(0)))
-    organs = measure_organs(np.concatenate(_plants(0)), foot_m(_traits(np.concatenate(_plants(0)))))
+    _close_to_traits(rows[1], np.concatenate(seedlings(0)))
+    organs = measure_organs(
+        np.concatenate(seedlings(0)), foot_m(traits_of(np.concatenate(seedlings(0))))
+    )
     assert rows[1]["leaf_count"] == organs.leaf_count
     assert not (apart / "plants" / "2.ply").exists()
     assert result.corrections.applied is not None
@@ -174,7 +103,7 @@ def test_split_by_stems_gives_each_seedling_its_points(merged: Path) -> None:
     add_correction(merged, Corrections(), split)
     rows = _csv(merged)
     assert list(rows) == [1, 2]
-    a, b = _plants(0)
+    a, b = seedlings(0)
     _close_to_traits(rows[1], b)  # the first stem picked keeps the plant's number
     _close_to_traits(rows[2], a)
     leaves = read_table(merged / "leaves.csv", ("plant_id",))
@@ -220,7 +149,7 @@ def test_a_new_reconstruction_gets_the_corrections_again_by_position(apart: Path
     saved = add_correction(apart, Corrections(), merge).corrections
     saved = saved.adding(phantom)
     # a new run into the same folder numbers the plants the other way round, 5 mm apart
-    a, b = _plants(0)
+    a, b = seedlings(0)
     shift = np.array([0.005, 0.0, 0.0])
     write_plot(apart, [b + shift, a + shift], [1, 2])
     result = apply_corrections(apart, saved)
@@ -236,7 +165,7 @@ def test_a_new_reconstruction_gets_the_corrections_again_by_position(apart: Path
 
 def test_corrections_carried_to_a_new_results_folder(apart: Path, tmp_path: Path) -> None:
     saved = add_correction(apart, Corrections(), Delete(plant=_ref(apart, 1))).corrections
-    other = write_plot(tmp_path / "rerun", _plants(0)[::-1], [1, 2])
+    other = write_plot(tmp_path / "rerun", seedlings(0)[::-1], [1, 2])
     apply_corrections(other, saved.model_copy(update={"applied": None}))
     rows = _csv(other)
     assert list(rows) == [1] and rows[1]["x_m"] == pytest.approx(STEMS[1][0], abs=0.02)
