@@ -98,6 +98,7 @@ class CorrectionBar(QtWidgets.QWidget):
         self.corrections = Corrections()
         self.workers = WorkerSet()
         self._showing_own = False
+        self.split_plant: int | None = None
         self._build()
         panel.results_shown.connect(self._shown)
         panel.runner.succeeded.connect(self._reconstructed)
@@ -116,12 +117,13 @@ class CorrectionBar(QtWidgets.QWidget):
     def start_split(self) -> None:
         """Pick the stems of the selected plant on the map (or type them), then split."""
         plant = self._one("split")
+        self.split_plant = plant  # map clicks may select another plant meanwhile
         self.stems.clear()
         self.split_row.setVisible(True)
         self.status.setText(f"split plant {plant}: click each stem on the map, then Apply split")
 
     def split(self) -> None:
-        plant = self._one("split")
+        plant = self.split_plant if self.split_plant is not None else self._one("split")
         stems = parse_stems(self.stems.text())
         if len(stems) < 2:
             raise FieldappError("split: pick two or more stems")
@@ -132,7 +134,7 @@ class CorrectionBar(QtWidgets.QWidget):
             into=[plant, *numbers],
             author=self._author(),
         )
-        self.split_row.setVisible(False)
+        self._end_split()
         self._change(add=operation)
 
     def delete(self) -> None:
@@ -243,7 +245,7 @@ class CorrectionBar(QtWidgets.QWidget):
         self._mark(results)
         if self._showing_own:
             return
-        self.split_row.setVisible(False)
+        self._end_split()
         try:
             saved = read_corrections(results.results_dir)
         except FieldappError as error:
@@ -276,10 +278,15 @@ class CorrectionBar(QtWidgets.QWidget):
         self._change(reapply=True)
 
     def _map_clicked(self, event: Any) -> None:
-        if not self.split_row.isVisible():
+        if self.split_plant is None:
             return
         position = self.panel.map.plotItem.vb.mapSceneToView(event.scenePos())
         self.add_stem(position.x(), position.y())
+
+    def _end_split(self) -> None:
+        self.split_plant = None
+        self.split_row.setVisible(False)
+        self.status.setText("")
 
     def add_stem(self, x_m: float, y_m: float) -> None:
         """Add a stem point (map frame) to the split being prepared."""
@@ -337,7 +344,7 @@ class CorrectionBar(QtWidgets.QWidget):
         apply = QtWidgets.QPushButton("Apply split")
         apply.clicked.connect(lambda: self._report("split", self.split))
         cancel = QtWidgets.QPushButton("Cancel")
-        cancel.clicked.connect(lambda: self.split_row.setVisible(False))
+        cancel.clicked.connect(self._end_split)
         self.split_row = QtWidgets.QWidget()
         split_layout = QtWidgets.QHBoxLayout(self.split_row)
         split_layout.setContentsMargins(0, 0, 0, 0)
