@@ -512,12 +512,20 @@ def _record_corrections(
 ) -> None:
     """The corrections of ``results_dir`` (when it has ``corrections.json``): flag the run's
     corrected traits and keep the document as the session's corrections."""
+    from fieldapp.results.corrected import snapshot_is_current
     from fieldapp.results.corrections import read_corrections
 
     corrections = read_corrections(results_dir)
     if corrections is None:
         return
-    if run_id is not None and corrections.applied is not None:
+    current = snapshot_is_current(results_dir, corrections)
+    if run_id is not None and corrections.applied is not None and not current:
+        log.warning(
+            "%s: reconstructed again since its corrections were applied: recorded as the "
+            "reconstruction found it (open it in the results panel to apply them again)",
+            results_dir,
+        )
+    elif run_id is not None and corrections.applied is not None:
         db.executemany(
             "UPDATE traits SET corrected = 1 WHERE run_id = ? AND run_plant = ?",
             [(run_id, plant) for plant in corrections.applied.corrected],

@@ -55,6 +55,8 @@ class Corrected:
     result: Result
     plot: PlotResults
     scene: CloudScene
+    db_problem: str = ""
+    """Why the results database could not keep them (they are in the folder all the same)."""
 
 
 def parse_stems(text: str) -> list[tuple[float, float]]:
@@ -78,13 +80,17 @@ def _job(
 ) -> Corrected:
     """On the worker: apply (``change(folder, settings)``), keep in the database, reread."""
     result: Result = change(folder, settings)
+    problem = ""
     if db_path is not None:
         from fieldapp.results.db import ResultsDB
 
-        with ResultsDB.open(db_path) as db:
-            db.save_corrections(session_id, folder)
+        try:
+            with ResultsDB.open(db_path) as db:
+                db.save_corrections(session_id, folder)
+        except FieldappError as error:
+            problem = str(error)
     plot = load_results_dir(folder)
-    return Corrected(result, plot, build_scene(plot))
+    return Corrected(result, plot, build_scene(plot), problem)
 
 
 class CorrectionBar(QtWidgets.QWidget):
@@ -229,6 +235,11 @@ class CorrectionBar(QtWidgets.QWidget):
         )
         if unmatched:
             self.panel.error.emit("corrections not applied:\n" + "\n".join(unmatched))
+        if corrected.db_problem:
+            self.panel.error.emit(
+                f"corrections kept in the results folder, not in the results database: "
+                f"{corrected.db_problem}"
+            )
         self.applied.emit(corrected.result)
         self._update()
 

@@ -214,3 +214,7 @@ def test_the_database_keeps_corrected_traits_and_the_corrections(
         assert saved[1]["operations"][0]["kind"] == "merge"
         again = db.record_run("plot", None, apart, date=dt.date(2026, 6, 1))
         assert db.corrected_plants(again) == [1]  # recorded from a corrected folder
+        write_plot(apart, seedlings(0), [1, 2])  # reconstructed again, not yet corrected again
+        rerun = db.record_run("plot", None, apart, date=dt.date(2026, 6, 1))
+        assert db.corrected_plants(rerun) == []
+        assert len(db.history("plot")) == 2  # both seedlings, as the reconstruction found them
