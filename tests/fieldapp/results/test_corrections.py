@@ -218,3 +218,22 @@ def test_the_database_keeps_corrected_traits_and_the_corrections(
         rerun = db.record_run("plot", None, apart, date=dt.date(2026, 6, 1))
         assert db.corrected_plants(rerun) == []
         assert len(db.history("plot")) == 2  # both seedlings, as the reconstruction found them
+
+
+def test_the_command_line_applies_again_carries_over_and_undoes(
+    apart: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from fieldapp.cli import main
+
+    add_correction(apart, Corrections(), Delete(plant=_ref(apart, 1), author="ana"))
+    a, b = seedlings(0)
+    write_plot(apart, [b, a], [1, 2])  # `fieldapp reconstruct` into the same folder
+    assert main(["correct", str(apart)]) == 0
+    assert list(_csv(apart)) == [1] and "1. delete plant 1" in capsys.readouterr().out
+    other = write_plot(tmp_path / "other", [a, b], [1, 2])
+    assert main(["correct", str(other), "--from", str(apart)]) == 0
+    assert list(_csv(other)) == [2]
+    assert main(["correct", str(other), "--undo"]) == 0
+    assert list(_csv(other)) == [1, 2]
+    assert main(["correct", str(tmp_path)]) == 1
+    assert "no corrections.json" in capsys.readouterr().err
