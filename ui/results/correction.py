@@ -220,6 +220,11 @@ class CorrectionBar(QtWidgets.QWidget):
         self._update()
 
     def _done(self, corrected: Corrected) -> None:
+        shown = self.panel.results
+        if shown is None or shown.results_dir != corrected.plot.results_dir:
+            self.status.setText(f"corrections applied to {corrected.plot.results_dir}")
+            self._update()
+            return  # another folder was opened meanwhile
         self.corrections = corrected.result.corrections
         self._showing_own = True
         try:
@@ -267,11 +272,14 @@ class CorrectionBar(QtWidgets.QWidget):
         self.corrections = saved or Corrections()
         self._update()
         if saved is not None and not snapshot_is_current(results.results_dir, saved):
-            self._change(reapply=True)
+            self._report("apply corrections", lambda: self._change(reapply=True))
 
     def _reconstructed(self, _outcome: object) -> None:
         """A reconstruction into a folder without corrections: the session's corrections
         saved from another folder (results database) are applied to it."""
+        self._report("apply corrections", self._carry_over)
+
+    def _carry_over(self) -> None:
         results = self.panel.results
         db_path = self.panel.settings.paths.results_db
         if results is None or self.corrections.operations or self.workers.busy:
