@@ -204,9 +204,10 @@ def _leaves(plant: int, organs: PlantOrgans) -> list[LeafRow]:
 
 def write_state(folder: Path, state: PlotState) -> None:
     """Rewrite ``plants.csv``, ``leaves.csv`` (when organs are measured), ``cloud.ply`` and
-    ``plants/`` (stale plant clouds removed) from ``state``."""
+    ``plants/`` (stale plant clouds removed) from ``state``; a file that would not change is
+    left as it is (each durable write waits for the disk)."""
     labels = state.labels
-    write_bytes_durably(folder / "cloud.ply", ply_bytes(state.cloud, labels))
+    _write_changed(folder / "cloud.ply", ply_bytes(state.cloud, labels))
     plants = folder / "plants"
     for old in plants.glob("*.ply") if plants.is_dir() else []:
         if old.stem.isdigit() and int(old.stem) not in state.rows:
@@ -214,8 +215,13 @@ def write_state(folder: Path, state: PlotState) -> None:
     for plant in state.rows:
         index = state.members(plant)
         part = PointLabels(labels.plant_id[index], labels.organ[index], labels.leaf_id[index])
-        write_bytes_durably(plants / f"{plant}.ply", ply_bytes(state.cloud.select(index), part))
-    text = csv_text(state.plant_rows(), grid=state.grid)
-    write_bytes_durably(folder / "plants.csv", text.encode("utf-8"))
+        _write_changed(plants / f"{plant}.ply", ply_bytes(state.cloud.select(index), part))
+    _write_changed(folder / "plants.csv", csv_text(state.plant_rows(), grid=state.grid).encode())
     if state.organs:
-        write_bytes_durably(folder / "leaves.csv", leaves_csv_text(state.leaf_rows()).encode())
+        _write_changed(folder / "leaves.csv", leaves_csv_text(state.leaf_rows()).encode())
+
+
+def _write_changed(path: Path, data: bytes) -> None:
+    if path.is_file() and path.stat().st_size == len(data) and path.read_bytes() == data:
+        return
+    write_bytes_durably(path, data)
