@@ -353,8 +353,9 @@ class CorrectionBar(QtWidgets.QWidget):
         self.undo_action.setShortcut(QtGui.QKeySequence.StandardKey.Undo)
         self.undo_action.setShortcutContext(QtCore.Qt.ShortcutContext.WidgetWithChildrenShortcut)
         self.panel.addAction(self.undo_action)  # Ctrl+Z anywhere in the results panel
-        self.author = QtWidgets.QLineEdit()
+        self.author = QtWidgets.QLineEdit(_login())
         self.author.setPlaceholderText("operator (optional)")
+        self.author.setToolTip("who made the corrections (kept with each one)")
         self.author.setMaximumWidth(160)
         self.toolbar.addWidget(self.author)
         self.status = QtWidgets.QLabel("")
@@ -402,3 +403,13 @@ def read_corrections_quietly(folder: Path) -> Corrections | None:
         return read_corrections(folder)
     except FieldappError:
         return None
+
+
+def _login() -> str:
+    """The login name, the author of corrections until the operator types theirs."""
+    import getpass
+
+    try:
+        return getpass.getuser()
+    except (OSError, KeyError):
+        return ""
