@@ -167,6 +167,7 @@ class ResultsDB:
             plant_ids = _identify(db, _plot_id(db, plot), run_id, run.plants, max_distance_m)
             _insert_traits(db, run_id, run.plants, plant_ids)
             _insert_organs(db, run_id, run, plant_ids)
+            _record_corrections(db, run_id, session.session_id, results_dir)
         log.info(
             "run %d: %s, %d plants of plot %s", run_id, session.session_id, len(run.plants), plot
         )
@@ -211,7 +212,46 @@ class ResultsDB:
                 )
         return len(records)
 
+    def save_corrections(self, session_id: str, results_dir: Path) -> int | None:
+        """Keep ``results_dir``'s ``corrections.json`` as the corrections of ``session_id`` (a
+        re-run into another folder finds them here) and, when a run was recorded from that
+        folder, replace its traits and leaves with the corrected ones; returns that run's id."""
+        recorded = self.run_of_results_dir(results_dir)
+        with self._transaction() as db:
+            if recorded is None:
+                _record_corrections(db, None, session_id, results_dir)
+                return None
+            run = read_run(results_dir, {}, recorded.software_version)
+            plot_id = _plot_id(db, recorded.plot, create=False)
+            previous = db.execute(
+                "SELECT plant_id, x_m, y_m FROM traits WHERE run_id = ?", (recorded.run_id,)
+            ).fetchall()
+            db.execute("DELETE FROM leaves WHERE run_id = ?", (recorded.run_id,))
+            db.execute("DELETE FROM traits WHERE run_id = ?", (recorded.run_id,))
+            plant_ids = _identify(
+                db, plot_id, recorded.run_id, run.plants, DEFAULT_MATCH_DISTANCE_M, previous
+            )
+            _insert_traits(db, recorded.run_id, run.plants, plant_ids)
+            _insert_organs(db, recorded.run_id, run, plant_ids)
+            _record_corrections(db, recorded.run_id, session_id, results_dir)
+        return recorded.run_id
+
     # --- reading ------------------------------------------------------------------------
+
+    def corrections(self, session_id: str) -> tuple[Path, dict[str, Any]] | None:
+        """The last corrections saved for ``session_id``: their results folder and document."""
+        row = self.connection.execute(
+            "SELECT results_dir, document FROM corrections WHERE session_id = ?", (session_id,)
+        ).fetchone()
+        return None if row is None else (Path(row[0]), dict(json.loads(row[1])))
+
+    def corrected_plants(self, run_id: int) -> list[int]:
+        """The run's plant numbers (``plants.csv``) whose traits are manual corrections."""
+        rows = self.connection.execute(
+            "SELECT run_plant FROM traits WHERE run_id = ? AND corrected = 1 ORDER BY run_plant",
+            (run_id,),
+        )
+        return [int(r[0]) for r in rows]
 
     def is_done(self, session_id: str, settings_sha256: str, software_version: str) -> bool:
         """Whether a complete run of the session with these settings and version is recorded."""
@@ -460,14 +500,19 @@ def _identify(
     run_id: int,
     plants: list[PlantRecord],
     max_distance_m: float,
+    previous: list[tuple[int, float, float]] | None = None,
 ) -> list[tuple[int, float | None]]:
-    """(season plant id, distance to where it was seen before) for each plant of the run."""
+    """(season plant id, distance to where it was seen before) for each plant of the run;
+    ``previous``: (season id, x_m, y_m) seen by this run before it was corrected, first."""
     known = db.execute(
         "SELECT plants.id, AVG(traits.x_m), AVG(traits.y_m) FROM plants "
         "JOIN traits ON traits.plant_id = plants.id WHERE plants.plot_id = ? "
         "GROUP BY plants.id ORDER BY plants.id",
         (plot_id,),
     ).fetchall()
+    if previous:
+        ids = {p[0] for p in previous}
+        known = list(previous) + [k for k in known if k[0] not in ids]
     known_xy = np.array([[k[1], k[2]] for k in known], np.float64).reshape(-1, 2)
     observed_xy = np.array([[p.x_m, p.y_m] for p in plants], np.float64).reshape(-1, 2)
     matches = match_positions(known_xy, observed_xy, max_distance_m)
@@ -528,3 +573,33 @@ def _insert_organs(
                 for leaf in organs["leaves"]
             ],
         )
+
+
+def _record_corrections(
+    db: sqlite3.Connection, run_id: int | None, session_id: str, results_dir: Path
+) -> None:
+    """The corrections of ``results_dir`` (when it has ``corrections.json``): flag the run's
+    corrected traits and keep the document as the session's corrections."""
+    from fieldapp.results.corrected import snapshot_is_current
+    from fieldapp.results.corrections import read_corrections
+
+    corrections = read_corrections(results_dir)
+    if corrections is None:
+        return
+    current = snapshot_is_current(results_dir, corrections)
+    if run_id is not None and corrections.applied is not None and not current:
+        log.warning(
+            "%s: reconstructed again since its corrections were applied: recorded as the "
+            "reconstruction found it (open it in the results panel to apply them again)",
+            results_dir,
+        )
+    elif run_id is not None and corrections.applied is not None:
+        db.executemany(
+            "UPDATE traits SET corrected = 1 WHERE run_id = ? AND run_plant = ?",
+            [(run_id, plant) for plant in corrections.applied.corrected],
+        )
+    db.execute(
+        "INSERT OR REPLACE INTO corrections (session_id, results_dir, document, saved) "
+        "VALUES (?, ?, ?, ?)",
+        (session_id, str(results_dir.resolve()), corrections.model_dump_json(), _now()),
+    )

@@ -104,6 +104,15 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         "ALTER TABLE runs ADD COLUMN calibration_sha256 TEXT",
         "ALTER TABLE runs ADD COLUMN software_commit TEXT",
     ),
+    (  # manual corrections (fieldapp/results/corrections.py): the traits rows they changed,
+        # and each session's corrections.json, kept for a re-run into another folder
+        "ALTER TABLE traits ADD COLUMN corrected INTEGER NOT NULL DEFAULT 0",
+        """CREATE TABLE corrections (
+            session_id TEXT PRIMARY KEY,
+            results_dir TEXT NOT NULL,
+            document TEXT NOT NULL,
+            saved TEXT NOT NULL)""",
+    ),
 )
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -14,6 +14,7 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.session import Session, load_session
 from fieldapp.recon.progress import Progress
 from fieldapp.settings import Settings
+from ui.results.correction import CorrectionBar
 from ui.results.data import PlotResults, load_results_dir
 from ui.results.history import HistoryPanel
 from ui.results.manual import ManualPanel
@@ -44,12 +45,15 @@ class ResultsPanel(QtWidgets.QWidget):
         self.session: Session | None = None
         self.results: PlotResults | None = None
         self.selected: int | None = None
+        self._syncing_table = False  # select_plant is moving the table's selection itself
         self.runner = ReconstructionRunner(self)
         self.runner.progressed.connect(self._progressed)
         self.runner.succeeded.connect(self._succeeded)
         self.runner.failed.connect(self._failed)
         self.runner.cancelled.connect(self._cancelled)
         self._build()
+        self.correction = CorrectionBar(self)  # merge, split, delete, renumber, undo
+        self.layout().insertWidget(3, self.correction)  # type: ignore[attr-defined]
         self._set_running(False)
 
     # --- public API --------------------------------------------------------------------
@@ -126,12 +130,20 @@ class ResultsPanel(QtWidgets.QWidget):
             leaf_model([] if plant is None else self.results.leaves.get(plant, []))
         )
         row = None if plant is None else self.plant_model.row_of(plant)
-        if row is None:
-            self.table.clearSelection()
-        else:
-            index = self.proxy.mapFromSource(self.plant_model.index(row, 0))
-            self.table.selectRow(index.row())
-            self.table.scrollTo(index)
+        selection = self.table.selectionModel()
+        self._syncing_table = True
+        try:
+            if row is None:
+                self.table.clearSelection()
+            else:
+                index = self.proxy.mapFromSource(self.plant_model.index(row, 0))
+                if not selection.isSelected(index):  # a plant of a multiple selection keeps it
+                    flags = QtCore.QItemSelectionModel.SelectionFlag
+                    selection.select(index, flags.ClearAndSelect | flags.Rows)
+                selection.setCurrentIndex(index, QtCore.QItemSelectionModel.SelectionFlag.NoUpdate)
+                self.table.scrollTo(index)
+        finally:
+            self._syncing_table = False
 
     def export_to(self, folder: Path) -> list[Path]:
         """Export the plot shown into ``folder`` (blocking; the button runs it in a worker)."""
@@ -160,6 +172,7 @@ class ResultsPanel(QtWidgets.QWidget):
         """Stop a running reconstruction (the main window calls this as it closes)."""
         self.runner.cancel()
         self.runner.wait()
+        self.correction.shutdown()
 
     # --- building ----------------------------------------------------------------------
 
@@ -205,7 +218,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self.table.setSortingEnabled(True)
         self.table.sortByColumn(0, QtCore.Qt.SortOrder.AscendingOrder)
         self.table.setSelectionBehavior(QtWidgets.QAbstractItemView.SelectionBehavior.SelectRows)
-        self.table.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.SingleSelection)
+        self.table.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.ExtendedSelection)
         self.table.verticalHeader().hide()
         self.table.horizontalHeader().setSectionResizeMode(
             QtWidgets.QHeaderView.ResizeMode.ResizeToContents
@@ -294,10 +307,16 @@ class ResultsPanel(QtWidgets.QWidget):
         self.stage.setText("cancelled")
 
     def _table_selected(self) -> None:
-        rows = self.table.selectionModel().selectedRows()
-        if rows:
-            source = self.proxy.mapToSource(rows[0])
-            self.select_plant(self.plant_model.plants[source.row()].plant)
+        if self._syncing_table:
+            return
+        selection = self.table.selectionModel()
+        rows = selection.selectedRows()
+        if not rows:
+            return
+        current = selection.currentIndex()  # the row clicked last, in a multiple selection
+        chosen = current if current.isValid() and selection.isSelected(current) else rows[0]
+        source = self.proxy.mapToSource(chosen)
+        self.select_plant(self.plant_model.plants[source.row()].plant)
 
     def _growth(self, trait: str) -> dict:  # type: ignore[type-arg]
         from fieldapp.results.history import growth_series

@@ -46,7 +46,7 @@ def test_pragmas_and_schema_version(tmp_path):
         assert c.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
         assert c.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL
         assert c.execute("PRAGMA foreign_keys").fetchone()[0] == 1
-        assert db.schema_version == SCHEMA_VERSION == 4
+        assert db.schema_version == SCHEMA_VERSION == 5
 
 
 def test_migrates_an_old_database_step_by_step(tmp_path):
