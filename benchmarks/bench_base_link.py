@@ -20,7 +20,6 @@ from pathlib import Path
 
 from devices.base import (
     BaseAuthRejected,
-    BaseClient,
     BaseError,
     ClientKeys,
     ClientTiming,
@@ -29,6 +28,7 @@ from devices.base import (
     SimFault,
     SimulatedBase,
     generate_key_pair,
+    open_base,
 )
 from devices.base.keys import AUTHORIZED_CLIENTS_DIR
 
@@ -62,7 +62,7 @@ def revoked_key_s(old_connection: bool) -> float:
         base_dir, ws_dir = _key_folders(Path(folder))
         keys = ClientKeys.from_dir(ws_dir)
         with SimulatedBase(ANY, ANY, keys=ServerKeys.from_dir(base_dir), time_scale=20.0) as sim:
-            old = BaseClient(sim.command_endpoint, keys=keys, timing=QUICK)
+            old = open_base(sim.command_endpoint, keys=keys, timing=QUICK)
             old.status()
             (base_dir / AUTHORIZED_CLIENTS_DIR / "ws.key").unlink()
             if old_connection:
@@ -82,7 +82,7 @@ def _fails(call: Callable[[], object]) -> bool:
 
 
 def _rejected(endpoint: str, keys: ClientKeys) -> bool:
-    client = BaseClient(endpoint, keys=keys, timing=QUICK)
+    client = open_base(endpoint, keys=keys, timing=QUICK)
     try:
         client.hello()
     except BaseAuthRejected:
@@ -97,7 +97,7 @@ def _rejected(endpoint: str, keys: ClientKeys) -> bool:
 def lost_link_stop_s() -> float:
     """Seconds from the commanding client's last heartbeat to the base's stop latch."""
     with SimulatedBase(ANY, ANY, time_scale=0.2) as sim:
-        client = BaseClient(sim.command_endpoint)
+        client = open_base(sim.command_endpoint)
         client.goto("far", Pose(4.0, 0.0, 0.0), wait=False)
         time.sleep(0.5)
         client.close()  # heartbeats end: the link is lost
@@ -109,7 +109,7 @@ def lost_link_stop_s() -> float:
 def offline_report_s() -> float:
     """Seconds from a base freezing to its client's follow_goal raising BaseOffline."""
     with SimulatedBase(ANY, ANY, time_scale=0.2) as sim:
-        client = BaseClient(sim.command_endpoint)
+        client = open_base(sim.command_endpoint)
         client.goto("far", Pose(4.0, 0.0, 0.0), wait=False)
         raised = threading.Event()
 

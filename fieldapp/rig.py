@@ -203,7 +203,7 @@ def _open_table(
 def _open_base(
     devices: DeviceSettings, world: SimWorld | None, realtime: bool, stack: ExitStack
 ) -> tuple[SimulatedBase | None, BaseClient, str]:
-    from devices.base import BaseClient, BaseError, ClientKeys, SimulatedBase
+    from devices.base import BaseError, ClientKeys, SimulatedBase, open_base
     from devices.base.protocol import Pose
 
     simulator: SimulatedBase | None = None
@@ -225,7 +225,7 @@ def _open_base(
             stack.callback(simulator.close)
             endpoint, telemetry = simulator.command_endpoint, simulator.telemetry_endpoint
         keys = ClientKeys.from_dir(devices.base_keys_dir) if devices.base_keys_dir else None
-        client = BaseClient(endpoint, telemetry, keys=keys)
+        client = open_base(endpoint, telemetry, keys=keys)
         stack.callback(client.close)
         info = client.hello()
     except BaseError as error:

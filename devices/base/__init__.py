@@ -1,10 +1,11 @@
 """The mobile base over ZeroMQ (fieldapp-base/1): protocol, client, simulated base, ROS bridge.
 
-The application uses :class:`BaseClient`; tests and demos serve the protocol with
-:class:`SimulatedBase`; the robot runs ``devices.base.ros_bridge``.
+The application uses :class:`BaseClient`, handed a :class:`BaseTransport` (:func:`open_base`
+makes both from endpoints); tests and demos serve the protocol with :class:`SimulatedBase`; the
+robot runs ``devices.base.ros_bridge``.
 """
 
-from devices.base.client import BaseClient, BaseInfo, ClientTiming
+from devices.base.client import BaseClient, BaseInfo, ClientTiming, open_base
 from devices.base.errors import (
     BaseAuthRejected,
     BaseError,
@@ -18,6 +19,7 @@ from devices.base.errors import (
 from devices.base.keys import ClientKeys, ServerKeys, generate_key_pair
 from devices.base.protocol import BaseState, Pose, Status
 from devices.base.simulator import SimFault, SimulatedBase
+from devices.base.transport import BaseTransport, ZmqTransport, open_transport
 
 __all__ = [
     "BaseAuthRejected",
@@ -28,6 +30,7 @@ __all__ = [
     "BaseRequestRejected",
     "BaseState",
     "BaseStopped",
+    "BaseTransport",
     "ClientKeys",
     "ClientTiming",
     "InsecureEndpoint",
@@ -38,5 +41,8 @@ __all__ = [
     "SimFault",
     "SimulatedBase",
     "Status",
+    "ZmqTransport",
     "generate_key_pair",
+    "open_base",
+    "open_transport",
 ]

@@ -1,10 +1,13 @@
 """Reliable request-reply to the base: Lazy Pirate over a REQ socket, with a handshake monitor.
 
-Each attempt waits ``timeout_s`` for the reply; on silence the socket is closed and reopened and
-the SAME request (same id) is sent again, at most ``retries`` more times, then
-:class:`BaseOffline`. A reply whose id is not the request's is discarded as no reply. The
-socket's monitor reports the CURVE handshake: a refused key raises :class:`BaseAuthRejected` at
-once (the base sends nothing else to a stranger), never "offline".
+The request side of :class:`~devices.base.transport.ZmqTransport`. Each attempt waits the
+policy's ``timeout_s`` for the reply; on silence the socket is closed and reopened and the SAME
+request (same id) is sent again, at most ``retries`` more times, then :class:`BaseOffline`. A
+send never blocks: with no peer to queue for (an in-process base whose socket is gone:
+``inproc://`` keeps no pipe, unlike TCP) the try fails at once. A reply whose id is not the
+request's is discarded as no reply. The socket's monitor reports the CURVE handshake: a refused
+key raises :class:`BaseAuthRejected` at once (the base sends nothing else to a stranger), never
+"offline".
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import logging
 import secrets
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import zmq
@@ -26,6 +30,8 @@ from devices.base.protocol import ProtocolError, Reply, decode_reply
 log = logging.getLogger(__name__)
 
 _monitor_ids = itertools.count()
+
+POLL_SLICE_S = 0.05
 
 _KEY_HINT = "is base.key the base's public key, and do both ends use CURVE?"
 _HANDSHAKE_FAILURES: dict[int, str] = {
@@ -50,13 +56,15 @@ class RequestChannel:
         context: zmq.Context[zmq.Socket[bytes]],
         endpoint: str,
         keys: ClientKeys | None = None,
-        policy: RetryPolicy | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        """``clock`` times each try's wait (a fake one in tests); the socket is polled at
+        least every ``POLL_SLICE_S`` of real time to look at it."""
         require_loopback_without_keys(endpoint, keys is not None)
         self.endpoint = endpoint
-        self.policy = policy or RetryPolicy()
         self._context = context
         self._keys = keys
+        self._clock = clock
         self._lock = threading.Lock()
         self._socket: zmq.Socket[bytes] | None = None
         self._monitor: zmq.Socket[bytes] | None = None
@@ -65,48 +73,53 @@ class RequestChannel:
         self.routing_id = b"fieldapp-" + secrets.token_hex(8).encode()
         """Kept across reconnections: the base knows this client (its goal, its replies)."""
 
-    def request(self, request_id: str, data: bytes) -> Reply:
+    def request(self, request_id: str, data: bytes, policy: RetryPolicy) -> Reply:
         """Send ``data`` and return the reply with id ``request_id`` (Lazy Pirate)."""
         failures_seen = self._failures
         with self._lock:
             if self._failures != failures_seen and self._last_failure is not None:
                 raise type(self._last_failure)(str(self._last_failure))
             try:
-                return self._request_locked(request_id, data)
+                return self._request_locked(request_id, data, policy)
             except BaseError as error:
                 self._failures += 1
                 self._last_failure = error
                 self._close_socket()
                 raise
 
-    def _request_locked(self, request_id: str, data: bytes) -> Reply:
-        attempts = self.policy.retries + 1
+    def _request_locked(self, request_id: str, data: bytes, policy: RetryPolicy) -> Reply:
+        attempts = policy.retries + 1
         for attempt in range(1, attempts + 1):
             if self._socket is None:
                 self._open_socket()
-            reply = self._attempt(request_id, data)
+            reply = self._attempt(request_id, data, policy.timeout_s)
             if reply is not None:
                 return reply
             log.warning(
                 "no reply to %s (attempt %d of %d): reconnecting", request_id, attempt, attempts
             )
             self._close_socket()
-        total_s = attempts * self.policy.timeout_s
+        total_s = attempts * policy.timeout_s
         raise BaseOffline(
             f"base at {self.endpoint} is offline: no reply in {attempts} tries over {total_s:.1f} s"
         )
 
-    def _attempt(self, request_id: str, data: bytes) -> Reply | None:
+    def _attempt(self, request_id: str, data: bytes, timeout_s: float) -> Reply | None:
         sock, monitor = self._socket, self._monitor
         if sock is None or monitor is None:
             raise RuntimeError("request channel is closed")
-        sock.send(data)
+        try:
+            sock.send(data, zmq.NOBLOCK)
+        except zmq.Again:  # no peer to queue for: an inproc:// base whose socket has gone
+            log.warning("%s: nowhere to send %s", self.endpoint, request_id)
+            return None
         poller = zmq.Poller()
         poller.register(sock, zmq.POLLIN)
         poller.register(monitor, zmq.POLLIN)
-        deadline_s = time.monotonic() + self.policy.timeout_s
-        while (remaining_s := deadline_s - time.monotonic()) > 0:
-            events = dict(poller.poll(timeout=max(1, round(remaining_s * 1000))))
+        deadline_s = self._clock() + timeout_s
+        while (remaining_s := deadline_s - self._clock()) > 0:
+            wait_s = min(remaining_s, POLL_SLICE_S)
+            events = dict(poller.poll(timeout=max(1, round(wait_s * 1000))))
             if monitor in events:
                 self._read_monitor(monitor)
             if sock in events:

@@ -1,10 +1,12 @@
 """The application's driver for the mobile base (fieldapp-base/1 client).
 
-``BaseClient`` sends requests through a Lazy Pirate :class:`RequestChannel`, keeps the base's
-watchdog fed with ``heartbeat`` every 0.25 s while a goal is active (a background thread), and
-optionally subscribes to telemetry, re-emitted as psygnal signals. ``goto`` blocks until
-``arrived`` (or raises), or with ``wait=False`` returns at once; :meth:`BaseClient.follow_goal`
-is a generator yielding each status until the goal ends.
+``BaseClient`` is handed its :class:`~devices.base.transport.BaseTransport` and never opens a
+socket; :func:`open_base` makes the transport from endpoints (and keys) and the client on it.
+The client sends each request through the transport's Lazy Pirate with its
+:class:`ClientTiming`, keeps the base's watchdog fed with ``heartbeat`` every 0.25 s while a goal
+is active (a background thread), and re-emits the transport's telemetry, if it carries any, as
+psygnal signals. ``goto`` blocks until ``arrived`` (or raises), or with ``wait=False`` returns at
+once; :meth:`BaseClient.follow_goal` is a generator yielding each status until the goal ends.
 """
 
 from __future__ import annotations
@@ -14,15 +16,14 @@ import logging
 import threading
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
-import zmq
 from psygnal import Signal
 
-from devices.base.channel import RequestChannel, RetryPolicy
+from devices.base.channel import RetryPolicy
 from devices.base.errors import (
     BaseError,
     BaseRequestRejected,
@@ -40,7 +41,7 @@ from devices.base.protocol import (
     Status,
     encode_request,
 )
-from devices.base.telemetry import TelemetrySubscriber
+from devices.base.transport import BaseTransport, Context, open_transport
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +62,9 @@ class BaseInfo:
 
 @dataclass(frozen=True)
 class ClientTiming:
+    """Each request's Lazy Pirate (``request_timeout_s`` per try, ``retries`` more tries, run by
+    the transport), the heartbeat period during a goal, and the status poll of ``goto``."""
+
     request_timeout_s: float = 0.5
     retries: int = 2
     heartbeat_period_s: float = 0.25
@@ -76,39 +80,19 @@ def _error_for(cmd: Command, code: ErrorCode, message: str) -> BaseError:
 
 
 class BaseClient:
-    """Drives one base. Thread-safe; signals fire on the telemetry thread."""
+    """Drives one base through ``transport``, which it closes with itself. Thread-safe;
+    signals fire on the transport's telemetry thread."""
 
     pose_received = Signal(float, Pose)
     """(base clock t_s, pose) from ``pose`` telemetry."""
     state_received = Signal(Status)
 
-    def __init__(
-        self,
-        endpoint: str,
-        telemetry_endpoint: str | None = None,
-        *,
-        keys: ClientKeys | None = None,
-        timing: ClientTiming | None = None,
-    ) -> None:
+    def __init__(self, transport: BaseTransport, *, timing: ClientTiming | None = None) -> None:
         self.timing = timing or ClientTiming()
-        self._context: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
-        policy = RetryPolicy(self.timing.request_timeout_s, self.timing.retries)
-        try:
-            self._channel = RequestChannel(self._context, endpoint, keys, policy)
-            self._telemetry = (
-                None
-                if telemetry_endpoint is None
-                else TelemetrySubscriber(
-                    self._context,
-                    telemetry_endpoint,
-                    self.pose_received.emit,
-                    self.state_received.emit,
-                    keys,
-                )
-            )
-        except BaseError:
-            self._context.term()
-            raise
+        self._policy = RetryPolicy(self.timing.request_timeout_s, self.timing.retries)
+        self._transport = transport
+        if transport.carries_telemetry:
+            transport.subscribe(self.pose_received.emit, self.state_received.emit)
         self._id_prefix = uuid.uuid4().hex[:12]
         self._counter = itertools.count(1)
         self._base_session: str | None = None
@@ -121,7 +105,7 @@ class BaseClient:
 
     @property
     def endpoint(self) -> str:
-        return self._channel.endpoint
+        return self._transport.endpoint
 
     @property
     def link_error(self) -> BaseError | None:
@@ -223,7 +207,7 @@ class BaseClient:
             raise BaseRequestRejected(
                 f"{cmd.value}: arguments are not finite JSON ({error})"
             ) from None
-        reply = self._channel.request(request.id, data)
+        reply = self._transport.request(request.id, data, self._policy)
         if reply.ok:
             return reply.result or {}
         code = reply.error_code or ErrorCode.BAD_REQUEST
@@ -249,7 +233,7 @@ class BaseClient:
 
     def _beat(self) -> None:
         while not self._closed.is_set():
-            if not self._goal_event.wait(timeout=0.1):
+            if not self._goal_event.wait(timeout=0.1) or self._closed.is_set():
                 continue
             try:
                 self.heartbeat()
@@ -260,14 +244,12 @@ class BaseClient:
             self._closed.wait(self.timing.heartbeat_period_s)
 
     def close(self) -> None:
-        """Stop heartbeats and telemetry and release the sockets (the base is not told)."""
+        """Stop heartbeats, then close the transport (the base is not told)."""
         self._closed.set()
-        self._end_goal()
+        self._goal_event.set()  # wakes the heartbeat thread, which sees it is closed
         self._heartbeat.join(timeout=5.0)
-        if self._telemetry is not None:
-            self._telemetry.close()
-        self._channel.close()
-        self._context.term()
+        self._end_goal()
+        self._transport.close()
 
     def __enter__(self) -> BaseClient:
         return self
@@ -279,6 +261,32 @@ class BaseClient:
         tb: TracebackType | None,
     ) -> None:
         self.close()
+
+
+def open_base(
+    endpoint: str,
+    telemetry_endpoint: str | None = None,
+    *,
+    keys: ClientKeys | None = None,
+    timing: ClientTiming | None = None,
+    context: Context | None = None,
+    clock: Callable[[], float] = time.monotonic,
+) -> BaseClient:
+    """A client of the base at ``endpoint`` (subscribed to ``telemetry_endpoint`` if given).
+
+    Over ``tcp://`` (CURVE with ``keys``; loopback only without, else :class:`InsecureEndpoint`)
+    the client has its own ZeroMQ context; an in-process base on ``inproc://`` is reached
+    through its ``context``. ``clock`` times each request's tries (``timing``; a fake clock in
+    tests). Nothing is sent yet (call :meth:`BaseClient.hello`).
+    """
+    transport = open_transport(
+        endpoint, telemetry_endpoint, keys=keys, context=context, clock=clock
+    )
+    try:
+        return BaseClient(transport, timing=timing)
+    except BaseException:
+        transport.close()
+        raise
 
 
 def _raise_if_over(status: Status, goal_id: str) -> None:

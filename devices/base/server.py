@@ -11,6 +11,10 @@ closed); the authorised-keys folder is re-read every ``keys_reload_s`` (or at on
 cached per client (its CURVE key and routing id) and request id: a byte-identical retry gets the
 cached reply, another request with a used id is refused (``id reused``), a ``stop`` always runs.
 
+With ``context`` the server binds on a ZeroMQ context it is handed and leaves open (an
+in-process base on ``inproc://``, reached by clients sharing that context); otherwise it makes
+its own and terminates it on :meth:`ProtocolServer.close`.
+
 Faults for tests: :meth:`ProtocolServer.freeze` (alive but silent), :meth:`ProtocolServer.crash`
 (sockets gone at once, nothing halted), :meth:`ProtocolServer.kill_authenticator`.
 """
@@ -107,6 +111,7 @@ class ProtocolServer:
         keys: ServerKeys | None = None,
         timing: ServerTiming | None = None,
         clock: Callable[[], float] = time.monotonic,
+        context: zmq.Context[zmq.Socket[bytes]] | None = None,
     ) -> None:
         for endpoint in (command_endpoint, telemetry_endpoint):
             require_loopback_without_keys(endpoint, keys is not None)
@@ -122,6 +127,7 @@ class ProtocolServer:
         self._frozen = threading.Event()
         self._crashed = threading.Event()
         self._thread: threading.Thread | None = None
+        self._shared_context = context
         self._context: zmq.Context[zmq.Socket[bytes]] | None = None
         self._auth: ThreadAuthenticator | None = None
         self._authorized = AuthorizedKeys(keys.authorized_dir) if keys is not None else None
@@ -135,7 +141,7 @@ class ProtocolServer:
 
     def start(self) -> None:
         """Bind both sockets and start serving; endpoints with port ``*`` are resolved."""
-        self._context = zmq.Context()
+        self._context = zmq.Context() if self._shared_context is None else self._shared_context
         if self._keys is not None:
             self._auth = ThreadAuthenticator(
                 self._context, log=logging.getLogger(f"{__name__}.zap")
@@ -185,9 +191,9 @@ class ProtocolServer:
         if self._auth is not None:
             self._auth.stop()
             self._auth = None
-        if self._context is not None:
+        if self._context is not None and self._context is not self._shared_context:
             self._context.term()
-            self._context = None
+        self._context = None
 
     def freeze(self, frozen: bool = True) -> None:
         """Stop (or resume) answering, publishing and updating, like a hung computer."""

@@ -1,4 +1,5 @@
-"""The simulated mobile base: the motion model served over the real protocol on loopback.
+"""The simulated mobile base: the motion model served over the real protocol on loopback
+(``tcp://127.0.0.1``), or in process on ``inproc://`` endpoints of a shared ZeroMQ context.
 
 ``time_scale`` makes simulated motion faster than real time (tests) or equal to it (demos); the
 watchdog and telemetry periods follow the link's ``clock`` (real time by default; tests inject a
@@ -16,6 +17,7 @@ from collections.abc import Callable
 from enum import StrEnum
 from types import TracebackType
 
+import zmq
 from psygnal import Signal
 
 from devices.base.backend import BackendSnapshot
@@ -87,14 +89,17 @@ class SimulatedBase:
         watchdog_s: float = 1.0,
         timing: ServerTiming | None = None,
         clock: Callable[[], float] = time.monotonic,
+        context: zmq.Context[zmq.Socket[bytes]] | None = None,
     ) -> None:
-        """``clock`` times the link (watchdog, telemetry); motion follows the real clock."""
+        """``clock`` times the link (watchdog, telemetry); motion follows the real clock.
+        ``context``: serve on this ZeroMQ context, left open (an in-process base on
+        ``inproc://`` endpoints, reached by ``open_base(..., context=context)``)."""
         self.model = MotionModel(limits, start, seed)
         self.backend = SimulatedMotionBackend(self.model, time_scale)
         config = ControllerConfig("fieldapp-sim-base", bounds_m, watchdog_s)
         self.controller = BaseController(self.backend, config)
         self.server = ProtocolServer(
-            self.controller, command_endpoint, telemetry_endpoint, keys, timing, clock
+            self.controller, command_endpoint, telemetry_endpoint, keys, timing, clock, context
         )
         self.server.on_tick = self._emit_pose
         self._last_pose = self.model.pose

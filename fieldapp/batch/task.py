@@ -72,6 +72,7 @@ def reconstruct_session(
     :class:`~fieldapp.recon.settings.ReconstructionSettings`) and write its outputs under
     ``out_dir/<session id>/``. Top-level and picklable: this is what a Dask task runs."""
     from fieldapp.io.session import load_session
+    from fieldapp.provenance import provenance_of
     from fieldapp.recon.outputs import write_outputs
     from fieldapp.recon.pipeline import run_reconstruction
     from fieldapp.recon.settings import ReconstructionSettings
@@ -93,6 +94,7 @@ def reconstruct_session(
             plant_clouds,
             result.report(),
             **result.output_extras(),
+            provenance=provenance_of(session, parsed),
         )
     except (FieldappError, OSError, ValueError) as error:
         log.warning("%s: %s", session_dir, error)

@@ -39,13 +39,13 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from devices.base.client import BaseClient
+    from devices.base.client import open_base
     from devices.base.errors import BaseError
     from devices.base.keys import ClientKeys
 
     try:
         keys = ClientKeys.from_dir(args.keys) if args.keys else None
-        with BaseClient(args.endpoint, keys=keys) as client:
+        with open_base(args.endpoint, keys=keys) as client:
             _execute(client, args)
     except BaseError as error:
         print(f"fieldapp base: {error}", file=sys.stderr)

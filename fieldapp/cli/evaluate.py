@@ -114,56 +114,16 @@ def run_traits(args: argparse.Namespace) -> int:
 
 def run_organs(args: argparse.Namespace) -> int:
     from fieldapp.evaluate.organ_files import (
-        leaves_by_plant,
-        read_table,
+        evaluate_organ_references,
         summary_lines,
         write_organ_evaluation,
     )
-    from fieldapp.evaluate.organs import PlantOrganPair, evaluate_organs, pair_plant
-    from fieldapp.evaluate.references import load_truth, pair_with_truth
-    from fieldapp.results.files import read_plants_csv
 
-    if args.max_distance_m <= 0:
-        raise FieldappError("--max-distance-m must be positive")
-    plants = {int(r["plant"]): r for r in read_table(args.results / "plants.csv", ("plant",))}
-    found = leaves_by_plant(read_table(args.results / "leaves.csv", ("plant_id", "leaf_id")))
-    pairs: list[PlantOrganPair] = []
-    if args.truth is not None:
-        truth = {p.name: p.model_dump() for p in load_truth(args.truth).plants}
-        pairing = pair_with_truth(
-            read_plants_csv(args.results / "plants.csv"),
-            list(load_truth(args.truth).plants),
-            args.max_distance_m,
-        )
-        for p in pairing.pairs:
-            leaves = found.get(p.plant, [])
-            pairs.append(
-                pair_plant(p.plant, p.reference, plants[p.plant], leaves, truth[p.reference])
-            )
-    else:
-        manual = leaves_by_plant(read_table(args.manual_leaves, ("plant_id", "leaf_id")))
-        for plant_id, leaves in sorted(manual.items()):
-            if plant_id not in plants:
-                print(f"warning: plant {plant_id} of {args.manual_leaves} is not in plants.csv")
-                continue
-            areas = [leaf.get("area_cm2") for leaf in leaves]
-            known = [float(a) for a in areas if a is not None]
-            expected = {
-                "leaf_count": len(leaves),
-                "leaf_area_cm2": sum(known) if len(known) == len(areas) else None,
-                "leaves": leaves,
-            }
-            pairs.append(
-                pair_plant(
-                    plant_id,
-                    str(plant_id),
-                    plants[plant_id],
-                    found.get(plant_id, []),
-                    expected,
-                    by_id=True,
-                )
-            )
-    evaluation = evaluate_organs(pairs)
+    evaluation, warnings = evaluate_organ_references(
+        args.results, args.truth, args.manual_leaves, args.max_distance_m
+    )
+    for warning in warnings:
+        print(f"warning: {warning}")
     for line in summary_lines(evaluation):
         print(line)
     out = args.out or args.results / "evaluation"

@@ -21,19 +21,32 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--no-icp", action="store_true", help="keep the coarse station poses")
     parser.add_argument("--settings", type=Path, help="settings YAML (default: the user's)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the results already in DIR (without it, a DIR holding results is refused)",
+    )
     parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from rich.progress import Progress as Bar
 
-    from fieldapp.errors import FormatError
+    from fieldapp.errors import FieldappError, FormatError
     from fieldapp.io.session import load_session
-    from fieldapp.recon.outputs import write_outputs
+    from fieldapp.provenance import provenance_of
+    from fieldapp.recon.outputs import existing_outputs, write_outputs
     from fieldapp.recon.pipeline import reconstruct
     from fieldapp.recon.progress import Progress
     from fieldapp.settings import load_settings
 
+    existing = existing_outputs(args.out) if args.out.is_dir() else []
+    if existing and not args.overwrite:
+        names = ", ".join(p.name for p in existing)
+        raise FieldappError(
+            f"{args.out}: already holds results ({names}); not overwritten: give --overwrite "
+            "to replace them, or another --out"
+        )
     settings = load_settings(args.settings).reconstruction
     if args.no_icp:
         settings.registration.enabled = False
@@ -66,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
             {p.id: p.cloud for p in result.plants},
             result.report(),
             **result.output_extras(),
+            provenance=provenance_of(session, settings),
         )
     except OSError as error:
         print(f"{args.out}: cannot write the results: {error.strerror or error}", file=sys.stderr)

@@ -21,6 +21,12 @@ def register(subparsers: Any) -> None:
     reference = parser.add_mutually_exclusive_group()
     reference.add_argument("--manual", type=Path, help="add the accuracy against manual.csv")
     reference.add_argument("--truth", type=Path, help="add the accuracy against truth.json")
+    parser.add_argument(
+        "--manual-leaves",
+        type=Path,
+        help="add the organ accuracy against hand-measured leaves (leaves.csv's columns); "
+        "with --truth the organs are compared with the truth's",
+    )
     parser.set_defaults(handler=run)
 
 
@@ -57,7 +63,21 @@ def _inputs(args: argparse.Namespace) -> Any:
             pairing = pair_with_truth(plants, load_truth(args.truth).plants, 0.15)
         inputs.evaluation = evaluate_traits(pairing)
         inputs.warnings += pairing.warnings()
+    _organ_inputs(args, inputs)
     return inputs
+
+
+def _organ_inputs(args: argparse.Namespace, inputs: Any) -> None:
+    """The organ accuracy (same evaluation as ``fieldapp evaluate organs``) when the results
+    have leaves and a reference is given."""
+    from fieldapp.evaluate.organ_files import evaluate_organ_references
+
+    manual = args.manual_leaves
+    truth = args.truth if manual is None else None
+    if manual is None and (truth is None or not (args.results / "leaves.csv").is_file()):
+        return  # a truth without leaves measured: no organs to compare
+    inputs.organ_evaluation, warnings = evaluate_organ_references(args.results, truth, manual)
+    inputs.warnings += warnings
 
 
 def run(args: argparse.Namespace) -> int:

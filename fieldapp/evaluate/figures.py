@@ -27,9 +27,14 @@ def _png(figure: Figure) -> bytes:
 
 
 def trait_scatter_png(
-    trait: str, algorithm: Sequence[float], reference: Sequence[float], result: Agreement
+    trait: str,
+    algorithm: Sequence[float],
+    reference: Sequence[float],
+    result: Agreement,
+    unit: str = "cm",
 ) -> bytes:
-    """Algorithm against reference with the 1:1 line and the figures (paper, Figure 10)."""
+    """Algorithm against reference with the 1:1 line and the figures (paper, Figure 10);
+    ``unit``: the trait's (organ traits are in cm, mm, cm², degrees or leaves)."""
     figure = Figure(figsize=(4.6, 4.4), layout="constrained")
     axes = figure.add_subplot()
     axes.scatter(reference, algorithm, s=22, color="tab:green", edgecolor="black", linewidth=0.4)
@@ -41,11 +46,11 @@ def trait_scatter_png(
     axes.set_xlim(line[0], line[1])
     axes.set_ylim(line[0], line[1])
     axes.set_aspect("equal")
-    label = UNITS.get(trait, trait)
+    label = UNITS.get(trait, f"{trait} ({unit})")
     axes.set_xlabel(f"reference {label}")
     axes.set_ylabel(f"algorithm {label}")
     r2 = "n/a" if result.r2 is None else f"{result.r2:.3f}"
-    rmse = "n/a" if result.rmse is None else f"{result.rmse:.2f} cm"
+    rmse = "n/a" if result.rmse is None else f"{result.rmse:.2f} {unit}"
     axes.set_title(f"{trait}: n = {result.n}, R² = {r2}, RMSE = {rmse}", fontsize=10)
     axes.legend(loc="upper left")
     return _png(figure)

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from fieldapp.evaluate.metrics import Agreement, agreement
 
@@ -25,6 +24,18 @@ LEAF_TRAITS = (
     "insertion_height_cm",
 )
 PLANT_TRAITS = ("leaf_count", "leaf_area_cm2", "stem_diameter_mm")
+UNITS = {
+    "length_cm": "cm",
+    "max_width_cm": "cm",
+    "area_cm2": "cm²",
+    "angle_from_stem_deg": "°",
+    "azimuth_deg": "°",
+    "insertion_height_cm": "cm",
+    "leaf_count": "leaves",
+    "leaf_area_cm2": "cm²",
+    "stem_diameter_mm": "mm",
+}
+"""The unit of every organ trait, for tables and figures."""
 
 AZIMUTH_SCALE_DEG = 45.0
 HEIGHT_SCALE_CM = 2.0
@@ -42,6 +53,8 @@ def pair_leaves(
 ) -> list[tuple[int, int]]:
     """Pairs (index in ``found``, index in ``reference``) of leaves (dicts with at least
     ``azimuth_deg`` and ``insertion_height_cm``)."""
+    from scipy.optimize import linear_sum_assignment  # SciPy loads when first used
+
     if not found or not reference:
         return []
     cost = np.array(
@@ -123,31 +136,47 @@ class OrganEvaluation:
     extra: int
     missed: int
 
+    def agreements(self) -> list[tuple[str, str, Agreement]]:
+        """(trait, level ``leaf`` or ``plant``, agreement) of every trait, leaves first."""
+        rows = [(t, "leaf", self.by_leaf_trait[t]) for t in LEAF_TRAITS]
+        return rows + [(t, "plant", self.by_plant_trait[t]) for t in PLANT_TRAITS]
+
+    def values(self, trait: str) -> tuple[list[float], list[float]]:
+        """(algorithm, reference) values compared for ``trait`` (azimuths unwrapped to within
+        180 degrees of the reference), as its agreement was computed."""
+        if trait in LEAF_TRAITS:
+            return _leaf_values(self.pairs, trait)
+        return _plant_values(self.pairs, trait)
+
+
+def _leaf_values(pairs: list[PlantOrganPair], trait: str) -> tuple[list[float], list[float]]:
+    algorithm, reference = [], []
+    for pair in pairs:
+        for found, expected in pair.leaf_pairs:
+            if found.get(trait) is None or expected.get(trait) is None:
+                continue
+            value, truth = float(found[trait]), float(expected[trait])
+            if trait == "azimuth_deg":
+                value = truth + azimuth_difference_deg(value, truth)
+            algorithm.append(value)
+            reference.append(truth)
+    return algorithm, reference
+
+
+def _plant_values(pairs: list[PlantOrganPair], trait: str) -> tuple[list[float], list[float]]:
+    values = [
+        (float(p.found[trait]), float(p.expected[trait]))
+        for p in pairs
+        if p.found.get(trait) is not None and p.expected.get(trait) is not None
+    ]
+    return [v[0] for v in values], [v[1] for v in values]
+
 
 def evaluate_organs(pairs: list[PlantOrganPair]) -> OrganEvaluation:
     """Agreement of organ traits over ``pairs``. Azimuths are compared on the circle: the
     algorithm's value is unwrapped to within 180 degrees of the reference."""
-    by_leaf = {}
-    for trait in LEAF_TRAITS:
-        algorithm, reference = [], []
-        for pair in pairs:
-            for found, expected in pair.leaf_pairs:
-                if found.get(trait) is None or expected.get(trait) is None:
-                    continue
-                value, truth = float(found[trait]), float(expected[trait])
-                if trait == "azimuth_deg":
-                    value = truth + azimuth_difference_deg(value, truth)
-                algorithm.append(value)
-                reference.append(truth)
-        by_leaf[trait] = agreement(algorithm, reference)
-    by_plant = {}
-    for trait in PLANT_TRAITS:
-        values = [
-            (float(p.found[trait]), float(p.expected[trait]))
-            for p in pairs
-            if p.found.get(trait) is not None and p.expected.get(trait) is not None
-        ]
-        by_plant[trait] = agreement([v[0] for v in values], [v[1] for v in values])
+    by_leaf = {t: agreement(*_leaf_values(pairs, t)) for t in LEAF_TRAITS}
+    by_plant = {t: agreement(*_plant_values(pairs, t)) for t in PLANT_TRAITS}
     exact = sum(
         1
         for p in pairs

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from fieldapp import __version__
+from fieldapp.evaluate.organs import UNITS, OrganEvaluation
 from fieldapp.evaluate.traits import TraitEvaluation
 from fieldapp.results.files import PlantRecord, read_plants_csv, read_report
 from fieldapp.results.organ_tables import LEAF_TRAITS, read_table
@@ -33,6 +34,7 @@ class ReportInputs:
     calibration: dict[str, Any] | None = None
     session_lines: list[str] = field(default_factory=list)
     evaluation: TraitEvaluation | None = None
+    organ_evaluation: OrganEvaluation | None = None
     warnings: list[str] = field(default_factory=list)
 
 
@@ -167,6 +169,48 @@ def evaluation_section(evaluation: TraitEvaluation | None) -> str:
     return "<h2>Accuracy against the reference</h2>" + _table(header, rows) + "".join(images)
 
 
+def organ_evaluation_section(evaluation: OrganEvaluation | None) -> str:
+    """Agreement of every organ trait with the reference (the leaf count exact on how many
+    plants, leaves found but not in the reference and the reverse), a scatter per trait."""
+    if evaluation is None:
+        return ""
+    from fieldapp.evaluate.figures import trait_scatter_png
+
+    rows: list[list[object]] = []
+    images = []
+    for trait, level, a in evaluation.agreements():
+        unit = UNITS[trait]
+        rows.append(
+            [
+                trait,
+                level,
+                unit,
+                a.n,
+                _number(a.r2, 4),
+                _number(a.rmse, 2),
+                _number(a.mape_percent, 2),
+                _number(a.bias, 2),
+                f"{_number(a.loa_low, 2)} .. {_number(a.loa_high, 2)}",
+            ]
+        )
+        if a.n:
+            images.append(
+                _image(trait_scatter_png(trait, *evaluation.values(trait), a, unit), trait)
+            )
+    header = ["trait", "level", "unit", "n", "R2", "RMSE", "MAPE (%)", "bias", "95 % limits"]
+    counts = (
+        f"<p>Leaf count exact on {evaluation.count_exact} of {len(evaluation.pairs)} plants; "
+        f"{evaluation.extra} leaves found but not in the reference; {evaluation.missed} "
+        "reference leaves not found.</p>"
+    )
+    return (
+        "<h2>Organ accuracy against the reference</h2>"
+        + counts
+        + _table(header, rows)
+        + "".join(images)
+    )
+
+
 def organs_section(results_dir: Path) -> str:
     """The organ traits per plant and every leaf, when the folder has ``leaves.csv``."""
     if not (results_dir / "leaves.csv").is_file():
@@ -199,6 +243,22 @@ def _cell(value: Any) -> str:
     return str(value) if isinstance(value, int) else f"{value:.2f}"
 
 
+def provenance_section(report: dict[str, Any]) -> str:
+    """Where the results came from (``report.json``'s provenance: devices, calibration,
+    software, settings hash) in one visible line with the details below it, and when this
+    report was written."""
+    from fieldapp.provenance import details_text, summary_line
+
+    provenance = report.get("provenance")
+    document = provenance if isinstance(provenance, dict) else None
+    written = dt.datetime.now().astimezone().isoformat(timespec="seconds")
+    return (
+        f"<p class=provenance><b>{_e(summary_line(document))}</b></p>"
+        f"<pre class=provenance>{_e(details_text(document))}</pre>"
+        f"<p>report written by fieldapp {_e(__version__)}, {_e(written)}</p>"
+    )
+
+
 def build_report(results_dir: Path, inputs: ReportInputs) -> str:
     """The HTML text of the report of ``results_dir``."""
     from fieldapp.evaluate.figures import trait_bars_png
@@ -220,8 +280,7 @@ def build_report(results_dir: Path, inputs: ReportInputs) -> str:
         f"<title>fieldapp report {_e(report.get('session', ''))}</title>",
         f"<style>{STYLE}</style></head><body>",
         f"<h1>Reconstruction report: {_e(report.get('session', results_dir.name))}</h1>",
-        f"<p>fieldapp {_e(__version__)}, "
-        f"{_e(dt.datetime.now().astimezone().isoformat(timespec='seconds'))}</p>",
+        provenance_section(report),
         "<h2>Session</h2>",
         _table(["", ""], summary),
         "<h2>Calibration used</h2>",
@@ -237,6 +296,7 @@ def build_report(results_dir: Path, inputs: ReportInputs) -> str:
         "<h2>Figures</h2>",
         _image(trait_bars_png([(p.plant, p.height_cm, p.width_cm) for p in plants]), "traits"),
         evaluation_section(inputs.evaluation),
+        organ_evaluation_section(inputs.organ_evaluation),
         "<h2>Warnings</h2>",
         "".join(f"<p class=warn>{_e(w)}</p>" for w in warnings) or "<p>none</p>",
         f"<!-- report.json: {_e(json.dumps(report.get('format', '')))} -->",

@@ -2,7 +2,10 @@
 
 ``plants.csv`` (plant,x_m,y_m,height_cm,width_cm,points, then the organ traits),
 ``leaves.csv`` (one row per leaf), ``cloud.ply`` (field frame, colour, and per point the plant,
-organ and leaf when organs were measured), ``plants/<plant>.ply`` and ``report.json``.
+organ and leaf when organs were measured), ``plants/<plant>.ply`` and ``report.json``; with
+the run's provenance (:mod:`fieldapp.provenance`) in ``report.json`` and in ``provenance.json``
+beside the CSVs (the spec's CSVs have no room for comment lines: every reader takes the first
+line as the header).
 """
 
 from __future__ import annotations
@@ -11,7 +14,7 @@ import csv
 import io
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,6 +22,13 @@ from numpy.typing import NDArray
 from fieldapp.io import ply
 from fieldapp.io.durable import write_bytes_durably, write_json_durably
 from fieldapp.recon.cloud import Cloud
+
+if TYPE_CHECKING:
+    from fieldapp.provenance import RunProvenance
+
+PROVENANCE_FILE = "provenance.json"
+OUTPUT_NAMES = ("plants.csv", "leaves.csv", "cloud.ply", "report.json", PROVENANCE_FILE, "plants")
+"""What a results folder holds: any of them there means a reconstruction was written here."""
 
 ORGAN_COLUMNS = [
     "leaf_count",
@@ -193,11 +203,22 @@ def write_outputs(
     leaves: list[LeafRow] | None = None,
     labels: PointLabels | None = None,
     plant_labels: dict[int, PointLabels] | None = None,
+    provenance: RunProvenance | None = None,
 ) -> list[Path]:
     """Write every output file into ``folder`` (created); returns the paths written. Plant
     clouds left in ``plants/`` by an earlier run with more plants are removed. ``leaves``
     (``leaves.csv``, written when given) and the per-point ``labels`` of ``cloud`` and
-    ``plant_labels`` of each plant cloud come from the organ step."""
+    ``plant_labels`` of each plant cloud come from the organ step. ``provenance`` (given by a
+    new reconstruction, not by a re-export) goes into ``report.json`` (``provenance``,
+    ``settings``, ``software_version``), and then a ``leaves.csv`` an earlier run left is
+    removed when this run has none; ``provenance.json`` is written whenever the report has a
+    provenance (also when results are exported again)."""
+    if provenance is not None:
+        report = report | {
+            "provenance": provenance.document,
+            "settings": provenance.settings,
+            "software_version": provenance.document["software"]["version"],
+        }
     written = [folder / "cloud.ply"]
     stale = folder / "plants"
     if stale.is_dir():
@@ -214,5 +235,15 @@ def write_outputs(
     if leaves is not None:
         write_bytes_durably(folder / "leaves.csv", leaves_csv_text(leaves).encode("utf-8"))
         written.append(folder / "leaves.csv")
+    elif provenance is not None and (folder / "leaves.csv").exists():
+        (folder / "leaves.csv").unlink()  # an earlier run's leaves are not this run's plants
+    if isinstance(report.get("provenance"), dict):
+        write_json_durably(folder / PROVENANCE_FILE, report["provenance"])
+        written.append(folder / PROVENANCE_FILE)
     write_json_durably(folder / "report.json", report)
     return [*written, folder / "report.json"]
+
+
+def existing_outputs(folder: Path) -> list[Path]:
+    """The reconstruction outputs already in ``folder`` (empty when it holds none)."""
+    return [folder / name for name in OUTPUT_NAMES if (folder / name).exists()]

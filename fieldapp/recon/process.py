@@ -19,6 +19,7 @@ from typing import Any
 
 from fieldapp.errors import FieldappError
 from fieldapp.io.session import load_session
+from fieldapp.provenance import provenance_of
 from fieldapp.recon.outputs import write_outputs
 from fieldapp.recon.pipeline import reconstruct
 from fieldapp.recon.progress import Progress
@@ -91,7 +92,8 @@ def _child(
     """The child's side: run the pipeline, send progress, write the outputs."""
     try:
         settings = ReconstructionSettings.model_validate_json(settings_json)
-        steps = reconstruct(load_session(Path(session_folder)), settings)
+        session = load_session(Path(session_folder))
+        steps = reconstruct(session, settings)
         while True:
             if cancel.is_set():
                 steps.close()
@@ -109,6 +111,7 @@ def _child(
             plant_clouds,
             result.report(),
             **result.output_extras(),
+            provenance=provenance_of(session, settings),
         )
         sender.send(("done", {"plants": len(result.plants), "warnings": list(result.warnings)}))
     except FieldappError as error:

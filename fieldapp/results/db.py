@@ -52,6 +52,9 @@ class RunInfo:
     settings_sha256: str
     plants: int
     message: str
+    provenance: dict[str, Any] | None = None
+    """The run's provenance document (:mod:`fieldapp.provenance`); ``None`` for a run recorded
+    before fieldapp kept it or from results written without it."""
 
 
 @dataclass(frozen=True)
@@ -159,7 +162,8 @@ class ResultsDB:
         session = read_session_source(session_dir, run.report, date)
         with self._transaction() as db:
             session_row = _session_row(db, plot, session)
-            run_id = _insert_run(db, session_row, run, "complete", "")
+            provenance = run.report.get("provenance")
+            run_id = _insert_run(db, session_row, run, "complete", "", provenance)
             plant_ids = _identify(db, _plot_id(db, plot), run_id, run.plants, max_distance_m)
             _insert_traits(db, run_id, run.plants, plant_ids)
             _insert_organs(db, run_id, run, plant_ids)
@@ -181,8 +185,10 @@ class ResultsDB:
         """Record a reconstruction of a session that failed (no plants); returns the run id."""
         session = read_session_source(session_dir, {}, date)
         run = RunSource(Path(), [], {}, dict(settings or {}), software_version or "unknown")
+        provenance = _failure_provenance(session_dir, settings)
         with self._transaction() as db:
-            return _insert_run(db, _session_row(db, plot, session), run, "failed", message)
+            session_row = _session_row(db, plot, session)
+            return _insert_run(db, session_row, run, "failed", message, provenance)
 
     def add_manual(
         self, plot: str, date: dt.date, records: list[ManualRecord], source: str = ""
@@ -222,15 +228,31 @@ class ResultsDB:
         query = (
             "SELECT runs.id, plots.name, sessions.session_id, sessions.date, runs.status, "
             "runs.recorded, runs.results_dir, runs.software_version, runs.settings_sha256, "
-            "(SELECT COUNT(*) FROM traits WHERE traits.run_id = runs.id), runs.message "
-            "FROM runs JOIN sessions ON sessions.id = runs.session_id "
+            "(SELECT COUNT(*) FROM traits WHERE traits.run_id = runs.id), runs.message, "
+            "runs.provenance FROM runs JOIN sessions ON sessions.id = runs.session_id "
             "JOIN plots ON plots.id = sessions.plot_id "
         )
         arguments: tuple[Any, ...] = ()
         if plot is not None:
             query, arguments = query + "WHERE plots.name = ? ", (plot,)
         rows = self.connection.execute(query + "ORDER BY sessions.date, runs.id", arguments)
-        return [RunInfo(r[0], r[1], r[2], dt.date.fromisoformat(r[3]), *r[4:]) for r in rows]
+        return [
+            RunInfo(
+                r[0],
+                r[1],
+                r[2],
+                dt.date.fromisoformat(r[3]),
+                r[4],
+                r[5],
+                r[6],
+                r[7],
+                r[8],
+                r[9],
+                r[10],
+                _document(r[11]),
+            )
+            for r in rows
+        ]
 
     def run_of_results_dir(self, results_dir: Path) -> RunInfo | None:
         """The latest run recorded from ``results_dir``, if any."""
@@ -364,12 +386,57 @@ def _session_row(db: sqlite3.Connection, plot: str, session: SessionSource) -> i
     return int(row[0])
 
 
+def _document(text: str | None) -> dict[str, Any] | None:
+    if text is None:
+        return None
+    document = json.loads(text)
+    return document if isinstance(document, dict) else None
+
+
+def _failure_provenance(
+    session_dir: Path, settings: Mapping[str, Any] | None
+) -> dict[str, Any] | None:
+    """The provenance of a run that failed: of its session, when the session can be read."""
+    from fieldapp.errors import FieldappError
+    from fieldapp.io.session import load_session
+    from fieldapp.provenance import provenance_of
+
+    try:
+        return provenance_of(load_session(session_dir, allow_empty=True), settings or {}).document
+    except FieldappError as error:
+        log.info("%s: no provenance for the failed run (%s)", session_dir, error)
+        return None
+
+
+def _provenance_columns(provenance: Any) -> tuple[str | None, ...]:
+    """(document, source kind, calibration sha256, software commit) of a provenance document;
+    all ``None`` when there is none."""
+    if not isinstance(provenance, dict):
+        return (None, None, None, None)
+    parts = {k: provenance.get(k) or {} for k in ("source", "calibration", "software")}
+    return (
+        canonical_json(provenance),
+        *(_text(parts[k].get(f)) for k, f in (("source", "kind"), ("calibration", "sha256"))),
+        _text(parts["software"].get("commit")),
+    )
+
+
+def _text(value: Any) -> str | None:
+    return None if value is None else str(value)
+
+
 def _insert_run(
-    db: sqlite3.Connection, session_row: int, run: RunSource, status: str, message: str
+    db: sqlite3.Connection,
+    session_row: int,
+    run: RunSource,
+    status: str,
+    message: str,
+    provenance: Any = None,
 ) -> int:
     cursor = db.execute(
         "INSERT INTO runs (session_id, recorded, results_dir, settings, settings_sha256, "
-        "software_version, timings, status, message, report) VALUES (?,?,?,?,?,?,?,?,?,?)",
+        "software_version, timings, status, message, report, provenance, source, "
+        "calibration_sha256, software_commit) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
         (
             session_row,
             _now(),
@@ -381,6 +448,7 @@ def _insert_run(
             status,
             message,
             canonical_json(run.report),
+            *_provenance_columns(provenance),
         ),
     )
     return int(cursor.lastrowid or 0)

@@ -96,6 +96,14 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
             PRIMARY KEY (run_id, plant_id, leaf_id))""",
         "CREATE INDEX leaves_by_plant ON leaves(plant_id, leaf_id)",
     ),
+    (
+        # Where each run came from (fieldapp.provenance): the whole document, and its most
+        # asked parts as columns. Runs recorded before have NULL: their provenance is unknown.
+        "ALTER TABLE runs ADD COLUMN provenance TEXT",
+        "ALTER TABLE runs ADD COLUMN source TEXT",
+        "ALTER TABLE runs ADD COLUMN calibration_sha256 TEXT",
+        "ALTER TABLE runs ADD COLUMN software_commit TEXT",
+    ),
 )
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -95,7 +95,7 @@ def probe_table(port: str | None) -> ProbeResult:
 
 def probe_base(endpoint: str | None, keys_dir: Path | None) -> ProbeResult:
     """Say hello to the base (a simulated base on loopback when ``endpoint`` is empty)."""
-    from devices.base import BaseClient, BaseError, ClientKeys, SimulatedBase
+    from devices.base import BaseError, ClientKeys, SimulatedBase, open_base
     from fieldapp.rig import LOOPBACK_ANY_PORT, telemetry_endpoint
 
     simulator = None
@@ -104,7 +104,7 @@ def probe_base(endpoint: str | None, keys_dir: Path | None) -> ProbeResult:
             simulator = SimulatedBase(LOOPBACK_ANY_PORT, LOOPBACK_ANY_PORT).start()
             endpoint = simulator.command_endpoint
         keys = ClientKeys.from_dir(keys_dir) if keys_dir else None
-        with BaseClient(endpoint, telemetry_endpoint(endpoint), keys=keys) as client:
+        with open_base(endpoint, telemetry_endpoint(endpoint), keys=keys) as client:
             info = client.hello()
             status = client.status()
     except BaseError as error:

@@ -11,6 +11,8 @@ from typing import Any
 import numpy as np
 
 from fieldapp.evaluate.figures import growth_png, map_png, trait_bars_png, trait_scatter_png
+from fieldapp.evaluate.organ_files import write_organ_evaluation
+from fieldapp.evaluate.organs import OrganEvaluation
 from fieldapp.evaluate.report import ReportInputs, build_report
 from fieldapp.evaluate.traits import TraitEvaluation, metrics_csv, pairs_csv
 from fieldapp.io.durable import write_bytes_durably
@@ -27,8 +29,10 @@ def export_results(
     evaluation: TraitEvaluation | None = None,
     growth: dict[str, dict[int, list[tuple[dt.date, float]]]] | None = None,
     calibration: dict[str, Any] | None = None,
+    organ_evaluation: OrganEvaluation | None = None,
 ) -> list[Path]:
-    """Write everything about ``results`` into ``folder``; returns the files written."""
+    """Write everything about ``results`` into ``folder``; returns the files written (with
+    ``organ_evaluation``: ``organs_metrics.csv``, ``leaf_pairs.csv`` and its report section)."""
     organs = _organ_columns(results.results_dir)
     rows = [
         PlantRow(
@@ -46,7 +50,11 @@ def export_results(
     if evaluation is not None:
         written.append(_write(folder / "accuracy.csv", metrics_csv(evaluation).encode("utf-8")))
         written.append(_write(folder / "pairs.csv", pairs_csv(evaluation).encode("utf-8")))
-    inputs = ReportInputs(calibration=calibration, evaluation=evaluation)
+    if organ_evaluation is not None:
+        written += write_organ_evaluation(folder, organ_evaluation)
+    inputs = ReportInputs(
+        calibration=calibration, evaluation=evaluation, organ_evaluation=organ_evaluation
+    )
     written.append(_write(folder / "report.html", build_report(folder, inputs).encode("utf-8")))
     return written
 

@@ -17,7 +17,13 @@ from fieldapp.settings import Settings
 from ui.results.data import PlotResults, load_results_dir
 from ui.results.history import HistoryPanel
 from ui.results.manual import ManualPanel
-from ui.results.runner import Outcome, ReconstructionRunner, default_results_dir
+from ui.results.provenance import show_provenance
+from ui.results.runner import (
+    Outcome,
+    ReconstructionRunner,
+    choose_results_dir,
+    default_results_dir,
+)
 from ui.results.scene import CloudScene, build_scene
 from ui.results.tables import PlantTableModel, leaf_model, station_model
 from ui.results.topmap import TopMap
@@ -69,7 +75,12 @@ class ResultsPanel(QtWidgets.QWidget):
         if self.session is None:
             raise FieldappError("open a session first")
         folder = Path(self.results_dir.text().strip() or default_results_dir(self.session.folder))
-        self.runner.start(self.session, self.settings.reconstruction, folder)
+        chosen = choose_results_dir(self, folder)
+        if chosen is None:
+            self.stage.setText(f"not reconstructed: the results in {folder} are kept")
+            return
+        self.results_dir.setText(str(chosen))
+        self.runner.start(self.session, self.settings.reconstruction, chosen)
         self.stage.setText("starting…")
         self.progress.setValue(0)
         self._set_running(True)
@@ -98,6 +109,7 @@ class ResultsPanel(QtWidgets.QWidget):
             f"{results.session_id}: {len(results.plants)} plants, {len(results.cloud)} points "
             f"→ {results.results_dir}"
         )
+        show_provenance(self.provenance, results.report.get("provenance"))
         self.export_button.setEnabled(True)
         self.history.record_button.setEnabled(True)
         self.results_shown.emit(results)
@@ -109,6 +121,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self.selected = plant
         self.view3d.select(plant)
         self.map.select(plant)
+        self.inspector.show_plant(plant)
         self.leaves.setModel(
             leaf_model([] if plant is None else self.results.leaves.get(plant, []))
         )
@@ -134,7 +147,13 @@ class ResultsPanel(QtWidgets.QWidget):
         from ui.results.export import export_results  # matplotlib: only when exporting
 
         return partial(
-            export_results, self.results, folder, self.manual.evaluation, growth, calibration
+            export_results,
+            self.results,
+            folder,
+            self.manual.evaluation,
+            growth,
+            calibration,
+            organ_evaluation=self.organ_accuracy.evaluation,
         )
 
     def shutdown(self) -> None:
@@ -162,6 +181,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self.progress.setRange(0, 1000)
         self.stage = QtWidgets.QLabel("")
         self.summary = QtWidgets.QLabel("")
+        self.provenance = QtWidgets.QLabel("")  # where the results came from; details as tooltip
         row1 = QtWidgets.QHBoxLayout()
         for widget in (open_session, open_results, self.session_label):
             row1.addWidget(widget)
@@ -224,9 +244,28 @@ class ResultsPanel(QtWidgets.QWidget):
         layout.addLayout(row1)
         layout.addLayout(row2)
         layout.addWidget(self.summary)
+        layout.addWidget(self.provenance)
         layout.addWidget(splitter, 1)
         self.export_button.setEnabled(False)
         self.history.record_button.setEnabled(False)
+        self._build_organ_views()
+
+    def _build_organ_views(self) -> None:
+        """The per-plant inspector (linked both ways with the plant table, the 3D view and
+        the map through :meth:`select_plant`) and the organ accuracy: one block, its imports
+        with it."""
+        from ui.results.inspector import PlantInspector
+        from ui.results.organ_accuracy import OrganAccuracyPanel
+
+        self.inspector = PlantInspector(self.settings.reconstruction.plants)
+        self.inspector.plant_selected.connect(self.select_plant)
+        self.tabs.insertTab(1, self.inspector, "Plant")
+        self.organ_accuracy = OrganAccuracyPanel()
+        self.tabs.insertTab(
+            self.tabs.indexOf(self.manual) + 1, self.organ_accuracy, "Organ accuracy"
+        )
+        self.results_shown.connect(self.inspector.set_results)
+        self.results_shown.connect(self.organ_accuracy.set_results)
 
     # --- slots -------------------------------------------------------------------------
 

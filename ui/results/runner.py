@@ -12,11 +12,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from PySide6 import QtCore
+from PySide6 import QtCore, QtWidgets
 from superqt.utils import GeneratorWorker, create_worker
 
 from fieldapp.errors import FieldappError
 from fieldapp.io.session import Session
+from fieldapp.recon.outputs import existing_outputs
 from fieldapp.recon.progress import Progress
 from fieldapp.recon.settings import ReconstructionSettings
 from ui.results.data import PlotResults, load_results_dir
@@ -43,6 +44,48 @@ class Outcome:
 def default_results_dir(session_folder: Path) -> Path:
     """``<session>-results`` beside the session folder (the session itself is left as it is)."""
     return session_folder.with_name(f"{session_folder.name}-results")
+
+
+def free_results_dir(folder: Path) -> Path:
+    """``<folder>-2``, ``-3``, ...: the first beside ``folder`` that does not exist yet."""
+    number = 2
+    while (candidate := folder.with_name(f"{folder.name}-{number}")).exists():
+        number += 1
+    return candidate
+
+
+def ask_overwrite(parent: QtWidgets.QWidget | None, folder: Path, existing: list[Path]) -> str:
+    """Ask whether to replace the results in ``folder``: ``"replace"``, ``"keep both"`` (a new
+    folder beside it) or ``"cancel"``."""
+    box = QtWidgets.QMessageBox(parent)
+    box.setIcon(QtWidgets.QMessageBox.Icon.Question)
+    box.setWindowTitle("Results already there")
+    box.setText(f"{folder} already holds results. Replace them?")
+    box.setInformativeText(
+        f"Replace: the new run overwrites {', '.join(p.name for p in existing)} when it "
+        f"finishes.\nKeep both: the new run goes to {free_results_dir(folder).name}."
+    )
+    roles = QtWidgets.QMessageBox.ButtonRole
+    answers = {
+        box.addButton("Replace", roles.DestructiveRole): "replace",
+        box.addButton("Keep both", roles.AcceptRole): "keep both",
+        box.addButton(QtWidgets.QMessageBox.StandardButton.Cancel): "cancel",
+    }
+    box.setDefaultButton(next(b for b, a in answers.items() if a == "keep both"))
+    box.exec()
+    return answers.get(box.clickedButton(), "cancel")
+
+
+def choose_results_dir(parent: QtWidgets.QWidget | None, folder: Path) -> Path | None:
+    """Where to write a new run: ``folder`` when it holds no results, else what the user
+    answers (``folder`` to replace, a new folder beside it, or ``None``: cancelled)."""
+    existing = existing_outputs(folder) if folder.is_dir() else []
+    if not existing:
+        return folder
+    answer = ask_overwrite(parent, folder, existing)
+    if answer == "replace":
+        return folder
+    return free_results_dir(folder) if answer == "keep both" else None
 
 
 def reconstruction_steps(

@@ -1,4 +1,11 @@
-"""Mobile base fixtures: simulated bases on free loopback ports, key folders, a lossy link."""
+"""Mobile base fixtures: simulated bases in process or on free loopback ports, key folders, a
+lossy link.
+
+``make_sim()`` serves in process (``inproc://`` on a ZeroMQ context shared with the clients the
+test makes): the real client, sockets and server loop, no ports. ``make_sim(tcp=True)``, and any
+base given CURVE keys, serves on loopback TCP: for what the network does (CURVE, ZAP,
+reconnections, message size limits, raw bytes). ``make_client`` reaches either, by endpoint.
+"""
 
 from __future__ import annotations
 
@@ -12,8 +19,16 @@ from pathlib import Path
 import pytest
 import zmq
 
-from devices.base import BaseClient, ClientKeys, ServerKeys, SimulatedBase, generate_key_pair
+from devices.base import (
+    BaseClient,
+    ClientKeys,
+    ServerKeys,
+    SimulatedBase,
+    generate_key_pair,
+    open_base,
+)
 from devices.base.keys import AUTHORIZED_CLIENTS_DIR
+from devices.base.transport import new_inproc_endpoints
 
 ANY_PORT = "tcp://127.0.0.1:*"
 
@@ -35,13 +50,30 @@ def wait_for() -> Callable[[Callable[[], bool], float], float]:
 
 
 @pytest.fixture
-def make_sim() -> Iterator[Callable[..., SimulatedBase]]:
-    """Start simulated bases on free ports (fast time by default); all closed at teardown."""
+def inproc_context() -> Iterator[zmq.Context[zmq.Socket[bytes]]]:
+    """The ZeroMQ context in-process bases bind on and their clients connect through; ended
+    after them (they depend on it)."""
+    context: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
+    yield context
+    context.term()
+
+
+@pytest.fixture
+def make_sim(
+    inproc_context: zmq.Context[zmq.Socket[bytes]],
+) -> Iterator[Callable[..., SimulatedBase]]:
+    """Start simulated bases (fast time by default), in process unless ``tcp=True`` or keys
+    are given (CURVE is the network's); all closed at teardown."""
     started: list[SimulatedBase] = []
 
-    def make(**kwargs: object) -> SimulatedBase:
+    def make(*, tcp: bool = False, **kwargs: object) -> SimulatedBase:
         kwargs.setdefault("time_scale", 20.0)
-        base = SimulatedBase(ANY_PORT, ANY_PORT, **kwargs).start()  # type: ignore[arg-type]
+        if tcp or kwargs.get("keys") is not None:
+            endpoints = (ANY_PORT, ANY_PORT)
+        else:
+            endpoints = new_inproc_endpoints("sim-base")
+            kwargs["context"] = inproc_context
+        base = SimulatedBase(*endpoints, **kwargs).start()  # type: ignore[arg-type]
         started.append(base)
         return base
 
@@ -52,15 +84,28 @@ def make_sim() -> Iterator[Callable[..., SimulatedBase]]:
 
 @pytest.fixture
 def sim(make_sim: Callable[..., SimulatedBase]) -> SimulatedBase:
+    """An in-process simulated base."""
     return make_sim()
 
 
 @pytest.fixture
-def make_client() -> Iterator[Callable[..., BaseClient]]:
+def tcp_sim(make_sim: Callable[..., SimulatedBase]) -> SimulatedBase:
+    """A simulated base on loopback TCP (raw sockets, message size limits)."""
+    return make_sim(tcp=True)
+
+
+@pytest.fixture
+def make_client(
+    inproc_context: zmq.Context[zmq.Socket[bytes]],
+) -> Iterator[Callable[..., BaseClient]]:
+    """``make_client(endpoint, telemetry=None, **open_base_kwargs)``, as the application makes
+    one (``open_base``); an ``inproc://`` endpoint goes through the in-process bases' context."""
     clients: list[BaseClient] = []
 
     def make(endpoint: str, telemetry: str | None = None, **kwargs: object) -> BaseClient:
-        client = BaseClient(endpoint, telemetry, **kwargs)  # type: ignore[arg-type]
+        if endpoint.startswith("inproc://"):
+            kwargs["context"] = inproc_context
+        client = open_base(endpoint, telemetry, **kwargs)  # type: ignore[arg-type]
         clients.append(client)
         return client
 

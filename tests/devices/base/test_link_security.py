@@ -116,7 +116,10 @@ def _answers(client: BaseClient) -> bool:
 # --- 3. duplicates and replays --------------------------------------------------------------
 
 
-def test_a_stop_reusing_a_goto_id_is_executed(sim: SimulatedBase, raw_dealer: RawDealer) -> None:
+def test_a_stop_reusing_a_goto_id_is_executed(
+    tcp_sim: SimulatedBase, raw_dealer: RawDealer
+) -> None:
+    sim = tcp_sim
     sock = raw_dealer(sim.command_endpoint)
     session = sim.server.session
     assert _ask(sock, _goto("x-1", session, 4.0)) == {
@@ -128,8 +131,9 @@ def test_a_stop_reusing_a_goto_id_is_executed(sim: SimulatedBase, raw_dealer: Ra
 
 
 def test_a_reused_id_with_another_request_is_refused(
-    sim: SimulatedBase, raw_dealer: RawDealer
+    tcp_sim: SimulatedBase, raw_dealer: RawDealer
 ) -> None:
+    sim = tcp_sim
     sock = raw_dealer(sim.command_endpoint)
     assert _ask(sock, {"v": 1, "id": "y-1", "cmd": "heartbeat"}) is not None
     reply = _ask(sock, _goto("y-1", sim.server.session))
@@ -137,7 +141,8 @@ def test_a_reused_id_with_another_request_is_refused(
     assert sim.executed[Command.GOTO] == 0
 
 
-def test_the_reply_cache_is_per_client(sim: SimulatedBase, raw_dealer: RawDealer) -> None:
+def test_the_reply_cache_is_per_client(tcp_sim: SimulatedBase, raw_dealer: RawDealer) -> None:
+    sim = tcp_sim
     first, second = raw_dealer(sim.command_endpoint), raw_dealer(sim.command_endpoint)
     accepted = _ask(first, _goto("z-1", sim.server.session))
     assert accepted is not None and accepted["ok"]
@@ -149,10 +154,10 @@ def test_the_reply_cache_is_per_client(sim: SimulatedBase, raw_dealer: RawDealer
 def test_a_captured_goto_replayed_after_a_restart_is_refused(
     make_sim: MakeSim, raw_dealer: RawDealer
 ) -> None:
-    before = make_sim()
+    before = make_sim(tcp=True)
     captured = _goto("r-1", before.server.session)
     before.close()
-    after = make_sim()
+    after = make_sim(tcp=True)
     assert after.server.session != captured["session"]
     sock = raw_dealer(after.command_endpoint)
     reply = _ask(sock, captured)
@@ -199,7 +204,7 @@ def test_the_owner_s_heartbeats_keep_its_goal_alive_across_a_reconnection(
     make_sim: MakeSim, make_client: MakeClient, make_link: Callable[[str], Any]
 ) -> None:
     clock = FakeClock()
-    sim = make_sim(time_scale=0.1, clock=clock)
+    sim = make_sim(tcp=True, time_scale=0.1, clock=clock)
     link = make_link(sim.command_endpoint)
     owner = make_client(link.endpoint)
     owner.goto("g", Pose(3.0, 0.0, 0.0), wait=False)

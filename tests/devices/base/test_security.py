@@ -24,6 +24,7 @@ from devices.base import (
     Pose,
     SimulatedBase,
     generate_key_pair,
+    open_base,
 )
 from devices.base.keys import is_loopback, load_key_pair
 
@@ -86,10 +87,10 @@ def test_both_ends_refuse_non_loopback_without_keys(key_folders: Any) -> None:
     with pytest.raises(InsecureEndpoint, match=r"tcp://\*:5555.*without CURVE keys"):
         SimulatedBase("tcp://*:5555", "tcp://127.0.0.1:*")
     with pytest.raises(InsecureEndpoint, match=r"192\.168\.1\.20"):
-        BaseClient("tcp://192.168.1.20:5555")
+        open_base("tcp://192.168.1.20:5555")
     with pytest.raises(InsecureEndpoint):
-        BaseClient("tcp://127.0.0.1:5555", "tcp://192.168.1.20:5556")
-    BaseClient("tcp://192.168.1.20:5555", keys=key_folders.client_keys()).close()  # allowed
+        open_base("tcp://127.0.0.1:5555", "tcp://192.168.1.20:5556")
+    open_base("tcp://192.168.1.20:5555", keys=key_folders.client_keys()).close()  # allowed
 
 
 def test_authorised_client_drives_the_base_and_gets_telemetry(

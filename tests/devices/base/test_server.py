@@ -1,4 +1,5 @@
-"""The client against the simulated base over real loopback sockets."""
+"""The client against the simulated base: in process (``inproc://``) where the network is not
+what a test checks, over loopback TCP for lost and dropped replies, raw bytes and size limits."""
 
 from __future__ import annotations
 
@@ -29,11 +30,19 @@ from devices.base.motion import wrap_deg
 from devices.base.protocol import Command, Status
 from devices.base.server import ServerTiming, TelemetrySchedule
 
-from ..fake_clock import FakeClock
+from ..fake_clock import FakeClock, wait_real
 
 MakeSim = Callable[..., SimulatedBase]
 MakeClient = Callable[..., BaseClient]
 WaitFor = Callable[[Callable[[], bool], float], float]
+
+
+def _advance_until(clock: FakeClock, done: Callable[[], bool], step_s: float = 0.05) -> bool:
+    """Move ``clock`` on by ``step_s`` unless ``done()``; for ``wait_real``."""
+    if done():
+        return True
+    clock.advance(step_s)
+    return False
 
 
 def _request(sock: zmq.Socket[bytes], body: bytes, timeout_ms: int = 1000) -> dict[str, Any] | None:
@@ -114,7 +123,7 @@ def test_lost_link_stops_and_latches_the_base_until_reset_and_new_goto(
     make_sim: MakeSim, make_client: MakeClient, make_link: Callable[[str], Any], wait_for: WaitFor
 ) -> None:
     clock = FakeClock()
-    sim = make_sim(time_scale=2.0, clock=clock)
+    sim = make_sim(tcp=True, time_scale=2.0, clock=clock)
     link = make_link(sim.command_endpoint)
     client = make_client(link.endpoint)
     client.goto("far", Pose(4.5, 0.0, 0.0), wait=False)
@@ -161,8 +170,9 @@ def test_heartbeats_keep_a_long_goal_alive(
 
 
 def test_retried_request_executes_once(
-    sim: SimulatedBase, make_client: MakeClient, make_link: Callable[[str], Any]
+    tcp_sim: SimulatedBase, make_client: MakeClient, make_link: Callable[[str], Any]
 ) -> None:
+    sim = tcp_sim
     link = make_link(sim.command_endpoint)
     client = make_client(link.endpoint)
     link.drop_replies = 2  # the goto is executed, its reply lost twice; the third try gets it
@@ -179,8 +189,11 @@ def test_retried_request_executes_once(
 
 
 def test_same_id_gets_the_cached_reply_and_the_cache_keeps_256(
-    sim: SimulatedBase, raw_dealer: Callable[[str], zmq.Socket[bytes]]
+    make_sim: MakeSim, raw_dealer: Callable[[str], zmq.Socket[bytes]]
 ) -> None:
+    # the goal must still be on its way after 257 round trips, however slow they are: motion
+    # at 1/1000 of real time, and a link clock that never moves (no watchdog)
+    sim = make_sim(tcp=True, time_scale=0.001, clock=FakeClock())
     sock = raw_dealer(sim.command_endpoint)
     goto = {
         "v": 1,
@@ -207,8 +220,9 @@ def test_same_id_gets_the_cached_reply_and_the_cache_keeps_256(
 
 
 def test_bad_requests_get_errors_or_are_dropped_and_nothing_moves(
-    sim: SimulatedBase, raw_dealer: Callable[[str], zmq.Socket[bytes]], make_client: MakeClient
+    tcp_sim: SimulatedBase, raw_dealer: Callable[[str], zmq.Socket[bytes]], make_client: MakeClient
 ) -> None:
+    sim = tcp_sim  # ZMQ_MAXMSGSIZE is enforced by the wire's decoder: not on inproc://
     sock = raw_dealer(sim.command_endpoint)
     goal = '"goal_id": "g", "y": 0.0, "yaw_deg": 0.0'
     session = f'"session": "{sim.server.session}"'.encode()
@@ -365,7 +379,8 @@ def test_frozen_or_crashed_base_is_reported_offline_after_the_retries(
     make_sim: MakeSim, make_client: MakeClient, fault: SimFault
 ) -> None:
     sim = make_sim(time_scale=1.0)
-    client = make_client(sim.command_endpoint)
+    clock = FakeClock()  # each try waits 0.5 s of it: replies are never late until it moves
+    client = make_client(sim.command_endpoint, clock=clock)
     client.goto("g", Pose(3.0, 0.0, 0.0), wait=False)
     failed: list[BaseException] = []
 
@@ -380,6 +395,7 @@ def test_frozen_or_crashed_base_is_reported_offline_after_the_retries(
     thread.start()
     time.sleep(0.3)
     sim.inject_fault(fault)
+    wait_real(lambda: _advance_until(clock, lambda: not thread.is_alive()))
     thread.join(timeout=30.0)  # the retry budget is 3 x 0.5 s; benchmarks/ measures it
     assert len(failed) == 1
     assert isinstance(failed[0], BaseOffline)

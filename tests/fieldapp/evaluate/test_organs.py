@@ -164,3 +164,50 @@ def test_the_html_report_lists_plants_organs_and_leaves(tmp_path: Path) -> None:
     assert "<td>19.00</td>" in text and "3 leaves" in text
     (results / "leaves.csv").unlink()
     assert "not measured" in organs_section(results)
+
+
+def test_the_report_shows_the_organ_accuracy(tmp_path: Path) -> None:
+    from fieldapp.evaluate.organ_files import evaluate_organ_references
+    from fieldapp.evaluate.report import organ_evaluation_section
+
+    results = _results(tmp_path / "out")
+    manual = tmp_path / "leaves_manual.csv"
+    manual.write_text("plant_id,leaf_id,length_cm,area_cm2\n1,1,20,48\n1,2,20,\n2,1,22,60\n")
+    evaluation, warnings = evaluate_organ_references(results, manual_leaves=manual)
+    assert warnings == [] and evaluation.by_leaf_trait["length_cm"].n == 3
+    text = organ_evaluation_section(evaluation)
+    assert "Leaf count exact on 2 of 2 plants; 0 leaves found but not in the reference; 0" in text
+    assert text.count("<tr>") == 1 + 9  # header, every leaf and plant trait
+    assert "<td>length_cm</td><td>leaf</td><td>cm</td><td>3</td>" in text
+    assert f"<td>{math.sqrt(6 / 3):.2f}</td>" in text  # the length's RMSE, as the CLI's
+    # a scatter for each trait compared: the leaves' length and area, the count and area
+    assert text.count("data:image/png;base64") == 4
+    assert organ_evaluation_section(None) == ""
+
+
+def test_fieldapp_report_adds_the_organ_accuracy(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    results = _results(tmp_path / "out")
+    (results / "report.json").write_text('{"session": "s", "warnings": []}')
+    manual = tmp_path / "leaves_manual.csv"
+    manual.write_text("plant_id,leaf_id,length_cm\n1,1,20\n3,1,20\n")
+    out = tmp_path / "report.html"
+    assert main(["report", str(results), "--out", str(out), "--manual-leaves", str(manual)]) == 0
+    text = out.read_text()
+    assert "Organ accuracy against the reference" in text
+    assert "plant 3 of" in text  # a plant measured by hand but not found is a warning
+    (results / "leaves.csv").unlink()
+    assert main(["report", str(results), "--out", str(out), "--manual-leaves", str(manual)]) == 1
+    assert f"{results / 'leaves.csv'}: file is missing" in capsys.readouterr().err
+
+
+def test_one_reference_exactly(tmp_path: Path) -> None:
+    from fieldapp.errors import FieldappError
+    from fieldapp.evaluate.organ_files import evaluate_organ_references
+
+    results = _results(tmp_path / "out")
+    with pytest.raises(FieldappError, match=r"either a truth\.json or a file"):
+        evaluate_organ_references(results)
+    with pytest.raises(FieldappError, match=r"either a truth\.json or a file"):
+        evaluate_organ_references(results, tmp_path / "t.json", tmp_path / "m.csv")

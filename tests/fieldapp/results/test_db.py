@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import json
 import sqlite3
 from pathlib import Path
 
@@ -45,7 +46,7 @@ def test_pragmas_and_schema_version(tmp_path):
         assert c.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
         assert c.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL
         assert c.execute("PRAGMA foreign_keys").fetchone()[0] == 1
-        assert db.schema_version == SCHEMA_VERSION == 3
+        assert db.schema_version == SCHEMA_VERSION == 4
 
 
 def test_migrates_an_old_database_step_by_step(tmp_path):
@@ -154,3 +155,38 @@ def test_failures_and_manual_measurements(tmp_path):
             db.add_manual("p", DAYS[0], [ManualRecord(7, 1.0, 1.0)])
         with pytest.raises(ResultsDBError, match="no plot named"):
             db.history("nowhere")
+
+
+def test_a_database_of_version_3_keeps_its_runs_and_gains_provenance(tmp_path):
+    """Runs recorded before provenance was kept stay, with ``provenance`` None; new runs have it."""
+    path = tmp_path / "r.sqlite"
+    connection = connect(path)
+    assert migrate(connection, path, target=3) == 3
+    connection.executescript(
+        "INSERT INTO plots (id, name, created) VALUES (1, 'plot-a', '2022-06-01');"
+        "INSERT INTO sessions (id, session_id, plot_id, date) VALUES (1, 's1', 1, '2022-06-01');"
+        "INSERT INTO runs (id, session_id, recorded, settings, settings_sha256, software_version,"
+        " timings, status) VALUES (1, 1, '2022-06-01', '{}', 'abc', '0.0.1', '{}', 'complete');"
+        "INSERT INTO plants (id, plot_id, number, first_run_id) VALUES (1, 1, 1, 1);"
+        "INSERT INTO traits (run_id, plant_id, run_plant, x_m, y_m, height_cm, width_cm, points)"
+        " VALUES (1, 1, 1, 0.5, 0.5, 12.5, 20.0, 900);"
+    )
+    connection.close()
+    with ResultsDB.open(path) as db:
+        assert db.schema_version == SCHEMA_VERSION
+        (old,) = db.runs()
+        assert (old.session_id, old.software_version, old.plants) == ("s1", "0.0.1", 1)
+        assert old.provenance is None
+        assert [o.height_cm for o in db.history("plot-a")] == [12.5]
+        folder = write_results(tmp_path / "new", "s2", [(1, 0.5, 0.51, 15.0, 22.0)])
+        document = {"source": {"kind": "real"}, "software": {"commit": "0123abcd"}}
+        report = json.loads((folder / "report.json").read_text())
+        (folder / "report.json").write_text(json.dumps(report | {"provenance": document}))
+        db.record_run("plot-a", None, folder, date=dt.date(2022, 6, 6))
+        assert [r.provenance for r in db.runs()] == [None, document]
+        assert [(o.plant_number, o.height_cm) for o in db.history("plot-a")] == [
+            (1, 12.5),
+            (1, 15.0),
+        ]
+        columns = db.connection.execute("SELECT source, software_commit FROM runs ORDER BY id")
+        assert [tuple(r) for r in columns] == [(None, None), ("real", "0123abcd")]

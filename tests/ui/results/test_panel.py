@@ -55,6 +55,7 @@ def test_run_shows_every_plant_against_the_truth(panel, plot_session, tmp_path):
     stages = _run(panel, plot_session, tmp_path / "out")
     assert list(dict.fromkeys(stages)) == list(STAGES)
     assert panel.progress.value() == 1000 and panel.stage.text().startswith("done")
+    assert panel.provenance.text().startswith("Simulated devices · calibration: nominal")
     results = panel.results
     assert results is not None and len(results.plants) >= 5
     _same_plants(read_plants_csv(tmp_path / "out" / "plants.csv"), results.plants)
