@@ -57,13 +57,13 @@ def level_stations(
     scans: dict[int, StationScan],
     T_field_coarse: dict[int, Matrix4],
     settings: GroundSettings,
-    warnings: list[str],
-) -> dict[int, Matrix4]:
-    """Each station's placement corrected so that the ground it sees is z = 0, level.
+) -> tuple[dict[int, Matrix4], list[str]]:
+    """Each station's placement corrected so that the ground it sees is z = 0, level, and the
+    warnings.
 
     A station whose ground cannot be found keeps its coarse placement (with a warning).
     """
-    levelled = {}
+    levelled, warnings = {}, []
     for station, scan in scans.items():
         points = transform_points(
             T_field_coarse[station], subsample(scan.soil.points, settings.sample_points)
@@ -87,4 +87,4 @@ def level_stations(
             plane.offset_m * 1000,
         )
         levelled[station] = T_correction @ T_field_coarse[station]
-    return levelled
+    return levelled, warnings

@@ -2,44 +2,40 @@
 
 ``reconstruct(session, settings)`` is a generator: it yields :class:`Progress` events between
 steps (closing it cancels the work there) and returns a :class:`Reconstruction`.
-:func:`run_reconstruction` is the blocking form.
+:func:`run_reconstruction` is the blocking form. Each step is a pure function of
+:mod:`fieldapp.recon.stages`; this module only calls them in order, times them and reports
+progress.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Generator, Iterator
+from collections.abc import Callable, Generator
+from dataclasses import dataclass
 from typing import TypeVar
 
-import numpy as np
-from numpy.typing import NDArray
-
-from devices.geometry import Matrix4, invert, transform_points
+from devices.geometry import Matrix4
 from fieldapp.errors import FieldappError
+from fieldapp.io.calibration import Stations, ViewStep
 from fieldapp.io.session import Session
-from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
-from fieldapp.recon.guards import COARSE_KEPT, UNRELIABLE
-from fieldapp.recon.levelling import T_field_reference_initial, level_stations
-from fieldapp.recon.mapframe import (
-    in_map_frame,
-    map_alignment,
-    session_grid,
-    station_map_poses,
-    turntable_axis_direction,
-)
-from fieldapp.recon.organ_traits import foot_m, measure_organs
-from fieldapp.recon.plants import search_plants
+from fieldapp.recon import stages
+from fieldapp.recon.backproject import ray_table
+from fieldapp.recon.filters import FilteredStation
+from fieldapp.recon.mapframe import station_map_poses
+from fieldapp.recon.organ_traits import PlantOrgans
+from fieldapp.recon.plants import PlantSearch
 from fieldapp.recon.progress import Progress, StageTimer, progress
-from fieldapp.recon.register import StationRegistration, register_stations
+from fieldapp.recon.register import StationRegistration
 from fieldapp.recon.result import Reconstruction
-from fieldapp.recon.scans import StationScan, read_stations, turntable_axis_point
+from fieldapp.recon.scans import StationScan, captures_by_station
 from fieldapp.recon.settings import ReconstructionSettings
-from fieldapp.recon.turntable import carries_plant, read_turntable
+from fieldapp.recon.turntable import carries_plant
 
 log = logging.getLogger(__name__)
 
-T = TypeVar("T")
+K = TypeVar("K")
+V = TypeVar("V")
+R = TypeVar("R")
 
 
 class NothingUsable(FieldappError):
@@ -51,134 +47,42 @@ def reconstruct(
 ) -> Generator[Progress, None, Reconstruction]:
     """Reconstruct ``session``: local reconstruction of each station, levelling, plant
     filtering, global registration, plants and their traits, organs and theirs."""
-    timer, warnings = StageTimer(), _missing_warnings(session)
-    calibration = session.calibration
-    if calibration.view_step is None or calibration.stations is None:
-        raise NothingUsable(f"{session.folder}: the calibration cannot join views and stations")
-    to_reference = calibration.stations.to_reference
-
+    timer, (view_step, stations) = StageTimer(), _joinable(session)
     # 1-2. Depth to points, every view of a station into its view 0 (Eq. 9).
-    scans: dict[int, StationScan] = {}
-    table = None
-    if carries_plant(session):  # camera fixed, plant turning: the room masked
-        with timer.stage("local reconstruction"):
-            table = read_turntable(session, settings, warnings)
-        if table is not None:
-            scans[table.scan.station] = table.scan
-        yield progress("local reconstruction", 1.0, "turntable views joined")
-    else:
-        for index, count, scan in _timed_iter(
-            timer, "local reconstruction", read_stations(session, settings, warnings)
-        ):
-            if scan is not None and scan.station not in to_reference:
-                warnings.append(f"station {scan.station} has no to_reference calibration: skipped")
-            elif scan is not None:
-                scans[scan.station] = scan
-            yield progress(
-                "local reconstruction", (index + 1) / count, f"station {index + 1} of {count}"
-            )
-    if not scans:
-        raise NothingUsable(f"{session.folder}: no capture could be read")
-    reference = _reference_station(calibration.stations.reference, scans, to_reference, warnings)
-
+    local = yield from _local_reconstruction(session, settings, stations, timer)
+    reference = stages.anchor(stations.reference, local.value.scans, stations.to_reference)
     # 3. Levelling: coarse placement by the pre-calibration, each station on its own ground.
     with timer.stage("levelling"):
-        if table is not None:
-            T_field_coarse = {reference: table.T_field_view0}
-        else:
-            T_field_ref = T_field_reference_initial(calibration, scans[reference], settings.ground)
-            T_field_coarse = {s: T_field_ref @ to_reference[s] for s in scans}
-        T_field_levelled = level_stations(scans, T_field_coarse, settings.ground, warnings)
+        levelled = stages.level(local.value, session.calibration, reference.value, settings.ground)
     yield progress("levelling", 1.0, "stations levelled")
-
     # 4. Plant filtering per station: pass-through above the ground, voxel means.
-    filtered: dict[int, FilteredStation] = {}
-    for i, (station, scan) in enumerate(scans.items()):
-        with timer.stage("filtering"):
-            filtered[station] = filter_station(
-                scan.green.transformed(T_field_levelled[station]),
-                scan.soil.transformed(T_field_levelled[station]),
-                settings.filters,
-                settings.ground.soil_band_m,
-                settings.ground.soil_voxel_m,
-                scan.separation.by_geometry,
-            )
-        yield progress("filtering", (i + 1) / len(scans), f"station {station} filtered")
-    separation = {s: scan.separation.describe() for s, scan in scans.items()}
-    exg_thresholds = {
-        s: scan.exg_threshold for s, scan in scans.items() if not scan.separation.by_geometry
-    }
-    measured_pixels = sum(scan.measured_pixels for scan in scans.values())
-    scans.clear()  # the station clouds are no longer needed
-
-    # 5. Global registration: one pose graph of every overlap, the coarse poses as its prior.
-    steps = register_stations(
-        _registration_points(filtered, T_field_levelled, settings),
-        T_field_levelled,
-        turntable_axis_point(calibration.view_step.matrix, calibration.view_step.views_per_turn),
-        reference,
-        settings.registration,
-        settings.threads,
+    filtered = yield from _filtering(local.value.scans, levelled.value, settings, timer)
+    scanned = stages.summarise(local, filtered)
+    del local  # the station clouds are no longer needed
+    # 5. Stations joined: one pose graph of every overlap, the levelled poses as its prior.
+    joined = yield from _registration(
+        filtered, levelled.value, view_step, reference.value, settings, timer
     )
-    registrations = yield from _timed_steps(timer, "registration", steps)
-    yield progress("registration", 1.0, f"{len(registrations)} stations placed")
-    for station, registration in registrations.items():
-        if registration.verdict in (COARSE_KEPT, UNRELIABLE) and settings.registration.enabled:
-            warnings.append(f"station {station} {registration.verdict}: {registration.message}")
-
     # 6. One cloud of the plot; outliers removed where every station's view is together.
     with timer.stage("outlier removal"):
-        cloud, soil = _fuse(filtered, registrations, settings.filters.voxel_size_m)
-        kept = {"fused": len(cloud)}
-        cloud, outlier_counts = remove_outliers(cloud, settings.filters, settings.threads)
+        fused = stages.fuse(filtered, joined.value, settings.filters, settings.threads)
     yield progress("plants", 0.5, "outliers removed")
-
     # 7-8. Plants from their stems and their traits, in plot coordinates (the map's x and y).
     with timer.stage("plants"):
-        T_map_field = map_alignment(
-            station_map_poses(session),
-            {s: r.T_field_station for s, r in registrations.items()},
-            turntable_axis_point(
-                calibration.view_step.matrix, calibration.view_step.views_per_turn
-            ),
-            turntable_axis_direction(calibration.view_step.matrix),
-        )
-        if T_map_field is not None:
-            cloud, soil, registrations = in_map_frame(T_map_field, cloud, soil, registrations)
-        grid, expected = session_grid(session, T_map_field, warnings)
-        search = search_plants(
-            cloud, soil, settings.plants, settings.ground.local_ground_radius_m, grid
-        )
-        plants = search.plants
-        warnings.extend(search.warnings(settings.plants.stems.flag_ambiguous_share))
+        placed = stages.on_map(fused, joined.value, station_map_poses(session), view_step)
+        grid = stages.planting_grid(session, placed.T_map_field)
+        ground_radius_m = settings.ground.local_ground_radius_m
+        found = stages.find_plants(placed, settings.plants, ground_radius_m, grid.value.nodes)
+    # Beyond the paper: each plant's organs (stem, whorl, each leaf) and their traits.
     with timer.stage("organs"):
-        organs = {p.id: measure_organs(p.cloud.points, foot_m(p.traits)) for p in plants}
-    yield progress("traits", 1.0, f"{len(plants)} plants")
-    if not plants:
-        warnings.append("no plant found")
-    for warning in warnings:
-        log.warning("%s", warning)
-    return Reconstruction(
-        session_id=session.id,
-        reference=reference,
-        plants=plants,
-        cloud=cloud,
-        registrations=registrations,
-        T_field_reference=registrations[reference].T_field_station,
-        kept={"measured_pixels": measured_pixels} | _sum_kept(filtered) | kept | outlier_counts,
-        exg_thresholds=exg_thresholds,
-        timings_s=dict(timer.seconds),
-        cpu_s=dict(timer.cpu_seconds),
-        warnings=warnings,
-        separation=separation,
-        turntable=table.report if table is not None else None,
-        organs=organs,
-        search=search,
-        frame="map" if T_map_field is not None else "field",
-        T_map_field=T_map_field,
-        expected_plants=expected,
-        flag_ambiguous_share=settings.plants.stems.flag_ambiguous_share,
-    )
+        organs = stages.organs(found.value.plants)
+    yield progress("traits", 1.0, f"{len(found.value.plants)} plants")
+    warnings = [
+        *stages.missing_captures(session.missing()),
+        *(w for step in (scanned, reference, levelled, joined, grid, found) for w in step.warnings),
+    ]
+    plot = _Plot(reference.value, scanned.value, fused, placed, grid.value, found.value, organs)
+    return _result(session.id, plot, settings, timer, warnings)
 
 
 def run_reconstruction(
@@ -197,22 +101,6 @@ def run_reconstruction(
             on_progress(event)
 
 
-def _timed_iter(timer: StageTimer, stage: str, steps: Iterator[T]) -> Iterator[T]:
-    """``steps`` with the time spent producing each item (not the caller's) added to ``stage``."""
-    while True:
-        with timer.stage(stage):
-            item = next(steps, _END)
-        if item is _END:
-            return
-        yield item  # type: ignore[misc]
-
-
-_END = object()
-
-
-R = TypeVar("R")
-
-
 def _timed_steps(
     timer: StageTimer, stage: str, steps: Generator[tuple[float, str], None, R]
 ) -> Generator[Progress, None, R]:
@@ -226,63 +114,155 @@ def _timed_steps(
         yield progress(stage, fraction, message)
 
 
-def _missing_warnings(session: Session) -> list[str]:
-    missing = session.missing()
-    if not missing:
-        return []
-    listed = ", ".join(f"s{s} v{v}" for s, v in missing)
-    return [f"{len(missing)} captures missing: {listed}"]
+def _joinable(session: Session) -> tuple[ViewStep, Stations]:
+    """The calibration's view step and stations; :class:`NothingUsable` without them."""
+    calibration = session.calibration
+    if calibration.view_step is None or calibration.stations is None:
+        raise NothingUsable(f"{session.folder}: the calibration cannot join views and stations")
+    return calibration.view_step, calibration.stations
 
 
-def _reference_station(
-    reference: int,
-    scans: dict[int, StationScan],
-    to_reference: dict[int, Matrix4],
-    warnings: list[str],
-) -> int:
-    """The calibrated reference station, or the read station nearest to it when it is missing."""
-    if reference in scans:
-        return reference
-    nearest = min(scans, key=lambda s: (float(np.linalg.norm(to_reference[s][:3, 3])), s))
-    warnings.append(
-        f"reference station {reference} has no usable capture: station {nearest} anchors the plot"
+def _local_reconstruction(
+    session: Session, settings: ReconstructionSettings, stations: Stations, timer: StageTimer
+) -> Generator[Progress, None, stages.Staged[stages.LocalScans]]:
+    """Steps 1-2, a progress event per station (one for a plant on a turntable);
+    :class:`NothingUsable` when no capture could be read."""
+    if carries_plant(session):  # camera fixed, plant turning: the room masked
+        with timer.stage("local reconstruction"):
+            crop, top_m = settings.crop, settings.filters.pass_through_max_m
+            local = stages.turntable_scan(session, crop, top_m, settings.registration.enabled)
+        yield progress("local reconstruction", 1.0, "turntable views joined")
+    else:
+        local = yield from _station_scans(session, settings, stations, timer)
+    if not local.value.scans:
+        raise NothingUsable(f"{session.folder}: no capture could be read")
+    return local
+
+
+def _station_scans(
+    session: Session, settings: ReconstructionSettings, stations: Stations, timer: StageTimer
+) -> Generator[Progress, None, stages.Staged[stages.LocalScans]]:
+    """Steps 1-2 station by station, a progress event after each."""
+    with timer.stage("local reconstruction"):
+        rays = ray_table(session.calibration.depth_camera.intrinsics())
+        grouped = captures_by_station(session)
+    read = yield from _per_station(
+        timer,
+        "local reconstruction",
+        grouped,
+        lambda station, captures: stages.station_scan(
+            session,
+            station,
+            captures,
+            rays,
+            settings.crop,
+            settings.filters.exg_threshold,
+            settings.ground.soil_pixel_stride,
+        ),
+        lambda index, _: f"station {index + 1} of {len(grouped)}",
     )
-    return nearest
+    return stages.calibrated_scans(read, stations.to_reference)
 
 
-def _registration_points(
-    filtered: dict[int, FilteredStation],
+def _filtering(
+    scans: dict[int, StationScan],
     T_field_levelled: dict[int, Matrix4],
     settings: ReconstructionSettings,
-) -> dict[int, NDArray[np.float64]]:
-    """Per station, the points ICP aligns (plants, and soil when set), in its view-0 frame."""
-    points = {}
-    for station, result in filtered.items():
-        chosen = [result.plants.points]
-        if settings.registration.include_soil:
-            chosen.append(result.soil_m)
-        points[station] = transform_points(
-            invert(T_field_levelled[station]), np.concatenate(chosen)
-        )
-    return points
-
-
-def _fuse(
-    filtered: dict[int, FilteredStation],
-    registrations: dict[int, StationRegistration],
-    voxel_m: float,
-) -> tuple[Cloud, NDArray[np.float64]]:
-    """The plant cloud and the soil sample of the plot in the field frame, overlaps averaged."""
-    plants = Cloud.concatenate(
-        [f.plants.transformed(registrations[s].T_correction) for s, f in filtered.items()]
+    timer: StageTimer,
+) -> Generator[Progress, None, dict[int, FilteredStation]]:
+    """Step 4 station by station, a progress event after each."""
+    return _per_station(
+        timer,
+        "filtering",
+        scans,
+        lambda station, scan: stages.filter_plants(
+            scan, T_field_levelled[station], settings.filters, settings.ground
+        ),
+        lambda _, station: f"station {station} filtered",
     )
-    soil = [transform_points(registrations[s].T_correction, f.soil_m) for s, f in filtered.items()]
-    return voxel_mean(plants, voxel_m), np.concatenate(soil)
 
 
-def _sum_kept(filtered: dict[int, FilteredStation]) -> dict[str, int]:
-    total: dict[str, int] = {}
-    for result in filtered.values():
-        for name, count in result.kept.items():
-            total[name] = total.get(name, 0) + count
-    return total
+def _registration(
+    filtered: dict[int, FilteredStation],
+    T_field_levelled: dict[int, Matrix4],
+    view_step: ViewStep,
+    reference: int,
+    settings: ReconstructionSettings,
+    timer: StageTimer,
+) -> Generator[Progress, None, stages.Staged[dict[int, StationRegistration]]]:
+    """Step 5, a progress event per pair of stations registered and one when all are placed."""
+    steps = stages.join_stations(
+        filtered,
+        T_field_levelled,
+        view_step,
+        reference,
+        settings.registration,
+        settings.threads,
+    )
+    joined = yield from _timed_steps(timer, "registration", steps)
+    yield progress("registration", 1.0, f"{len(joined.value)} stations placed")
+    return joined
+
+
+def _per_station(
+    timer: StageTimer,
+    stage: str,
+    items: dict[int, K],
+    work: Callable[[int, K], V],
+    message: Callable[[int, int], str],
+) -> Generator[Progress, None, dict[int, V]]:
+    """``work(station, item)`` for each station's item, timed under ``stage``, with a progress
+    event ``message(index, station)`` after each; returns the results by station."""
+    done: dict[int, V] = {}
+    for index, (station, item) in enumerate(items.items()):
+        with timer.stage(stage):
+            done[station] = work(station, item)
+        yield progress(stage, (index + 1) / len(items), message(index, station))
+    return done
+
+
+@dataclass(frozen=True)
+class _Plot:
+    """The stages' results that go into the :class:`Reconstruction`."""
+
+    reference: int
+    scanned: stages.ScanSummary
+    fused: stages.Fused
+    placed: stages.Placed
+    grid: stages.GridPrior
+    search: PlantSearch
+    organs: dict[int, PlantOrgans]
+
+
+def _result(
+    session_id: str,
+    plot: _Plot,
+    settings: ReconstructionSettings,
+    timer: StageTimer,
+    warnings: list[str],
+) -> Reconstruction:
+    """The :class:`Reconstruction` of ``plot``, its warnings logged."""
+    for warning in warnings:
+        log.warning("%s", warning)
+    placed = plot.placed
+    return Reconstruction(
+        session_id=session_id,
+        reference=plot.reference,
+        plants=plot.search.plants,
+        cloud=placed.cloud,
+        registrations=placed.registrations,
+        T_field_reference=placed.registrations[plot.reference].T_field_station,
+        kept=plot.scanned.kept | plot.fused.kept,
+        exg_thresholds=plot.scanned.exg_thresholds,
+        timings_s=dict(timer.seconds),
+        cpu_s=dict(timer.cpu_seconds),
+        warnings=warnings,
+        separation=plot.scanned.separation,
+        turntable=plot.scanned.turntable,
+        organs=plot.organs,
+        search=plot.search,
+        frame="map" if placed.T_map_field is not None else "field",
+        T_map_field=placed.T_map_field,
+        expected_plants=plot.grid.expected,
+        flag_ambiguous_share=settings.plants.stems.flag_ambiguous_share,
+    )

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import logging
 from collections import defaultdict
-from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from devices.geometry import Matrix4
 from fieldapp.errors import FieldappError, FormatError
 from fieldapp.io.session import Capture, CaptureImages, Session
-from fieldapp.recon.backproject import backproject, ray_table
+from fieldapp.recon.backproject import backproject
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.depth_only import read_scan_capture
 from fieldapp.recon.filters import (
@@ -30,7 +30,7 @@ from fieldapp.recon.filters import (
     excess_green,
     otsu_threshold,
 )
-from fieldapp.recon.settings import ReconstructionSettings
+from fieldapp.recon.settings import CropSettings
 from fieldapp.recon.station import T_view0_view, station_cloud
 
 log = logging.getLogger(__name__)
@@ -67,16 +67,17 @@ def turntable_axis_point(T_view_next: Matrix4, views: int) -> NDArray[np.float64
     return np.mean(centres, axis=0)  # type: ignore[no-any-return]
 
 
-def _read_images(
-    session: Session, station: int, captures: list[Capture], warnings: list[str]
-) -> list[CaptureImages]:
-    images = []
+def read_images(
+    session: Session, station: int, captures: list[Capture]
+) -> tuple[list[CaptureImages], list[str]]:
+    """The images of every readable capture, and one warning per capture skipped."""
+    images, warnings = [], []
     for capture in captures:
         try:
             images.append(read_scan_capture(session, capture))
         except FormatError as error:
             warnings.append(f"station {station} view {capture.view} skipped: {error}")
-    return images
+    return images, warnings
 
 
 def _soil_grid(shape: tuple[int, ...], stride: int) -> NDArray[np.bool_]:
@@ -89,28 +90,28 @@ def read_station(
     session: Session,
     station: int,
     captures: list[Capture],
-    settings: ReconstructionSettings,
+    crop: CropSettings,
+    exg_threshold: float | Literal["otsu"],
+    soil_pixel_stride: int,
     rays: NDArray[np.float64],
-    warnings: list[str],
-) -> StationScan | None:
-    """Back-project the green pixels (and a sparse grid of the rest) of every readable capture
-    of ``station`` and join them in view 0; ``None`` when nothing was readable."""
+) -> tuple[StationScan | None, list[str]]:
+    """Back-project the green pixels (and a sparse grid of the rest, every
+    ``soil_pixel_stride``-th pixel) of every readable capture of ``station`` and join them in
+    view 0; ``None`` when nothing was readable. ``rays``: the calibration's (H, W, 3) ray
+    table. Returns the scan and the warnings (one per capture skipped)."""
     view_step = session.calibration.view_step
     if view_step is None:
         raise FieldappError(f"{session.folder}: the calibration has no view_step")
-    images = _read_images(session, station, captures, warnings)
+    images, warnings = read_images(session, station, captures)
     if not images:
-        return None
+        return None, warnings
     measured = [np.isfinite(i.depth_m) for i in images]
     exg = [excess_green(i.color.reshape(-1, 3)).reshape(i.depth_m.shape) for i in images]
     measured_exg = np.concatenate([e[m] for e, m in zip(exg, measured, strict=True)])
     has_colour = all(i.capture.color is not None for i in images)
     separation = choose_separation(measured_exg if has_colour else None)
-    threshold = _threshold(measured_exg, settings) if not separation.by_geometry else np.inf
-    crop, grid = (
-        settings.crop,
-        _soil_grid(images[0].depth_m.shape, settings.ground.soil_pixel_stride),
-    )
+    threshold = _threshold(measured_exg, exg_threshold) if not separation.by_geometry else np.inf
+    grid = _soil_grid(images[0].depth_m.shape, soil_pixel_stride)
     green: dict[int, Cloud] = {}
     soil: dict[int, Cloud] = {}
     for image, image_exg in zip(images, exg, strict=True):
@@ -127,7 +128,7 @@ def read_station(
             crop.min_depth_m,
             grid if separation.by_geometry else grid & ~is_green,
         )
-    return StationScan(
+    scan = StationScan(
         station,
         station_cloud(green, view_step.matrix),
         station_cloud(soil, view_step.matrix),
@@ -136,23 +137,10 @@ def read_station(
         int(sum(int(m.sum()) for m in measured)),
         separation,
     )
+    return scan, warnings
 
 
-def _threshold(exg: NDArray[np.float64], settings: ReconstructionSettings) -> float:
-    if settings.filters.exg_threshold == "otsu":
+def _threshold(exg: NDArray[np.float64], exg_threshold: float | Literal["otsu"]) -> float:
+    if exg_threshold == "otsu":
         return otsu_threshold(exg) if len(exg) else 0.0
-    return float(settings.filters.exg_threshold)
-
-
-def read_stations(
-    session: Session, settings: ReconstructionSettings, warnings: list[str]
-) -> Iterator[tuple[int, int, StationScan | None]]:
-    """Yield (index, count, scan) for every station that has captures, in station order."""
-    rays = ray_table(session.calibration.depth_camera.intrinsics())
-    grouped = captures_by_station(session)
-    for index, (station, captures) in enumerate(grouped.items()):
-        yield (
-            index,
-            len(grouped),
-            read_station(session, station, captures, settings, rays, warnings),
-        )
+    return float(exg_threshold)

@@ -28,14 +28,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.geometry import Matrix4, make_transform
-from fieldapp.errors import FieldappError, FormatError
+from fieldapp.errors import FieldappError
 from fieldapp.io.session import CaptureImages, Session
 from fieldapp.recon.backproject import backproject, ray_table
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.depth_only import read_scan_capture
 from fieldapp.recon.filters import Separation, choose_separation, excess_green, otsu_threshold
-from fieldapp.recon.scans import StationScan, captures_by_station
-from fieldapp.recon.settings import ReconstructionSettings
+from fieldapp.recon.scans import StationScan, captures_by_station, read_images
+from fieldapp.recon.settings import CropSettings
 from fieldapp.recon.turntable_axis import (
     ICP_ABOVE_SURFACE_M,
     TableAxis,
@@ -79,19 +78,21 @@ class _View:
 
 
 def read_turntable(
-    session: Session, settings: ReconstructionSettings, warnings: list[str]
-) -> TurntableScan | None:
+    session: Session, crop: CropSettings, top_m: float, refine: bool
+) -> tuple[TurntableScan | None, list[str]]:
     """Read, mask, place and join the views of a plant-on-turntable session; ``None`` when no
-    capture could be read."""
+    capture could be read. ``crop``: the back-projection's range; ``top_m``: how far above
+    the soil surface the working volume reaches; ``refine``: whether a nominal view step may
+    be refined by ICP about the axis. Returns the scan and the warnings."""
     view_step = session.calibration.view_step
     if view_step is None:
         raise FieldappError(f"{session.folder}: the calibration has no view_step")
-    station, images = _station_images(session, warnings)
+    station, images, warnings = _station_images(session)
     if not images:
-        return None
+        return None, warnings
     axis = table_axis(view_step.matrix, view_step.angle_deg)
     radius_m = _working_radius_m(session)
-    views, surface_m = _working_volume(session, images, axis, radius_m, settings)
+    views, surface_m = _working_volume(session, images, axis, radius_m, crop, top_m)
     separation, threshold = _separation(views, images)
     plant = [_plant_mask(v, separation, threshold) for v in views]
     turns, report = place_views(
@@ -102,8 +103,8 @@ def read_turntable(
         ],
         axis,
         [v.view for v in views],
-        getattr(view_step, "nominal", None) is not None and settings.registration.enabled,
-        warnings,
+        getattr(view_step, "nominal", None) is not None and refine,
+        warnings,  # read_turntable's own list: place_views adds a warning when ICP failed
     )
     T_view0 = [axis.T_view0_view(turn) for turn in turns]
     scan = StationScan(
@@ -123,7 +124,7 @@ def read_turntable(
         separation,
     )
     report |= {"working_radius_m": radius_m, "kept_in_volume": sum(len(v.points) for v in views)}
-    return TurntableScan(scan, _T_field_view0(axis, surface_m), report)
+    return TurntableScan(scan, _T_field_view0(axis, surface_m), report), warnings
 
 
 def _working_radius_m(session: Session) -> float:
@@ -136,12 +137,14 @@ def _working_volume(
     images: list[CaptureImages],
     axis: TableAxis,
     radius_m: float,
-    settings: ReconstructionSettings,
+    crop: CropSettings,
+    top_m: float,
 ) -> tuple[list[_View], float]:
-    """Each view's points in the working volume, and the soil surface's height on the axis."""
+    """Each view's points in the working volume (up to ``top_m`` above the soil surface), and
+    the soil surface's height on the axis."""
     rays = ray_table(session.calibration.depth_camera.intrinsics())
     step_deg = session.calibration.view_step.angle_deg if session.calibration.view_step else 0.0
-    views = [_in_volume(image, axis, rays, radius_m, settings, step_deg) for image in images]
+    views = [_in_volume(image, axis, rays, radius_m, crop, step_deg) for image in images]
     try:
         surface_m = _surface_height(views, axis)
     except ValueError:
@@ -149,8 +152,7 @@ def _working_volume(
             f"{session.folder / session.document.calibration}: view_step.matrix: nothing was "
             f"measured within {SURFACE_RADIUS_M * 100:g} cm of the turntable's axis it gives"
         ) from None
-    top_m = surface_m + settings.filters.pass_through_max_m
-    return [_above(v, surface_m - BELOW_SURFACE_M, top_m) for v in views], surface_m
+    return [_above(v, surface_m - BELOW_SURFACE_M, surface_m + top_m) for v in views], surface_m
 
 
 def _separation(views: list[_View], images: list[CaptureImages]) -> tuple[Separation, float]:
@@ -164,23 +166,20 @@ def _separation(views: list[_View], images: list[CaptureImages]) -> tuple[Separa
     return separation, otsu_threshold(exg)
 
 
-def _station_images(session: Session, warnings: list[str]) -> tuple[int, list[CaptureImages]]:
+def _station_images(session: Session) -> tuple[int, list[CaptureImages], list[str]]:
+    """The station turned, its readable captures' images, and the warnings."""
     grouped = captures_by_station(session)
     if not grouped:
-        return 0, []
+        return 0, [], []
     station = session.calibration.stations.reference if session.calibration.stations else 0
     if station not in grouped:
         station = min(grouped)
+    ignored = []
     if len(grouped) > 1:
         others = ", ".join(str(s) for s in grouped if s != station)
-        warnings.append(f"a turntable session has one station: stations {others} ignored")
-    images = []
-    for capture in grouped[station]:
-        try:
-            images.append(read_scan_capture(session, capture))
-        except FormatError as error:
-            warnings.append(f"station {station} view {capture.view} skipped: {error}")
-    return station, images
+        ignored.append(f"a turntable session has one station: stations {others} ignored")
+    images, skipped = read_images(session, station, grouped[station])
+    return station, images, ignored + skipped
 
 
 def _in_volume(
@@ -188,14 +187,12 @@ def _in_volume(
     axis: TableAxis,
     rays: NDArray[np.float64],
     radius_m: float,
-    settings: ReconstructionSettings,
+    crop: CropSettings,
     step_deg: float,
 ) -> _View:
     """A view's points within ``radius_m`` of the axis (camera frame)."""
     capture = image.capture
-    cloud = backproject(
-        image.depth_m, image.color, rays, settings.crop.radius_m, settings.crop.min_depth_m
-    )
+    cloud = backproject(image.depth_m, image.color, rays, crop.radius_m, crop.min_depth_m)
     radius, height = axis.radius_height(cloud.points)
     inside = radius <= radius_m
     commanded = capture.angle_deg if capture.angle_deg is not None else capture.view * step_deg

@@ -1,0 +1,334 @@
+"""The reconstruction's stages, each a pure function of plain typed arguments.
+
+A stage returns its result, and the warnings it raised with it (:class:`Staged`); it never
+appends to a list it was given and never changes its arguments, so the same arguments give
+the same result. :func:`fieldapp.recon.pipeline.reconstruct` calls them in the paper's order,
+times them and reports progress between them. Reading a session's images (steps 1-2) and its
+plan (the planting grid) is the only input they do.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Generator
+from dataclasses import dataclass
+from typing import Generic, Literal, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.geometry import Matrix4, invert, transform_points
+from fieldapp.io.calibration import Calibration, ViewStep
+from fieldapp.io.session import Capture, Session
+from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
+from fieldapp.recon.grid import GridNodes
+from fieldapp.recon.guards import COARSE_KEPT, UNRELIABLE
+from fieldapp.recon.levelling import T_field_reference_initial, level_stations
+from fieldapp.recon.mapframe import (
+    in_map_frame,
+    map_alignment,
+    session_grid,
+    turntable_axis_direction,
+)
+from fieldapp.recon.organ_traits import PlantOrgans, foot_m, measure_organs
+from fieldapp.recon.plants import Plant, PlantSearch, search_plants
+from fieldapp.recon.register import StationRegistration, register_stations
+from fieldapp.recon.scans import StationScan, read_station, turntable_axis_point
+from fieldapp.recon.settings import (
+    CropSettings,
+    FilterSettings,
+    GroundSettings,
+    PlantSettings,
+    RegistrationSettings,
+)
+from fieldapp.recon.turntable import read_turntable
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Staged(Generic[T]):
+    """A stage's result and the warnings it raised, in the order raised."""
+
+    value: T
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class LocalScans:
+    """Steps 1-2 done: each usable station's views joined in its view-0 frame, by station.
+    For a plant on a turntable (one station), where its field frame is (``T_field_view0``)
+    and how its views were placed (``turntable``, for ``report.json``)."""
+
+    scans: dict[int, StationScan]
+    T_field_view0: Matrix4 | None = None
+    turntable: dict[str, object] | None = None
+
+
+@dataclass(frozen=True)
+class ScanSummary:
+    """What ``report.json`` keeps of the scans once their clouds are dropped: how each
+    station told plants from soil, its excess-green threshold (colour only), the points kept
+    (pixels measured, then by each filter of step 4, summed over the stations)."""
+
+    separation: dict[int, str]
+    exg_thresholds: dict[int, float]
+    kept: dict[str, int]
+    turntable: dict[str, object] | None
+
+
+@dataclass(frozen=True)
+class Fused:
+    """Step 6 done: the plot's plant cloud (overlaps averaged, outliers removed) and soil
+    sample (``soil_m``: (M, 3) float64) in the field frame, and the points each step kept."""
+
+    cloud: Cloud
+    soil_m: NDArray[np.float64]
+    kept: dict[str, int]
+
+
+@dataclass(frozen=True)
+class Placed:
+    """The plot in its output frame: the map's x and y when ``T_map_field`` is known (the
+    session has map poses), else the levelled field frame."""
+
+    cloud: Cloud
+    soil_m: NDArray[np.float64]
+    registrations: dict[int, StationRegistration]
+    T_map_field: Matrix4 | None
+
+
+@dataclass(frozen=True)
+class GridPrior:
+    """The session's planting grid in the output frame and how many plants it expects
+    (``None`` for both without a usable grid)."""
+
+    nodes: GridNodes | None
+    expected: int | None
+
+
+def missing_captures(missing: list[tuple[int, int]]) -> tuple[str, ...]:
+    """One warning listing the (station, view) captures the session lacks, if any."""
+    if not missing:
+        return ()
+    listed = ", ".join(f"s{s} v{v}" for s, v in missing)
+    return (f"{len(missing)} captures missing: {listed}",)
+
+
+def station_scan(
+    session: Session,
+    station: int,
+    captures: list[Capture],
+    rays: NDArray[np.float64],
+    crop: CropSettings,
+    exg_threshold: float | Literal["otsu"],
+    soil_pixel_stride: int,
+) -> Staged[StationScan | None]:
+    """Steps 1-2 for one station: depth to points through the ray table ``rays`` ((H, W, 3)
+    float64), early excess-green filtering, every view into view 0 by the view step (Eq. 9);
+    ``None`` when no capture could be read."""
+    scan, warnings = read_station(
+        session, station, captures, crop, exg_threshold, soil_pixel_stride, rays
+    )
+    return Staged(scan, tuple(warnings))
+
+
+def calibrated_scans(
+    read: dict[int, Staged[StationScan | None]], calibrated: Collection[int]
+) -> Staged[LocalScans]:
+    """Steps 1-2 for the plot: the stations read that the station calibration places
+    (``calibrated``); the warnings station by station."""
+    scans: dict[int, StationScan] = {}
+    warnings: list[str] = []
+    for station, staged in read.items():
+        warnings.extend(staged.warnings)
+        if staged.value is not None and station not in calibrated:
+            warnings.append(f"station {station} has no to_reference calibration: skipped")
+        elif staged.value is not None:
+            scans[station] = staged.value
+    return Staged(LocalScans(scans), tuple(warnings))
+
+
+def turntable_scan(
+    session: Session, crop: CropSettings, top_m: float, refine: bool
+) -> Staged[LocalScans]:
+    """Steps 1-2 for a plant turning before a fixed camera: the room masked, the views placed
+    about the table's axis (refined by ICP when ``refine`` and the view step is nominal)."""
+    table, warnings = read_turntable(session, crop, top_m, refine)
+    if table is None:
+        return Staged(LocalScans({}), tuple(warnings))
+    scans = {table.scan.station: table.scan}
+    return Staged(LocalScans(scans, table.T_field_view0, table.report), tuple(warnings))
+
+
+def anchor(reference: int, scans: Collection[int], to_reference: dict[int, Matrix4]) -> Staged[int]:
+    """The station anchoring the plot: the calibrated ``reference``, or the read station
+    (``scans``) nearest to it when it has no usable capture."""
+    if reference in scans:
+        return Staged(reference)
+    nearest = min(scans, key=lambda s: (float(np.linalg.norm(to_reference[s][:3, 3])), s))
+    missing = f"reference station {reference} has no usable capture"
+    return Staged(nearest, (f"{missing}: station {nearest} anchors the plot",))
+
+
+def level(
+    local: LocalScans, calibration: Calibration, reference: int, ground: GroundSettings
+) -> Staged[dict[int, Matrix4]]:
+    """Step 3: each station's ``T_field_station``. Placed coarsely (the turntable's own
+    frame; else the ground calibration, or the reference station's own ground, and the
+    station calibration), then corrected onto the ground it sees."""
+    if local.T_field_view0 is not None:
+        coarse = {reference: local.T_field_view0}
+    else:
+        to_reference = calibration.stations.to_reference if calibration.stations else {}
+        T_field_ref = T_field_reference_initial(calibration, local.scans[reference], ground)
+        coarse = {s: T_field_ref @ to_reference[s] for s in local.scans}
+    levelled, warnings = level_stations(local.scans, coarse, ground)
+    return Staged(levelled, tuple(warnings))
+
+
+def filter_plants(
+    scan: StationScan, T_field_station: Matrix4, filters: FilterSettings, ground: GroundSettings
+) -> FilteredStation:
+    """Step 4 for one station, levelled: pass-through above the ground (or the plants
+    standing clear of it, by geometry), voxel means; a sparse soil sample."""
+    return filter_station(
+        scan.green.transformed(T_field_station),
+        scan.soil.transformed(T_field_station),
+        filters,
+        ground.soil_band_m,
+        ground.soil_voxel_m,
+        scan.separation.by_geometry,
+    )
+
+
+def summarise(
+    local: Staged[LocalScans], filtered: dict[int, FilteredStation]
+) -> Staged[ScanSummary]:
+    """What the report keeps of steps 1-4, with the warnings of steps 1-2."""
+    scans = local.value.scans.values()
+    measured = {"measured_pixels": sum(scan.measured_pixels for scan in scans)}
+    summary = ScanSummary(
+        separation={scan.station: scan.separation.describe() for scan in scans},
+        exg_thresholds={
+            scan.station: scan.exg_threshold for scan in scans if not scan.separation.by_geometry
+        },
+        kept=measured | _kept_by_filters(filtered),
+        turntable=local.value.turntable,
+    )
+    return Staged(summary, local.warnings)
+
+
+def join_stations(
+    filtered: dict[int, FilteredStation],
+    T_field_levelled: dict[int, Matrix4],
+    view_step: ViewStep,
+    reference: int,
+    settings: RegistrationSettings,
+    threads: int,
+) -> Generator[tuple[float, str], None, Staged[dict[int, StationRegistration]]]:
+    """Step 5: one pose graph of every overlapping pair, the levelled poses as its prior;
+    yields (fraction done, message) per pair registered. A warning per station whose
+    refinement was refused or is unreliable."""
+    registrations = yield from register_stations(
+        _registration_points(filtered, T_field_levelled, settings.include_soil),
+        T_field_levelled,
+        turntable_axis_point(view_step.matrix, view_step.views_per_turn),
+        reference,
+        settings,
+        threads,
+    )
+    warnings = tuple(
+        f"station {station} {r.verdict}: {r.message}"
+        for station, r in registrations.items()
+        if r.verdict in (COARSE_KEPT, UNRELIABLE) and settings.enabled
+    )
+    return Staged(registrations, warnings)
+
+
+def _registration_points(
+    filtered: dict[int, FilteredStation],
+    T_field_levelled: dict[int, Matrix4],
+    include_soil: bool,
+) -> dict[int, NDArray[np.float64]]:
+    """Per station, the (N, 3) points ICP aligns (plants, and soil when ``include_soil``),
+    in its view-0 frame."""
+    points = {}
+    for station, result in filtered.items():
+        chosen = [result.plants.points] + ([result.soil_m] if include_soil else [])
+        points[station] = transform_points(
+            invert(T_field_levelled[station]), np.concatenate(chosen)
+        )
+    return points
+
+
+def fuse(
+    filtered: dict[int, FilteredStation],
+    registrations: dict[int, StationRegistration],
+    filters: FilterSettings,
+    threads: int,
+) -> Fused:
+    """Step 6: one plant cloud of the plot, overlaps averaged; outliers removed where every
+    station's view of a leaf is together (statistical, then radius)."""
+    plants = Cloud.concatenate(
+        [f.plants.transformed(registrations[s].T_correction) for s, f in filtered.items()]
+    )
+    soil = [transform_points(registrations[s].T_correction, f.soil_m) for s, f in filtered.items()]
+    fused = voxel_mean(plants, filters.voxel_size_m)
+    cloud, outlier_counts = remove_outliers(fused, filters, threads)
+    return Fused(cloud, np.concatenate(soil), {"fused": len(fused)} | outlier_counts)
+
+
+def _kept_by_filters(filtered: dict[int, FilteredStation]) -> dict[str, int]:
+    """The points each per-station filter kept, summed over the stations."""
+    total: dict[str, int] = {}
+    for result in filtered.values():
+        for name, count in result.kept.items():
+            total[name] = total.get(name, 0) + count
+    return total
+
+
+def on_map(
+    fused: Fused,
+    registrations: dict[int, StationRegistration],
+    map_poses: dict[int, tuple[float, float, float]],
+    view_step: ViewStep,
+) -> Placed:
+    """The plot turned and shifted onto the base's map (``map_poses``: per station, x_m,
+    y_m, yaw_deg) by where each station's turntable axis stands; unchanged without poses."""
+    T_map_field = map_alignment(
+        map_poses,
+        {s: r.T_field_station for s, r in registrations.items()},
+        turntable_axis_point(view_step.matrix, view_step.views_per_turn),
+        turntable_axis_direction(view_step.matrix),
+    )
+    if T_map_field is None:
+        return Placed(fused.cloud, fused.soil_m, registrations, None)
+    cloud, soil_m, placed = in_map_frame(T_map_field, fused.cloud, fused.soil_m, registrations)
+    return Placed(cloud, soil_m, placed, T_map_field)
+
+
+def planting_grid(session: Session, T_map_field: Matrix4 | None) -> Staged[GridPrior]:
+    """The session plan's planting grid in the output frame, when it can be placed."""
+    warnings: list[str] = []  # mapframe.session_grid reports into a list it is handed
+    nodes, expected = session_grid(session, T_map_field, warnings)
+    return Staged(GridPrior(nodes, expected), tuple(warnings))
+
+
+def find_plants(
+    placed: Placed,
+    settings: PlantSettings,
+    ground_radius_m: float,
+    grid: GridNodes | None,
+) -> Staged[PlantSearch]:
+    """Step 7-8: plants from their stems (density clusters where no stem is seen), the
+    planting grid as a prior, each measured (height, maximum width). Warns of plants that may
+    hold a neighbour's points, grid cells left empty, plants off the grid, and no plant."""
+    search = search_plants(placed.cloud, placed.soil_m, settings, ground_radius_m, grid)
+    warnings = search.warnings(settings.stems.flag_ambiguous_share)
+    return Staged(search, (*warnings, *(() if search.plants else ("no plant found",))))
+
+
+def organs(plants: list[Plant]) -> dict[int, PlantOrgans]:
+    """Beyond the paper: each plant's organs (stem, whorl, each leaf) and their traits."""
+    return {p.id: measure_organs(p.cloud.points, foot_m(p.traits)) for p in plants}
