@@ -155,7 +155,8 @@ def run(args: argparse.Namespace) -> int:
                 about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
             if args.depth_only:
                 about["depth_only"] = True
-            count = write_session(args.out, world, stations, views, seed, about, errors)
+            plan = simulated_plan(rig) if args.scene == "plot" else None
+            count = write_session(args.out, world, stations, views, seed, about, errors, plan)
         if args.scene == "checkerboard" and shots:
             write_intrinsics_images(args.out, seed, shots)
     except OSError as error:
@@ -203,6 +204,37 @@ def build_world(
     return SimWorld(scene, rig, seed=seed)
 
 
+def simulated_plan(rig: RigGeometry) -> dict[str, Any]:
+    """The session's ``plan`` as a mission would write it (session-format spec, map frame): the
+    stations' nominal map poses, the views, and the planting grid the plot was sown on (rows
+    along the map's x axis, row 1 column 1 at the plants' lowest x and y; the simulated plants
+    stand within a few cm of its nodes)."""
+    import numpy as np
+
+    from devices.sim.scene import PlotLayout
+
+    layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
+    T_map_field = np.linalg.inv(rig.T_field_map)
+    first_field = -np.array([layout.cols - 1, layout.rows - 1]) * layout.spacing_m / 2
+    origin = T_map_field[:2, :2] @ first_field + T_map_field[:2, 3]
+    stations = [
+        {"number": s, "x_m": p.x_m, "y_m": p.y_m, "yaw_deg": p.yaw_deg}
+        for s, p in ((s, rig.station_pose(s)) for s in rig.stations)
+    ]
+    return {
+        "stations": stations,
+        "views": {"count": rig.views, "step_deg": rig.view_step_deg},
+        "planting_grid": {
+            "rows": layout.rows,
+            "columns": layout.cols,
+            "row_spacing_m": layout.spacing_m,
+            "plant_spacing_m": layout.spacing_m,
+            "origin": {"x": round(float(origin[0]), 9), "y": round(float(origin[1]), 9)},
+            "row_direction_deg": 0.0,
+        },
+    }
+
+
 def nominal_calibration(world: SimWorld) -> Calibration:
     """The rig's pre-calibration over all the plan's stations (reference: the centre one, 5 on
     the 3 x 3 plan)."""
@@ -221,8 +253,10 @@ def write_session(
     seed: int,
     about: dict[str, Any],
     errors: StopErrors | None = None,
+    plan: dict[str, Any] | None = None,
 ) -> int:
-    """Simulate and write the session; returns the number of captures written."""
+    """Simulate and write the session (with the mission ``plan`` when given); returns the
+    number of captures written."""
     from devices.sim.survey import survey
     from devices.sim.truth import truth_document
     from fieldapp.io.durable import write_json_durably
@@ -230,9 +264,8 @@ def write_session(
 
     stage = "" if about.get("stage", "seedling") == "seedling" else f"-{about['stage']}"
     session_id = f"sim-{about['scene']}-seed{seed}-day{about['day']}{stage}"
-    writer = SessionWriter.create(
-        folder, session_id, nominal_calibration(world), extra={"simulated": about}
-    )
+    extra: dict[str, Any] = {"simulated": about} | ({"plan": plan} if plan else {})
+    writer = SessionWriter.create(folder, session_id, nominal_calibration(world), extra=extra)
     truths = []
     tag_boards = bool(world.scene.boards)
     with ThreadPoolExecutor(max_workers=1) as saver:  # encode and write while rendering the next

@@ -124,13 +124,17 @@ class PlantSearch:
     - ``splits``: connected canopies (one density cluster) split between plants by their stems;
     - ``merges``: stem candidates merged into a stronger one nearby, and density clusters
       joined into one plant at one grid node;
-    - ``missing_cells``: grid cells (row, column) where no plant was found;
+    - ``missing_cells``: grid cells (row, column) where no plant was found though the captures
+      saw the ground there;
+    - ``unseen_cells``: grid cells outside what the captures saw (a mission that visited part
+      of the plot): neither found nor missing;
     - ``extra_plants``: ids of plants standing at no grid cell."""
 
     plants: list[Plant]
     splits: list[list[int]] = field(default_factory=list)
     merges: list[str] = field(default_factory=list)
     missing_cells: list[tuple[int, int]] = field(default_factory=list)
+    unseen_cells: list[tuple[int, int]] = field(default_factory=list)
     extra_plants: list[int] = field(default_factory=list)
 
     def warnings(self, flag_ambiguous_share: float) -> list[str]:
@@ -145,6 +149,11 @@ class PlantSearch:
         if self.missing_cells:
             cells = ", ".join(f"row {r} column {c}" for r, c in self.missing_cells)
             lines.append(f"{len(self.missing_cells)} planting-grid cells without a plant: {cells}")
+        if self.unseen_cells:
+            lines.append(
+                f"{len(self.unseen_cells)} planting-grid cells outside what the captures saw "
+                "(not searched)"
+            )
         if self.extra_plants:
             ids = ", ".join(str(i) for i in self.extra_plants)
             lines.append(f"{len(self.extra_plants)} plants off the planting grid: {ids}")
@@ -191,7 +200,7 @@ def search_plants(
     )
     search = PlantSearch(plants, merges=merges)
     if grid is not None:
-        _place_on_grid(search, grid)
+        _place_on_grid(search, grid, soil_m)
     search.splits = _splits(cloud.points, labels, plant_labels, settings.cluster_voxel_m)
     return search
 
@@ -302,9 +311,11 @@ def _soil_near(
     return soil_m[near]
 
 
-def _place_on_grid(search: PlantSearch, grid: GridNodes) -> None:
+def _place_on_grid(search: PlantSearch, grid: GridNodes, soil_m: NDArray[np.float64]) -> None:
     """Each plant to the grid node its base stands at (within the snap radius), one plant per
-    node (the nearest); the others are extra, the nodes left are missing."""
+    node (the nearest); the others are extra; the nodes left are missing where the soil sample
+    (M, 3) has ground within the snap radius, unseen elsewhere (every node counts as seen
+    without a soil sample)."""
     taken: dict[int, tuple[float, int]] = {}
     for index, plant in enumerate(search.plants):
         distance = np.hypot(*(grid.xy_m - [plant.traits.x_m, plant.traits.y_m]).T)
@@ -320,9 +331,14 @@ def _place_on_grid(search: PlantSearch, grid: GridNodes) -> None:
             continue
         at = owner[index]
         search.plants[index] = replace(plant, grid_cell=(int(grid.row[at]), int(grid.column[at])))
-    search.missing_cells = [
-        (int(grid.row[n]), int(grid.column[n])) for n in range(len(grid.xy_m)) if n not in taken
-    ]
+    seen = np.ones(len(grid.xy_m), dtype=bool)
+    if len(soil_m):
+        distance, _ = cKDTree(soil_m[:, :2]).query(grid.xy_m)
+        seen = distance <= grid.snap_radius_m
+    for node in range(len(grid.xy_m)):
+        if node not in taken:
+            cells = search.missing_cells if seen[node] else search.unseen_cells
+            cells.append((int(grid.row[node]), int(grid.column[node])))
 
 
 def _splits(

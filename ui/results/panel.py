@@ -100,7 +100,7 @@ class ResultsPanel(QtWidgets.QWidget):
         scene = scene or build_scene(results)
         self.view3d.show_scene(scene)
         self.map.show_scene(scene)
-        self.plant_model.set_plants(results.plants)
+        self.plant_model.set_plants(results.plants, results.report)
         reference = results.report.get("reference_station")
         self.stations.setModel(station_model(results.report, reference))
         self.warnings.clear()

@@ -1,8 +1,9 @@
-"""The plant table (id, position, height, width, points) and the per-station registration
-quality table, as Qt item models over plain records."""
+"""The plant table (id, position, height, width, points, how the plant was found) and the
+per-station registration quality table, as Qt item models over plain records."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 from PySide6 import QtCore, QtGui
@@ -10,7 +11,8 @@ from PySide6 import QtCore, QtGui
 from fieldapp.results.files import PlantRecord
 from fieldapp.results.organ_tables import LEAF_TRAITS
 
-PLANT_COLUMNS = ("plant", "x (m)", "y (m)", "height (cm)", "width (cm)", "points")
+PLANT_COLUMNS = ("plant", "x (m)", "y (m)", "height (cm)", "width (cm)", "points", "found")
+FOUND_COLUMN = len(PLANT_COLUMNS) - 1
 LEAF_COLUMNS = (
     "leaf",
     "length (cm)",
@@ -41,9 +43,12 @@ class PlantTableModel(QtGui.QStandardItemModel):
         self.setHorizontalHeaderLabels(list(PLANT_COLUMNS))
         self.plants: list[PlantRecord] = []
 
-    def set_plants(self, plants: list[PlantRecord]) -> None:
+    def set_plants(self, plants: list[PlantRecord], report: dict[str, Any] | None = None) -> None:
+        """The plants, and from ``report.json`` (when given) how each was found (column
+        "found": a badge, the details in its tooltip; the plot's merges in the header's)."""
         self.removeRows(0, self.rowCount())
         self.plants = list(plants)
+        notes = plant_search_notes(report or {})
         for p in self.plants:
             values = (p.plant, p.x_m, p.y_m, p.height_cm, p.width_cm, p.points)
             row = []
@@ -54,13 +59,95 @@ class PlantTableModel(QtGui.QStandardItemModel):
                 item.setEditable(False)
                 item.setTextAlignment(QtCore.Qt.AlignmentFlag.AlignRight)
                 row.append(item)
+            row.append(_found_item(notes.get(p.plant)))
             self.appendRow(row)
+        self.setHeaderData(
+            FOUND_COLUMN,
+            QtCore.Qt.Orientation.Horizontal,
+            merges_text(report or {}),
+            Role.ToolTipRole,
+        )
 
     def row_of(self, plant: int) -> int | None:
         for row, record in enumerate(self.plants):
             if record.plant == plant:
                 return row
         return None
+
+
+@dataclass(frozen=True)
+class SearchNote:
+    """How one plant was found, for the plant table: a short ``badge`` ("stem", "⚠ split",
+    "⚠ 2.1 % ambiguous", "cluster") and the ``details`` for its tooltip; ``flagged`` plants
+    are drawn in orange."""
+
+    badge: str
+    details: str
+    flagged: bool
+
+
+def plant_search_notes(report: dict[str, Any]) -> dict[int, SearchNote]:
+    """Per plant id, from ``report.json``'s ``plant_search``: found from a stem or as a density
+    cluster, the share of its points another stem reaches almost as soon (flagged above the
+    report's bar), the plants whose canopy it shares (split by their stems) and its grid cell.
+    Empty when the report has no plant search (results from before it)."""
+    search = report.get("plant_search") or {}
+    groups: dict[int, list[int]] = {}
+    for split in search.get("splits") or []:
+        for plant in split.get("plants", []):
+            groups[int(plant)] = [int(p) for p in split["plants"] if int(p) != int(plant)]
+    extra = {int(p) for p in search.get("extra_plants") or []}
+    notes = {}
+    for entry in search.get("plants") or []:
+        plant = int(entry["plant"])
+        share = 100.0 * float(entry.get("ambiguous_share", 0.0))
+        lines = [
+            "found from its stem"
+            if entry.get("from_stem", True)
+            else "found as a density cluster (no stem seen)"
+        ]
+        badge = "stem" if entry.get("from_stem", True) else "cluster"
+        if plant in groups:
+            others = ", ".join(map(str, groups[plant]))
+            lines.append(
+                f"canopy joined to plant{'s' if len(groups[plant]) > 1 else ''} "
+                f"{others}: split between them by their stems"
+            )
+            badge = "split"
+        if share > 0.0:
+            lines.append(f"{share:.1f} % of its points could belong to a neighbour")
+        if entry.get("flagged"):
+            badge = f"⚠ {share:.1f} % ambiguous"
+            lines.append("check this plant: its traits may include a neighbour's leaf")
+        cell = entry.get("grid_cell")
+        if cell:
+            lines.append(f"planting grid row {cell[0]}, column {cell[1]}")
+        elif plant in extra:
+            lines.append("at no planting-grid cell (an extra plant)")
+        notes[plant] = SearchNote(badge, "\n".join(lines), bool(entry.get("flagged")))
+    return notes
+
+
+def merges_text(report: dict[str, Any]) -> str:
+    """The plot's merges and empty grid cells, one per line, for the "found" column's header."""
+    search = report.get("plant_search") or {}
+    lines = [str(m) for m in search.get("merges") or []]
+    missing = search.get("missing_cells") or []
+    if missing:
+        cells = ", ".join(f"row {r} column {c}" for r, c in missing)
+        lines.append(f"planting-grid cells without a plant: {cells}")
+    return "\n".join(["how each plant was found", *lines])
+
+
+def _found_item(note: SearchNote | None) -> QtGui.QStandardItem:
+    item = QtGui.QStandardItem("-" if note is None else note.badge)
+    item.setData("" if note is None else note.badge, Role.UserRole)
+    item.setEditable(False)
+    if note is not None:
+        item.setToolTip(note.details)
+        if note.flagged:
+            item.setForeground(QtGui.QColor(190, 90, 0))
+    return item
 
 
 def station_rows(report: dict[str, Any]) -> list[list[str]]:

@@ -108,6 +108,22 @@ def test_the_grid_prior_finds_a_faint_stem_and_reports_missing_and_extra_plants(
     assert b_plant.traits.width_m == pytest.approx(width_m(b), abs=0.01)
 
 
+def test_grid_cells_the_captures_did_not_see_are_not_reported_missing() -> None:
+    """A mission over part of the plot: the grid's far cells are outside the captured ground."""
+    rng = np.random.default_rng(8)
+    points = np.concatenate([plant(rng, (0.0, 0.0), [(0.0, 0.12, 0.3, 0.1)])])
+    soil = ground_patch(rng, 1.0, 4000)  # the ground seen: |x|, |y| <= 1 m
+    nodes = grid_nodes(1, 4, 0.8, 0.8, (0.0, 0.0), 0.0, np.eye(4))  # x = 0, 0.8, 1.6, 2.4
+    search = search_plants(colored(points, LEAF_RGB), soil, PlantSettings(), 0.15, nodes)
+    assert [p.grid_cell for p in search.plants] == [(1, 1)]
+    assert search.missing_cells == [(1, 2)]  # seen, empty
+    assert search.unseen_cells == [(1, 3), (1, 4)]
+    assert search.warnings(0.005) == [
+        "1 planting-grid cells without a plant: row 1 column 2",
+        "2 planting-grid cells outside what the captures saw (not searched)",
+    ]
+
+
 def test_points_two_stems_reach_alike_are_flagged() -> None:
     rng = np.random.default_rng(6)
     left = plant(rng, (0.0, 0.0), [(0.0, 0.1, 0.38, 0.0)])
