@@ -148,6 +148,11 @@ class FrameStream:
         taken = self.buffer.latest()
         return None if taken is None else taken[1]
 
+    def last_frame(self) -> Frame | None:
+        """The newest frame the stream delivered, even after it ended (never raises)."""
+        taken = self.buffer.latest()
+        return None if taken is None else taken[1]
+
     def next_frame(self, timeout_s: float | None = None) -> Frame:
         """A frame newer than the last one this method returned; waits for it."""
         timeout_s = self.timeout_s if timeout_s is None else timeout_s

@@ -36,7 +36,9 @@ def run(args: argparse.Namespace) -> int:
     from devices.base.simulator import SimulatedBase
 
     done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda _signum, _frame: done.set())
+    # SIGINT too: a parent that ignores it (nohup, test runners' workers) passes that on
+    for stop_signal in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(stop_signal, lambda _signum, _frame: done.set())
     try:
         keys = ServerKeys.from_dir(args.keys) if args.keys else None
         base = SimulatedBase(

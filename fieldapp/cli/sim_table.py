@@ -46,7 +46,10 @@ def run(args: argparse.Namespace) -> int:
     print(server.device_path, flush=True)
     mode = "real time" if args.realtime else "instant moves"
     print(f"simulated Grbl table ({mode}); Ctrl-C to stop", file=sys.stderr, flush=True)
-    signal.signal(signal.SIGTERM, _interrupt)
+    # Ctrl-C stops it even when the parent started it with SIGINT ignored (nohup, test
+    # runners' workers): Python then installs no handler of its own.
+    for stop_signal in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(stop_signal, _interrupt)
     try:
         while server.running:
             time.sleep(0.2)

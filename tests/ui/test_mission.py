@@ -59,8 +59,9 @@ def test_start_pause_stop_resume_to_the_end(
     assert not page.start_button.isEnabled() and page.abort_button.isEnabled()
 
     page.pause_button.click()
+    # the mission thread sets the state; the button follows once the GUI thread has the signal
     assert wait_until(lambda: page.controller.state is MissionState.PAUSED, 10.0)
-    assert page.pause_button.text().endswith("Continue")
+    assert wait_until(lambda: page.pause_button.text().endswith("Continue"), 10.0)
     held = page.progress.captured
     assert never_within(lambda: page.progress.captured > held, 0.6)  # nothing while paused
     page.pause_button.click()

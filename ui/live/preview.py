@@ -301,6 +301,10 @@ class LivePreview(QtWidgets.QWidget):
         try:
             frame = self.stream.latest()
         except CameraError as error:
+            last = self.stream.last_frame()  # the end stays on screen, however fast it came
+            if last is not None and id(last) != self._shown_frame_id:
+                self._shown_frame_id = id(last)
+                self.show_frame(last)
             self._stream_ended(error)
             return
         if frame is not None and id(frame) != self._shown_frame_id and not self.freeze.isChecked():
