@@ -3,11 +3,12 @@
 A leaf's **midrib** is traced through the leaf's points: geodesic distance (shortest paths
 along 1.2 cm links) from where the leaf leaves the stem's cylinder, the centroid of every 1 cm
 level set, and the farthest point (the tip). The **collar** is where the midrib, extended
-back along its first centimetres, meets the stem's surface. Each level set's points, seen
-along the midrib, are the leaf's cross-section there: its **width** is the length of the
-section's profile (a folded blade is measured flattened, as with a ruler), and the **area** is
-the width integrated along the midrib.
-"""
+back along its first centimetres, meets the stem's surface. The leaf's **cross-sections** are
+the 1 cm level sets of the geodesic distance from the tip (seen from the tip, the base of a
+leaf that hugs the stem is cut across, not along): each section's points, seen along the
+leaf, give its **width**, the length of the section's profile (a folded blade is measured
+flattened, as with a ruler); the **area** is the width integrated from the tip over the
+midrib's length."""
 
 from __future__ import annotations
 
@@ -68,30 +69,57 @@ def measure_leaf(
         if sections
         else points_m.mean(axis=0, keepdims=True)
     )
-    tip = points_m[int(np.argmax(distance))]
+    tip_index = int(np.argmax(distance))
+    tip = points_m[tip_index]
     extension = _collar(centres_m, axis, stem_radius_m)
     collar = extension[0]
     midrib = np.vstack([extension, centres_m, tip])
-    widths = [
-        section_width_m(
-            members, centres_m[min(i + 1, len(centres_m) - 1)] - centres_m[max(i - 1, 0)]
-        )
-        for i, members in enumerate(sections)
-    ]
-    width = _running_median(np.array(widths))
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(midrib, axis=0), axis=1))])
-    first = width[0] if len(width) else 0.0
-    profile = np.concatenate([np.full(len(extension), first), width, [0.0]])
+    from_tip, width = _widths_from_tip(points_m, tip_index)
     return LeafTraits(
         leaf_id=leaf_id,
         length_m=float(arc[-1]),
         max_width_m=float(width.max()) if len(width) else 0.0,
-        area_m2=float(np.trapezoid(profile, arc)),
+        area_m2=_area_m2(from_tip, width, float(arc[-1])),
         angle_from_stem_deg=angle_from_axis_deg(midrib, axis.direction),
         azimuth_deg=azimuth_deg(tip - collar),
         insertion_height_m=float(collar[2] - axis.foot_m[2]),
         midrib_m=midrib,
     )
+
+
+def _widths_from_tip(
+    points_m: NDArray[np.float64], tip_index: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The leaf's flattened width (running median) across each :data:`LEVEL_M` level set of
+    the geodesic distance from its tip: (K,) the level sets' middle distances from the tip and
+    (K,) their widths, tip first. Seen from the tip every level set is a cross-section down to
+    the base; seen from the stem, the base of a leaf hugging the stem (a strip along it, all at
+    one distance from the stem) would be one "section" as long as the strip."""
+    from_tip = geodesic_m(points_m, np.array([tip_index]))
+    sections = _level_sets(points_m, from_tip)
+    levels = np.unique(np.floor(from_tip / LEVEL_M))
+    centres = np.array([s.mean(axis=0) for s in sections])
+    last = len(sections) - 1
+    widths = [
+        section_width_m(s, centres[max(i - 1, 0)] - centres[min(i + 1, last)])
+        if len(s) >= 3
+        else 0.0
+        for i, s in enumerate(sections)
+    ]
+    return LEVEL_M * (levels + 0.5), _running_median(np.array(widths))
+
+
+def _area_m2(
+    from_tip_m: NDArray[np.float64], width_m: NDArray[np.float64], length_m: float
+) -> float:
+    """One side of the blade: the widths (K,) at ``from_tip_m`` (K,) along the leaf from its
+    tip (none at the tip itself), integrated over the midrib's ``length_m``, the last width
+    held to the collar."""
+    at = np.concatenate([[0.0], from_tip_m])
+    profile = np.concatenate([[0.0], width_m])
+    grid = np.append(at[at < length_m], length_m)
+    return float(np.trapezoid(np.interp(grid, at, profile), grid))
 
 
 def _level_sets(
@@ -170,13 +198,15 @@ def section_width_m(members_m: NDArray[np.float64], tangent: NDArray[np.float64]
 
 
 def _running_median(values: NDArray[np.float64], half: int = 1) -> NDArray[np.float64]:
-    """``values`` (K,) through a running median of ``2 * half + 1`` (ends repeated): a section
+    """``values`` (K,) through a running median of ``2 * half + 1``, the ends taking their
+    nearest whole window's (a repeated end value would keep a spoilt end section): a section
     spoilt by a touching leaf or the stem's noise does not make the leaf's width."""
-    if len(values) < 2 * half + 1:
+    size = 2 * half + 1
+    if len(values) < size:
         return values
-    padded = np.concatenate([np.full(half, values[0]), values, np.full(half, values[-1])])
-    windows = np.stack([padded[i : i + len(values)] for i in range(2 * half + 1)])
-    return np.median(windows, axis=0)  # type: ignore[no-any-return]
+    windows = np.stack([values[i : i + len(values) - size + 1] for i in range(size)])
+    middle = np.median(windows, axis=0)
+    return np.concatenate([np.full(half, middle[0]), middle, np.full(half, middle[-1])])
 
 
 def angle_from_axis_deg(
