@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
@@ -62,7 +62,8 @@ def measure_leaf(
     """Traits of one leaf from its points (M, 3), the stem's axis and radius."""
     _along, radial = axis.split(points_m)
     sources = np.flatnonzero(radial <= radial.min() + SOURCE_BAND_M)
-    distance = geodesic_m(points_m, sources)
+    graph = LeafGraph.of(points_m)
+    distance = graph.geodesic_m(sources)
     sections = [s for s in _level_sets(points_m, distance) if len(s) >= 3]
     centres_m = (
         np.array([s.mean(axis=0) for s in sections])
@@ -75,7 +76,7 @@ def measure_leaf(
     collar = extension[0]
     midrib = np.vstack([extension, centres_m, tip])
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(midrib, axis=0), axis=1))])
-    from_tip, width = _widths_from_tip(points_m, tip_index)
+    from_tip, width = _widths_from_tip(points_m, graph, tip_index)
     return LeafTraits(
         leaf_id=leaf_id,
         length_m=float(arc[-1]),
@@ -89,14 +90,14 @@ def measure_leaf(
 
 
 def _widths_from_tip(
-    points_m: NDArray[np.float64], tip_index: int
+    points_m: NDArray[np.float64], graph: LeafGraph, tip_index: int
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The leaf's flattened width (running median) across each :data:`LEVEL_M` level set of
     the geodesic distance from its tip: (K,) the level sets' middle distances from the tip and
     (K,) their widths, tip first. Seen from the tip every level set is a cross-section down to
     the base; seen from the stem, the base of a leaf hugging the stem (a strip along it, all at
     one distance from the stem) would be one "section" as long as the strip."""
-    from_tip = geodesic_m(points_m, np.array([tip_index]))
+    from_tip = graph.geodesic_m(np.array([tip_index]))
     sections = _level_sets(points_m, from_tip)
     levels = np.unique(np.floor(from_tip / LEVEL_M))
     centres = np.array([s.mean(axis=0) for s in sections])
@@ -132,22 +133,42 @@ def _level_sets(
     return np.split(points_m[order], starts[1:])
 
 
+@dataclass(frozen=True)
+class LeafGraph:
+    """A leaf's points linked for geodesic distances: ``means_m`` (V, 3) the means of its
+    voxels (:func:`fieldapp.recon.organs.voxel_means`), ``inverse`` (M,) each point's voxel,
+    ``links`` (V, V) sparse, the lengths of the links shorter than :data:`LINK_M`."""
+
+    means_m: NDArray[np.float64]
+    inverse: NDArray[np.intp]
+    links: csr_matrix
+
+    @classmethod
+    def of(cls, points_m: NDArray[np.float64]) -> LeafGraph:
+        """The graph of a leaf's points (M, 3)."""
+        means, inverse = voxel_means(points_m)
+        pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
+        length = np.linalg.norm(means[pairs[:, 0]] - means[pairs[:, 1]], axis=1)
+        links = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(means),) * 2)
+        return cls(means, inverse, links.tocsr())
+
+    def geodesic_m(self, sources: NDArray[np.intp]) -> NDArray[np.float64]:
+        """(M,) every point's shortest distance from any of the points ``sources`` along the
+        links; a voxel the links do not reach (a piece cut off by a gap) gets its nearest
+        reached voxel's distance plus the straight gap."""
+        starts = np.unique(self.inverse[sources])
+        distance = dijkstra(self.links, directed=False, indices=starts, min_only=True)
+        reached = np.isfinite(distance)
+        if not reached.all():
+            gap, nearest = cKDTree(self.means_m[reached]).query(self.means_m[~reached])
+            distance[~reached] = distance[reached][nearest] + gap
+        return distance[self.inverse]  # type: ignore[no-any-return]
+
+
 def geodesic_m(points_m: NDArray[np.float64], sources: NDArray[np.intp]) -> NDArray[np.float64]:
-    """(M,) shortest distance from any of ``sources`` along :data:`LINK_M` links between voxel
-    means (:func:`fieldapp.recon.organs.voxel_means`), plus each point's offset from its voxel's
-    mean; a voxel the links do not reach (a piece cut off by a gap) gets its nearest reached
-    voxel's distance plus the straight gap."""
-    means, inverse = voxel_means(points_m)
-    pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
-    length = np.linalg.norm(means[pairs[:, 0]] - means[pairs[:, 1]], axis=1)
-    graph = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(means),) * 2)
-    starts = np.unique(inverse[sources])
-    distance = dijkstra(graph.tocsr(), directed=False, indices=starts, min_only=True)
-    reached = np.isfinite(distance)
-    if not reached.all():
-        gap, nearest = cKDTree(means[reached]).query(means[~reached])
-        distance[~reached] = distance[reached][nearest] + gap
-    return distance[inverse]  # type: ignore[no-any-return]
+    """(M,) shortest distance of the points (M, 3) from any of ``sources`` through the leaf
+    (:meth:`LeafGraph.geodesic_m`)."""
+    return LeafGraph.of(points_m).geodesic_m(sources)
 
 
 def _collar(
