@@ -3,11 +3,12 @@
 A leaf's **midrib** is traced through the leaf's points: geodesic distance (shortest paths
 along 1.2 cm links) from where the leaf leaves the stem's cylinder, the centroid of every 1 cm
 level set, and the farthest point (the tip). The **collar** is where the midrib, extended
-back along its first centimetres, meets the stem's surface. Each level set's points, seen
-along the midrib, are the leaf's cross-section there: its **width** is the length of the
-section's profile (a folded blade is measured flattened, as with a ruler), and the **area** is
-the width integrated along the midrib.
-"""
+back along its first centimetres, meets the stem's surface. The leaf's **cross-sections** are
+the 1 cm level sets of the geodesic distance from the tip (seen from the tip, the base of a
+leaf that hugs the stem is cut across, not along): each section's points, seen along the
+leaf, give its **width**, the length of the section's profile (a folded blade is measured
+flattened, as with a ruler); the **area** is the width integrated from the tip over the
+midrib's length."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
@@ -61,37 +62,63 @@ def measure_leaf(
     """Traits of one leaf from its points (M, 3), the stem's axis and radius."""
     _along, radial = axis.split(points_m)
     sources = np.flatnonzero(radial <= radial.min() + SOURCE_BAND_M)
-    distance = geodesic_m(points_m, sources)
+    graph = LeafGraph.of(points_m)
+    distance = graph.geodesic_m(sources)
     sections = [s for s in _level_sets(points_m, distance) if len(s) >= 3]
     centres_m = (
         np.array([s.mean(axis=0) for s in sections])
         if sections
         else points_m.mean(axis=0, keepdims=True)
     )
-    tip = points_m[int(np.argmax(distance))]
+    tip_index = int(np.argmax(distance))
+    tip = points_m[tip_index]
     extension = _collar(centres_m, axis, stem_radius_m)
     collar = extension[0]
     midrib = np.vstack([extension, centres_m, tip])
-    widths = [
-        section_width_m(
-            members, centres_m[min(i + 1, len(centres_m) - 1)] - centres_m[max(i - 1, 0)]
-        )
-        for i, members in enumerate(sections)
-    ]
-    width = _running_median(np.array(widths))
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(midrib, axis=0), axis=1))])
-    first = width[0] if len(width) else 0.0
-    profile = np.concatenate([np.full(len(extension), first), width, [0.0]])
+    from_tip, width = _widths_from_tip(points_m, graph, tip_index)
     return LeafTraits(
         leaf_id=leaf_id,
         length_m=float(arc[-1]),
         max_width_m=float(width.max()) if len(width) else 0.0,
-        area_m2=float(np.trapezoid(profile, arc)),
+        area_m2=_area_m2(from_tip, width, float(arc[-1])),
         angle_from_stem_deg=angle_from_axis_deg(midrib, axis.direction),
         azimuth_deg=azimuth_deg(tip - collar),
         insertion_height_m=float(collar[2] - axis.foot_m[2]),
         midrib_m=midrib,
     )
+
+
+def _widths_from_tip(
+    points_m: NDArray[np.float64], graph: LeafGraph, tip_index: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The leaf's flattened width (running median) across each :data:`LEVEL_M` level set of
+    the geodesic distance from its tip: (K,) the level sets' middle distances from the tip and
+    (K,) their widths, tip first. Seen from the tip every level set is a cross-section down to
+    the base; seen from the stem, the base of a leaf hugging the stem (a strip along it, all at
+    one distance from the stem) would be one "section" as long as the strip."""
+    from_tip = graph.geodesic_m(np.array([tip_index]))
+    sections = _level_sets(points_m, from_tip)
+    levels = np.unique(np.floor(from_tip / LEVEL_M))
+    centres = np.array([s.mean(axis=0) for s in sections])
+    last = len(sections) - 1
+    tangents = np.array(
+        [centres[max(i - 1, 0)] - centres[min(i + 1, last)] for i in range(len(sections))]
+    )
+    widths = section_widths_m(sections, tangents)
+    return LEVEL_M * (levels + 0.5), _running_median(widths)
+
+
+def _area_m2(
+    from_tip_m: NDArray[np.float64], width_m: NDArray[np.float64], length_m: float
+) -> float:
+    """One side of the blade: the widths (K,) at ``from_tip_m`` (K,) along the leaf from its
+    tip (none at the tip itself), integrated over the midrib's ``length_m``, the last width
+    held to the collar."""
+    at = np.concatenate([[0.0], from_tip_m])
+    profile = np.concatenate([[0.0], width_m])
+    grid = np.append(at[at < length_m], length_m)
+    return float(np.trapezoid(np.interp(grid, at, profile), grid))
 
 
 def _level_sets(
@@ -104,22 +131,42 @@ def _level_sets(
     return np.split(points_m[order], starts[1:])
 
 
+@dataclass(frozen=True)
+class LeafGraph:
+    """A leaf's points linked for geodesic distances: ``means_m`` (V, 3) the means of its
+    voxels (:func:`fieldapp.recon.organs.voxel_means`), ``inverse`` (M,) each point's voxel,
+    ``links`` (V, V) sparse, the lengths of the links shorter than :data:`LINK_M`."""
+
+    means_m: NDArray[np.float64]
+    inverse: NDArray[np.intp]
+    links: csr_matrix
+
+    @classmethod
+    def of(cls, points_m: NDArray[np.float64]) -> LeafGraph:
+        """The graph of a leaf's points (M, 3)."""
+        means, inverse = voxel_means(points_m)
+        pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
+        length = np.linalg.norm(means[pairs[:, 0]] - means[pairs[:, 1]], axis=1)
+        links = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(means),) * 2)
+        return cls(means, inverse, links.tocsr())
+
+    def geodesic_m(self, sources: NDArray[np.intp]) -> NDArray[np.float64]:
+        """(M,) every point's shortest distance from any of the points ``sources`` along the
+        links; a voxel the links do not reach (a piece cut off by a gap) gets its nearest
+        reached voxel's distance plus the straight gap."""
+        starts = np.unique(self.inverse[sources])
+        distance = dijkstra(self.links, directed=False, indices=starts, min_only=True)
+        reached = np.isfinite(distance)
+        if not reached.all():
+            gap, nearest = cKDTree(self.means_m[reached]).query(self.means_m[~reached])
+            distance[~reached] = distance[reached][nearest] + gap
+        return distance[self.inverse]  # type: ignore[no-any-return]
+
+
 def geodesic_m(points_m: NDArray[np.float64], sources: NDArray[np.intp]) -> NDArray[np.float64]:
-    """(M,) shortest distance from any of ``sources`` along :data:`LINK_M` links between voxel
-    means (:func:`fieldapp.recon.organs.voxel_means`), plus each point's offset from its voxel's
-    mean; a voxel the links do not reach (a piece cut off by a gap) gets its nearest reached
-    voxel's distance plus the straight gap."""
-    means, inverse = voxel_means(points_m)
-    pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
-    length = np.linalg.norm(means[pairs[:, 0]] - means[pairs[:, 1]], axis=1)
-    graph = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(means),) * 2)
-    starts = np.unique(inverse[sources])
-    distance = dijkstra(graph.tocsr(), directed=False, indices=starts, min_only=True)
-    reached = np.isfinite(distance)
-    if not reached.all():
-        gap, nearest = cKDTree(means[reached]).query(means[~reached])
-        distance[~reached] = distance[reached][nearest] + gap
-    return distance[inverse]  # type: ignore[no-any-return]
+    """(M,) shortest distance of the points (M, 3) from any of ``sources`` through the leaf
+    (:meth:`LeafGraph.geodesic_m`)."""
+    return LeafGraph.of(points_m).geodesic_m(sources)
 
 
 def _collar(
@@ -144,39 +191,57 @@ def _collar(
     return steps[end::-1][:-1] if end > 0 else steps[:1]
 
 
-def section_width_m(members_m: NDArray[np.float64], tangent: NDArray[np.float64]) -> float:
-    """Flattened width of a cross-section's points (K, 3) seen along ``tangent`` (3,): the
-    span across it (between the 2nd and 98th percentiles, scaled to the whole span of evenly
-    spread points: noise widens the extremes, not the quantiles) times the length per span of
-    the parabola fitted to the section's profile (a folded blade measured flat)."""
-    norm = float(np.linalg.norm(tangent))
-    if norm < 1e-9 or len(members_m) < 5:
-        return 0.0
-    t = tangent / norm
-    q = members_m - members_m.mean(axis=0)
-    q = q - np.outer(q @ t, t)
-    _, vectors = np.linalg.eigh(q.T @ q)
-    across, height = q @ vectors[:, 2], q @ vectors[:, 1]
-    ordered = np.sort(across)
-    edge = round(EDGE_QUANTILE / 100.0 * (len(ordered) - 1))
-    span = float(ordered[-1 - edge] - ordered[edge]) / (1.0 - 2.0 * edge / (len(ordered) - 1))
-    design = np.stack([np.ones_like(across), across, across * across], axis=1)
-    curve = np.linalg.solve(design.T @ design + 1e-12 * np.eye(3), design.T @ height)
-    x = np.linspace(float(ordered[0]), float(ordered[-1]), 32)
-    y = curve[0] + curve[1] * x + curve[2] * x * x
-    chord = float(x[-1] - x[0])
-    arc = float(np.hypot(np.diff(x), np.diff(y)).sum())
-    return span * (arc / chord if chord > 0 else 1.0)
+def section_widths_m(
+    sections: list[NDArray[np.float64]], tangents: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(S,) flattened width of each cross-section's points (K_s, 3) seen along its tangent
+    (S, 3): the span across it (between the 2nd and 98th percentiles, scaled to the whole
+    span of evenly spread points: noise widens the extremes, not the quantiles) times the
+    length per span of the parabola fitted to the section's profile (a folded blade measured
+    flat); 0 for a section of fewer than 5 points. The 3 x 3 eigen and least-squares problems
+    of a leaf's sections are solved together (each alone costs more in calls than in work)."""
+    widths = np.zeros(len(sections))
+    norms = np.linalg.norm(tangents, axis=1) if len(sections) else np.zeros(0)
+    chosen = [i for i in range(len(sections)) if norms[i] >= 1e-9 and len(sections[i]) >= 5]
+    if not chosen:
+        return widths
+    flat = []
+    for i in chosen:
+        t = tangents[i] / norms[i]
+        q = sections[i] - sections[i].mean(axis=0)
+        flat.append(q - np.outer(q @ t, t))
+    _, vectors = np.linalg.eigh(np.stack([q.T @ q for q in flat]))
+    spans, normal, rhs, ends = [], [], [], []
+    for q, v in zip(flat, vectors, strict=True):
+        across, height = q @ v[:, 2], q @ v[:, 1]
+        ordered = np.sort(across)
+        edge = round(EDGE_QUANTILE / 100.0 * (len(ordered) - 1))
+        spans.append((ordered[-1 - edge] - ordered[edge]) / (1.0 - 2.0 * edge / (len(ordered) - 1)))
+        design = np.stack([np.ones_like(across), across, across * across], axis=1)
+        normal.append(design.T @ design + 1e-12 * np.eye(3))
+        rhs.append(design.T @ height)
+        ends.append((ordered[0], ordered[-1]))
+    curve = np.linalg.solve(np.stack(normal), np.stack(rhs)[:, :, None])[:, :, 0]
+    low, high = np.array(ends).T
+    x = low[:, None] + (high - low)[:, None] * np.linspace(0.0, 1.0, 32)
+    y = curve[:, :1] + curve[:, 1:2] * x + curve[:, 2:] * x * x
+    chord = high - low
+    arc = np.hypot(np.diff(x, axis=1), np.diff(y, axis=1)).sum(axis=1)
+    stretch = np.divide(arc, chord, out=np.ones_like(arc), where=chord > 0)
+    widths[chosen] = np.array(spans) * stretch
+    return widths
 
 
 def _running_median(values: NDArray[np.float64], half: int = 1) -> NDArray[np.float64]:
-    """``values`` (K,) through a running median of ``2 * half + 1`` (ends repeated): a section
+    """``values`` (K,) through a running median of ``2 * half + 1``, the ends taking their
+    nearest whole window's (a repeated end value would keep a spoilt end section): a section
     spoilt by a touching leaf or the stem's noise does not make the leaf's width."""
-    if len(values) < 2 * half + 1:
+    size = 2 * half + 1
+    if len(values) < size:
         return values
-    padded = np.concatenate([np.full(half, values[0]), values, np.full(half, values[-1])])
-    windows = np.stack([padded[i : i + len(values)] for i in range(2 * half + 1)])
-    return np.median(windows, axis=0)  # type: ignore[no-any-return]
+    windows = np.stack([values[i : i + len(values) - size + 1] for i in range(size)])
+    middle = np.median(windows, axis=0)
+    return np.concatenate([np.full(half, middle[0]), middle, np.full(half, middle[-1])])
 
 
 def angle_from_axis_deg(
