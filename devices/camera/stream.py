@@ -110,6 +110,7 @@ class FrameStream:
         self._last_number: int | None = None
         self._seen = 0
         self.error: CameraError | None = None
+        self._error_traceback: TracebackType | None = None
 
     def start(self) -> FrameStream:
         if self._thread is None:
@@ -177,7 +178,9 @@ class FrameStream:
 
     def _raise_error(self) -> None:
         if self.error is not None:
-            raise self.error
+            # Raised again on every call: from the grabber's traceback each time, or each
+            # raise would add this call's frames to it and it would grow without end.
+            raise self.error.with_traceback(self._error_traceback)
 
     def _grab(self) -> None:
         while not self._stop.is_set():
@@ -186,6 +189,7 @@ class FrameStream:
             except CameraError as error:
                 if not self._stop.is_set():
                     log.error("camera stream ended: %s", error)
+                    self._error_traceback = error.__traceback__
                     self.error = error
                 break
             self._count(frame)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+import traceback
 
 import numpy as np
 import pytest
@@ -113,6 +114,22 @@ def test_grabber_error_reaches_the_consumer() -> None:
             stream.latest()
         with pytest.raises(CameraDisconnected):
             stream.next_frame(0.5)
+        assert stream.last_frame() is not None  # the end stays on screen
+
+
+def test_the_error_raised_again_and_again_keeps_its_traceback_short() -> None:
+    camera = ScriptedCamera([0], error=CameraDisconnected("unplugged"))
+    camera.gate.release()
+    with camera, FrameStream(camera, timeout_s=1.0) as stream:
+        deadline = time.monotonic() + 20  # generous: waiting, not timing
+        while stream.running and time.monotonic() < deadline:
+            time.sleep(0.005)
+        depths = []
+        for _ in range(50):  # a live view polls a dead stream like this
+            with pytest.raises(CameraDisconnected) as raised:
+                stream.latest()
+            depths.append(len(traceback.extract_tb(raised.value.__traceback__)))
+        assert depths[-1] == depths[0]
 
 
 def test_no_frames_times_out_without_hanging() -> None:
