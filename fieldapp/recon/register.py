@@ -139,19 +139,30 @@ def _consensus_guesses(
     settings: RegistrationSettings,
 ) -> dict[int, Matrix4]:
     """The pairs to register again, each with its relative pose in the ``first`` solution of
-    the graph (index into ``fits`` -> ``T_a_b``): the fits that solution does not keep.
+    the graph (index into ``fits`` -> ``T_a_b``): the usable fits (plausible for the arrival
+    error) that solution drops.
 
     On smooth relief GICP started at the coarse poses can slide into another minimum (bare
     soil, seed 1: 4 of 20 pairs 13-20 cm off, the rest within 3 mm); the other pairs and the
-    priors still place the two stations, and from there the pair finds its true fit."""
+    priors still place the two stations, and from there the pair finds its true fit. A pair
+    whose stations the solution leaves where they started (within the edge tolerance) is not
+    registered again: it would only find the same minimum."""
     usable, solution = first
     kept = {usable[i] for i in solution.kept if i < len(usable)}
     correction = {s: solution.T_field_node[s] @ invert(T) for s, T in nodes.items()}
-    return {
-        k: invert(correction[f.a]) @ correction[f.b]
-        for k, f in enumerate(fits)
-        if k not in kept and f.points >= settings.min_points
-    }
+    guesses = {}
+    for k in usable:  # a pair beyond the expected arrival error is not tried again
+        fit = fits[k]
+        if k in kept:
+            continue
+        guess = invert(correction[fit.a]) @ correction[fit.b]
+        moved_m, moved_deg = posegraph.disagreement(
+            se3.log(invert(nodes[fit.b]) @ guess @ nodes[fit.b])
+        )
+        # from where it started (the coarse poses) the pair would only find its minimum again
+        if moved_m > settings.edge_tolerance_m or moved_deg > settings.edge_tolerance_deg:
+            guesses[k] = guess
+    return guesses
 
 
 def _usable(

@@ -195,7 +195,7 @@ def test_a_5x5_plot_is_refined_to_the_corners() -> None:
 def test_pairs_that_slid_into_another_minimum_are_registered_again_from_the_plot(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """GICP from the coarse poses can settle 13-20 cm off on smooth relief (bare soil, seed 1:
+    """GICP from the coarse poses can settle 10-20 cm off on smooth relief (bare soil, seed 1:
     4 of 20 pairs). Two of corner station 7's three pairs are made to do so here: they are
     registered again from the graph's first solution, found right and kept."""
     from dataclasses import replace
@@ -204,7 +204,7 @@ def test_pairs_that_slid_into_another_minimum_are_registered_again_from_the_plot
 
     points, coarse, truth, reference = _plot(1, 3, 0.03, 1.5)
     real = register.register_overlap
-    slid = make_transform(np.eye(3), np.array([0.15, -0.05, 0.0]))
+    slid = make_transform(np.eye(3), np.array([0.10, 0.0, 0.0]))
     again = []
 
     def sliding(overlap, centre, settings, init_T_a_b=None):  # type: ignore[no-untyped-def]
