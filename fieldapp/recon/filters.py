@@ -23,8 +23,14 @@ MIN_GREEN_CONTRAST = 0.1
 """Least difference of the mean ExG of Otsu's two classes for colour to separate plants: green
 leaves on soil differ by 0.3-0.5, a grey or constant image by less than 0.05."""
 
+MIN_SOIL_SHARE = 0.01
+"""Least share of a station's measured pixels a set ExG threshold must leave as soil for the
+soil sample (levelling, local ground, registration): seedling plots leave 99 %, a threshold
+of -1 (every colour, as for white reference spheres among plants) leaves none."""
+
 NO_COLOUR = "no colour"
 NO_GREEN_CONTRAST = "colour has no green contrast"
+NO_SOIL_LEFT = "the excess-green threshold leaves no soil"
 
 
 @dataclass(frozen=True)
@@ -69,6 +75,17 @@ def choose_separation(exg: NDArray[np.float64] | None) -> Separation:
     if green_contrast(exg) < MIN_GREEN_CONTRAST:
         return Separation("geometry", NO_GREEN_CONTRAST)
     return BY_COLOUR
+
+
+def keep_soil(separation: Separation, exg: NDArray[np.float64], threshold: float) -> Separation:
+    """``separation``, or geometry when the colour ``threshold`` calls (nearly) every measured
+    pixel (ExG (N,)) green: with no soil pixel the station has no ground to be levelled on and
+    registration only the points above an unlevelled ground."""
+    if separation.by_geometry or len(exg) == 0:
+        return separation
+    if np.count_nonzero(exg <= threshold) < MIN_SOIL_SHARE * len(exg):
+        return Separation("geometry", NO_SOIL_LEFT)
+    return separation
 
 
 def pass_through(height_m: NDArray[np.float64], min_m: float, max_m: float) -> NDArray[np.bool_]:

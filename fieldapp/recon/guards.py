@@ -60,17 +60,19 @@ def mahalanobis(correction: se3.Vector6, covariance: NDArray[np.float64]) -> flo
 
 def overlap_disagreement(
     station_points_m: NDArray[np.float64],
-    neighbour_points_m: NDArray[np.float64],
-    T_station: Matrix4,
-    T_neighbour: Matrix4,
+    neighbour: cKDTree,
+    T_neighbour_station: Matrix4,
     max_distance_m: float,
 ) -> float:
     """Mean squared distance (m^2, each capped at ``max_distance_m``) of the station's overlap
-    points (N, 3), moved by ``T_station``, to the neighbour's (M, 3), moved by ``T_neighbour``."""
-    if len(station_points_m) == 0 or len(neighbour_points_m) == 0:
+    points (N, 3), moved by ``T_neighbour_station``, to the neighbour's, given as a k-d tree
+    of them where they stand: distances do not change when both move, so one tree of each
+    side serves every pose the guards try."""
+    if len(station_points_m) == 0 or neighbour.n == 0:
         return max_distance_m**2
-    tree = cKDTree(transform_points(T_neighbour, neighbour_points_m))
-    distances, _ = tree.query(
-        transform_points(T_station, station_points_m), k=1, distance_upper_bound=max_distance_m
+    distances, _ = neighbour.query(
+        transform_points(T_neighbour_station, station_points_m),
+        k=1,
+        distance_upper_bound=max_distance_m,
     )
     return float(np.mean(np.minimum(distances, max_distance_m) ** 2))

@@ -68,14 +68,19 @@ def icp(
     source_m: NDArray[np.float64],
     settings: RegistrationSettings,
     threads: int = 1,
+    init_T_target_source: Matrix4 | None = None,
 ) -> IcpOutcome:
     """Align ``source_m`` (N, 3) onto ``target_m`` (M, 3), coarse to fine voxel sizes
-    (small_gicp); the fit is scored at the finest size."""
-    T = np.eye(4)
+    (small_gicp); the fit is scored at the finest size. From ``init_T_target_source`` (a
+    guess that agrees with the plot's other pairs within ``edge_tolerance_m`` / ``_deg``, so
+    within the finest size's correspondence reach at the cameras' range) only the finest size
+    runs: the coarse sizes reach far enough to slide into another minimum of smooth relief."""
+    T = np.eye(4) if init_T_target_source is None else np.array(init_T_target_source)
+    sizes = settings.voxel_sizes_m
+    if init_T_target_source is not None:
+        sizes = sizes[-1:]
     converged = True
-    target = source = None
-    tree = None
-    for voxel_m in settings.voxel_sizes_m:
+    for voxel_m in sizes:
         target, tree = small_gicp.preprocess_points(target_m, voxel_m, num_threads=threads)
         source, _ = small_gicp.preprocess_points(source_m, voxel_m, num_threads=threads)
         result = small_gicp.align(
@@ -158,10 +163,14 @@ def find_overlaps(
 
 
 def register_overlap(
-    overlap: Overlap, centre_b_m: NDArray[np.float64], settings: RegistrationSettings
+    overlap: Overlap,
+    centre_b_m: NDArray[np.float64],
+    settings: RegistrationSettings,
+    init_T_a_b: Matrix4 | None = None,
 ) -> PairFit:
-    """Align b's overlap points onto a's; ``centre_b_m`` (3,) is b's ground centre (field)."""
-    outcome = icp(overlap.points_a_m, overlap.points_b_m, settings, threads=1)
+    """Align b's overlap points onto a's; ``centre_b_m`` (3,) is b's ground centre (field);
+    ``init_T_a_b``: a close guess (fine voxel sizes only, see :func:`icp`), else identity."""
+    outcome = icp(overlap.points_a_m, overlap.points_b_m, settings, 1, init_T_a_b)
     information = point_to_plane_information(
         overlap.points_a_m,
         transform_points(outcome.T_target_source, overlap.points_b_m),

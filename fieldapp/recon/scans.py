@@ -28,6 +28,7 @@ from fieldapp.recon.filters import (
     Separation,
     choose_separation,
     excess_green,
+    keep_soil,
     otsu_threshold,
 )
 from fieldapp.recon.settings import CropSettings
@@ -111,6 +112,8 @@ def read_station(
     has_colour = all(i.capture.color is not None for i in images)
     separation = choose_separation(measured_exg if has_colour else None)
     threshold = _threshold(measured_exg, exg_threshold) if not separation.by_geometry else np.inf
+    separation = keep_soil(separation, measured_exg, threshold)
+    threshold = np.inf if separation.by_geometry else threshold
     grid = _soil_grid(images[0].depth_m.shape, soil_pixel_stride)
     green: dict[int, Cloud] = {}
     soil: dict[int, Cloud] = {}

@@ -4,8 +4,12 @@ import pytest
 
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.filters import (
+    BY_COLOUR,
+    NO_SOIL_LEFT,
+    choose_separation,
     excess_green,
     filter_station,
+    keep_soil,
     otsu_threshold,
     pass_through,
     radius_outliers,
@@ -103,3 +107,15 @@ def test_filter_chain_keeps_the_plant_and_drops_soil_and_strays() -> None:
     assert points[:, 2].min() >= 0.01 and points[:, 2].max() <= 0.3 + 1e-9
     assert list(counts_after) == ["statistical_outliers", "radius_outliers"]
     assert counts_after["radius_outliers"] == len(kept) > 0.95 * len(result.plants)
+
+
+def test_a_threshold_that_leaves_no_soil_separates_by_geometry() -> None:
+    """ExG -1 keeps every colour (white reference spheres among plants): the station would
+    have no soil sample, so no ground to level on; geometry keeps one."""
+    rng = np.random.default_rng(0)
+    exg = np.concatenate([rng.normal(0.0, 0.03, 9900), rng.normal(0.45, 0.05, 100)])
+    assert choose_separation(exg) == BY_COLOUR
+    assert keep_soil(BY_COLOUR, exg, otsu_threshold(exg)) == BY_COLOUR  # 99 % soil
+    everything = keep_soil(BY_COLOUR, exg, -1.0)
+    assert everything.by_geometry and everything.reason == NO_SOIL_LEFT
+    assert keep_soil(BY_COLOUR, exg, float(np.quantile(exg, 0.02))) == BY_COLOUR
