@@ -28,7 +28,8 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Calibration
 from ui.calibration.board_form import BoardForm
 from ui.calibration.live import BoardPreview, CoverageMap
-from ui.calibration.pages import PreparePage, SavePage, SolvePage
+from ui.calibration.pages import WIZARD_SIZE, PreparePage, SavePage, SolvePage
+from ui.calibration.pictures import ReprojectionPicture
 from ui.calibration.session_page import remembered_session
 from ui.state import UiState
 
@@ -202,10 +203,14 @@ class IntrinsicsWizard(QtWidgets.QWizard):
         self.board_form = BoardForm(DEFAULT_BOARD)
         self.prepare = PreparePage("What to prepare", PREPARE, self.board_form)
         self.capture = CapturePage(self.board_form, stream, ui_state)
-        self.solve = SolvePage(self._solve, describe)
+        self.reprojection = ReprojectionPicture(lambda: self.capture.views, self.board_form.board)
+        self.solve = SolvePage(
+            self._solve, describe, self.reprojection, self.reprojection.show_result
+        )
         self.save = SavePage(calibration_path, self._update)
         for page in (self.prepare, self.capture, self.solve, self.save):
             self.addPage(page)
+        self.resize(*WIZARD_SIZE)
 
     def _solve(self) -> Callable[[], IntrinsicsResult]:
         images = [(name, image) for name, image, _ in self.capture.views]

@@ -25,7 +25,8 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Calibration
 from fieldapp.io.session import Session
 from ui.calibration.board_form import BoardForm
-from ui.calibration.pages import PreparePage, SavePage, SolvePage
+from ui.calibration.pages import WIZARD_SIZE, PreparePage, SavePage, SolvePage
+from ui.calibration.pictures import StationLayout
 from ui.calibration.session_page import SessionPage
 from ui.state import UiState
 
@@ -85,6 +86,7 @@ class _SessionWizard(QtWidgets.QWizard):
         self.solve, self.save = solve, save
         for page in (prepare, self.session_page, solve, save):
             self.addPage(page)
+        self.resize(*WIZARD_SIZE)
 
     def in_force(self) -> Calibration | None:
         """The rig's calibration file as it is now (None when absent)."""
@@ -175,9 +177,15 @@ class StationsWizard(_SessionWizard):
             ui_state,
         )
         self.reference = reference
+        self.layout_view = StationLayout()
         self._add_pages(
             PreparePage("What to prepare", STATIONS_TEXT, self.board_form),
-            SolvePage(self._solve, self._describe),
+            SolvePage(
+                self._solve,
+                self._describe,
+                self.layout_view,
+                lambda result: self.layout_view.show_result(result, self.reference),
+            ),
             SavePage(calibration_path, self._update),
         )
 

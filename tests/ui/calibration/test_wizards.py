@@ -16,6 +16,7 @@ from fieldapp.io.calibration import load_calibration
 from ui.calibration import CalibratePage
 from ui.calibration.intrinsics_wizard import IntrinsicsWizard
 from ui.calibration.page import summary
+from ui.calibration.pictures import rms_px
 from ui.calibration.session_wizards import GroundWizard, StationsWizard, ViewsWizard
 from ui.state import UiState
 
@@ -60,6 +61,17 @@ def test_intrinsics_wizard_to_a_saved_calibration(qtbot, boards_session, tmp_pat
     assert result.intrinsics.fx == pytest.approx(truth["fx"], rel=0.005)
     assert result.intrinsics.cy == pytest.approx(truth["cy"], abs=2.0)
     assert solve.verdict.text().startswith(("Good", "Usable"))
+    picture = wizard.reprojection  # per-view error bars and the reprojection overlay
+    timed = [v for v in result.views if v.error_px is not None]
+    assert list(picture.bar_item.opts["height"]) == pytest.approx([v.error_px for v in timed])
+    assert picture.rms_line.value() == pytest.approx(result.rms_px)
+    worst = max(timed, key=lambda v: v.error_px)
+    assert picture.choice.count() == len(timed) and worst.name in picture.choice.currentText()
+    assert not picture.picture.pixmap().isNull() and worst.name in picture.caption.text()
+    for view in timed:  # the corners reprojected through the solved lens
+        found = picture.reprojection_of(view.name)
+        assert found is not None
+        assert rms_px(found[1], found[2]) == pytest.approx(view.error_px, abs=0.05)
     wizard.next()
     wizard.save.save()
     saved = load_calibration(tmp_path / "rig.json")
@@ -142,6 +154,10 @@ def test_view_station_and_ground_wizards_chain_into_one_calibration(
     )
     moved_m, turned_deg = pose_error(result.T_reference_station[4], T_true)
     assert moved_m < 0.01 and turned_deg < 0.5
+    assert stations.layout_view.positions[4] == pytest.approx(
+        (result.T_reference_station[4][0, 3], result.T_reference_station[4][2, 3])
+    )
+    assert stations.layout_view.positions[5] == pytest.approx((0.0, 0.0), abs=1e-9)
     figures = stations.solve.figures.toPlainText()  # the frame and axes named, in metres
     assert "reference frame (station 5's camera at view 0: x right, y down, z forward)" in figures
     x, y, z = result.T_reference_station[4][:3, 3]
