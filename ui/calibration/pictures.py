@@ -4,8 +4,9 @@
   as a line), and the chosen view's image with its detected corners (green circles) and the
   corners reprojected through the solved lens (red crosses; their offsets drawn 10 times
   longer, so a bad view shows at a glance);
-- stations: a top view of where each station's camera stands in the reference frame, joined
-  to the station it was measured through.
+- stations: a top view of where each station's camera stands, joined to the station it was
+  measured through: in the field frame (z up) when the calibration in force has a ground,
+  else the reference camera's x and z (a tilted camera's view, said on the axes).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from numpy.typing import NDArray
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from devices.camera.frames import Intrinsics
+from devices.geometry import Matrix4
 from fieldapp.calib.board import Board
 from fieldapp.calib.intrinsics import IntrinsicsResult
 from fieldapp.calib.stations import StationsResult
@@ -54,16 +56,30 @@ def rms_px(a: NDArray[np.floating[Any]], b: NDArray[np.floating[Any]]) -> float:
 
 
 def overlay(
-    image: NDArray[Any], corners: NDArray[np.float32], reprojected: NDArray[np.float64]
+    image: NDArray[Any],
+    corners: NDArray[np.float32],
+    reprojected: NDArray[np.float64],
+    width_px: int = 640,
 ) -> NDArray[np.uint8]:
-    """(H, W, 3) RGB: ``image`` with detected (green) and reprojected (red) corners."""
+    """(h, ``width_px``, 3) RGB: the board's part of ``image``, enlarged, with the detected
+    (green circles) and reprojected (red crosses) corners and their offsets (yellow, x
+    :data:`OFFSET_SCALE`)."""
     rgb = drawn(image, None, Board(3, 3, 1.0))  # grey to RGB, nothing drawn yet
-    for (u, v), (pu, pv) in zip(corners.reshape(-1, 2), reprojected, strict=True):
+    found = corners.reshape(-1, 2).astype(np.float64)
+    low, high = found.min(axis=0), found.max(axis=0)
+    margin = 0.15 * (high - low).max() + 10
+    x0, y0 = np.maximum(np.floor(low - margin), 0).astype(int)
+    x1, y1 = np.minimum(np.ceil(high + margin), (rgb.shape[1], rgb.shape[0])).astype(int)
+    scale = width_px / max(x1 - x0, 1)
+    crop = cv2.resize(rgb[y0:y1, x0:x1], None, fx=scale, fy=scale, interpolation=cv2.INTER_LINEAR)
+    origin = np.array([x0, y0], float)
+    for point, projected in zip(found, reprojected, strict=True):
+        (u, v), (pu, pv) = (point - origin) * scale, (projected - origin) * scale
         tip = (u + OFFSET_SCALE * (pu - u), v + OFFSET_SCALE * (pv - v))
-        cv2.line(rgb, _px(u, v), _px(*tip), (255, 200, 0), 1, cv2.LINE_AA)
-        cv2.circle(rgb, _px(u, v), 4, (40, 200, 60), 1, cv2.LINE_AA)
-        cv2.drawMarker(rgb, _px(pu, pv), (230, 40, 40), cv2.MARKER_CROSS, 7, 1, cv2.LINE_AA)
-    return rgb
+        cv2.line(crop, _px(u, v), _px(*tip), (255, 200, 0), 2, cv2.LINE_AA)
+        cv2.circle(crop, _px(u, v), 6, (40, 200, 60), 2, cv2.LINE_AA)
+        cv2.drawMarker(crop, _px(pu, pv), (230, 40, 40), cv2.MARKER_CROSS, 10, 2, cv2.LINE_AA)
+    return np.ascontiguousarray(crop)
 
 
 def _px(u: float, v: float) -> tuple[int, int]:
@@ -81,6 +97,7 @@ class ReprojectionPicture(QtWidgets.QWidget):
         self.bars = pg.PlotWidget()
         self.bars.setBackground(self.palette().color(QtGui.QPalette.ColorRole.Window))
         self.bars.setLabel("left", "reprojection error (px)")
+        self.bars.getAxis("left").enableAutoSIPrefix(False)
         self.bars.setLabel("bottom", "view")
         self.bars.setMouseEnabled(x=False, y=False)
         self.bars.setMenuEnabled(False)
@@ -161,8 +178,8 @@ class ReprojectionPicture(QtWidgets.QWidget):
 
 
 class StationLayout(pg.PlotWidget):
-    """Top view of the stations' cameras (view 0) in the reference frame: x right against z
-    forward of the reference camera, each joined to the station it was measured through."""
+    """Top view of the stations' cameras (view 0), each joined to the station it was measured
+    through; :attr:`positions` are the plotted (horizontal, vertical) metres per station."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -171,16 +188,31 @@ class StationLayout(pg.PlotWidget):
         self.showGrid(x=True, y=True, alpha=0.3)
         self.setMenuEnabled(False)
         self.setMinimumSize(320, 300)
-        self.setLabel("bottom", "x: right of the reference camera (m)")
-        self.setLabel("left", "z: ahead of the reference camera (m)")
+        for side in ("left", "bottom"):
+            self.getAxis(side).enableAutoSIPrefix(False)
         self.setTitle("Where the stations stand (top view)")
         self.positions: dict[int, tuple[float, float]] = {}
 
-    def show_result(self, result: StationsResult, reference: int) -> None:
+    def show_result(
+        self, result: StationsResult, reference: int, T_field_reference: Matrix4 | None = None
+    ) -> None:
+        """Plot ``result``'s stations; in the field frame (x, y) when ``T_field_reference``
+        is given, else the reference camera's (x, z)."""
         self.clear()
-        self.positions = {
-            s: (float(T[0, 3]), float(T[2, 3])) for s, T in result.T_reference_station.items()
-        }
+        if T_field_reference is not None:
+            self.positions = {
+                s: (float(p[0]), float(p[1]))
+                for s, T in result.T_reference_station.items()
+                for p in [(T_field_reference @ T)[:3, 3]]
+            }
+            self.setLabel("bottom", "field x (m)")
+            self.setLabel("left", "field y (m), ground in force")
+        else:
+            self.positions = {
+                s: (float(T[0, 3]), float(T[2, 3])) for s, T in result.T_reference_station.items()
+            }
+            self.setLabel("bottom", "x: right of the reference camera (m)")
+            self.setLabel("left", "z: ahead of it (m), camera not levelled: no ground yet")
         for station, parent in result.tree.items():
             if station in self.positions and parent in self.positions:
                 (x0, z0), (x1, z1) = self.positions[station], self.positions[parent]

@@ -184,9 +184,16 @@ class StationsWizard(_SessionWizard):
                 self._solve,
                 self._describe,
                 self.layout_view,
-                lambda result: self.layout_view.show_result(result, self.reference),
+                self._show_layout,
             ),
             SavePage(calibration_path, self._update),
+        )
+
+    def _show_layout(self, result: StationsResult) -> None:
+        """The top view, levelled by the ground of the calibration in force when it has one."""
+        ground = self.base(self.in_force()).ground
+        self.layout_view.show_result(
+            result, self.reference, None if ground is None else ground.matrix
         )
 
     def _solve(self) -> Callable[[], StationsResult]:
