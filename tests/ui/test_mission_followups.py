@@ -9,6 +9,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+from PySide6 import QtCore
 from pytestqt.qtbot import QtBot
 
 from devices.camera.quality import QualityReport
@@ -121,6 +122,9 @@ def test_a_double_clicked_thumbnail_shows_its_depth_large(
     images = session.read_capture(capture)
     expected = images.depth_m
     shown = read_view_depth(session.folder, 6, 2)
+    box = viewers[0].panel.depth_plot.vb  # the whole image framed, not a corner of it
+    assert wait_until(lambda: box.viewRect().contains(QtCore.QRectF(1, 1, 510, 422)))
+    assert box.viewRect().width() < 2 * 512 and box.viewRect().height() < 2 * 424
     colour = viewers[0].panel.second_item.image  # the colour beside the depth
     assert viewers[0].panel.second_plot.isVisible() and np.array_equal(colour, images.color)
     assert np.array_equal(np.isnan(shown), np.isnan(expected))

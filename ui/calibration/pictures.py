@@ -225,7 +225,8 @@ class StationLayout(pg.PlotWidget):
             )  # fmt: skip
             label = pg.TextItem(
                 f"station {station}" + (" (reference)" if is_reference else ""),
-                color=(20, 20, 20), anchor=(0, 1.2),
+                color=(20, 20, 20), anchor=(0.5, 1.3),
             )  # fmt: skip
             label.setPos(x, z)
             self.addItem(label)
+        self.getViewBox().autoRange(padding=0.35)  # room for the labels

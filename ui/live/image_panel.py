@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pyqtgraph as pg
 from numpy.typing import NDArray
-from PySide6 import QtGui
+from PySide6 import QtCore, QtGui
 
 from ui.live.frame_math import best_arrangement, depth_indices, depth_lut
 
@@ -41,8 +41,8 @@ class ImagePanel(pg.GraphicsLayoutWidget):
             _bare(plot)
             plot.addItem(item)
             self.marks.append(_marks(plot))
-        self.second_plot.setXLink(self.depth_plot)
-        self.second_plot.setYLink(self.depth_plot)
+        # not linked: linked views with locked aspects feed each other's range until it is
+        # many times the image (the images then shrink to a corner); each frames its own
         colour_map = pg.colormap.get("turbo")
         self.colour_bar = pg.ColorBarItem(
             values=DEPTH_LEVELS_M, colorMap=colour_map, interactive=False, label="depth (m)",
@@ -65,6 +65,8 @@ class ImagePanel(pg.GraphicsLayoutWidget):
         """Frame the whole image, and keep framing it as the panel is resized."""
         for plot in (self.depth_plot, self.second_plot):
             plot.getViewBox().setDefaultPadding(0.0)
+        width, height = self.image_size()
+        self.depth_plot.getViewBox().setRange(QtCore.QRectF(0.0, 0.0, width, height), padding=0.0)
         self.depth_plot.enableAutoRange()
         self.arrange()
 
@@ -103,15 +105,32 @@ class ImagePanel(pg.GraphicsLayoutWidget):
         area = (max(self.width() - BAR_W, 1), max(self.height(), 1))
         kind, _scale = best_arrangement(area, self.image_size(), count)
         if kind == self.arrangement:
+            self._share_space()
             return
         self.ci.removeItem(self.second_plot)
         row, col = (0, 2) if kind == "row" else (1, 0)
         self.ci.addItem(self.second_plot, row=row, col=col)
         self.arrangement = kind
+        self._share_space()
+
+    def _share_space(self) -> None:
+        """The two images' cells equally wide side by side (the colour bar keeps its own
+        width); the grid would otherwise give the second cell what the bar leaves over."""
+        grid = self.ci.layout
+        if self.arrangement == "row" and self.second_shown:
+            cell = max((self.width() - BAR_W) / 2, 1.0)
+            for col in (0, 2):
+                grid.setColumnMinimumWidth(col, cell)
+                grid.setColumnMaximumWidth(col, cell)
+        else:
+            for col in (0, 2):
+                grid.setColumnMinimumWidth(col, 0.0)
+                grid.setColumnMaximumWidth(col, 1e6)
 
     def resizeEvent(self, event: QtGui.QResizeEvent | None) -> None:
         super().resizeEvent(event)
-        if hasattr(self, "second_plot"):  # the base class resizes while being built
+        # the base class resizes while being built, and after close() (its scene cleared)
+        if hasattr(self, "second_plot") and not getattr(self, "closed", False):
             self.arrange()
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from fieldapp.errors import FieldappError
 from ui.live.frame_math import auto_levels_m, valid_depths_m
@@ -81,3 +81,7 @@ class DepthViewer(QtWidgets.QDialog):
         layout = QtWidgets.QVBoxLayout(self)
         layout.addWidget(self.panel)
         self.resize(1200, 560)
+
+    def showEvent(self, event: QtGui.QShowEvent) -> None:
+        super().showEvent(event)
+        QtCore.QTimer.singleShot(0, self.panel.fit)  # once the panel has its size
