@@ -20,6 +20,7 @@ from fieldapp.io.session import BasePose
 from fieldapp.io.writer import SessionWriter
 from fieldapp.mission.battery import BatteryWatch, check_before_start
 from fieldapp.mission.control import Gate, MissionFault
+from fieldapp.mission.estimate import RemainingTime
 from fieldapp.mission.events import (
     Fault,
     MissionEvent,
@@ -84,22 +85,29 @@ def run_mission(context: MissionContext, todo: list[tuple[int, int]]) -> Iterato
     ):
         if warning is not None:
             yield warning
-    clock = ProgressClock(len(plan.capture_keys()), len(plan.capture_keys()) - len(todo))
+    stations = visits(plan, todo)
+    total = len(plan.capture_keys())
+    clock = ProgressClock(total, total - len(todo), moves=len(stations))
     yield clock.progress("starting")
-    for station, views in visits(plan, todo):
+    for station, views in stations:
         gate.checkpoint()
+        clock.left.begin()  # after the checkpoint: a pause is not timed
         try:
             status, attempts = yield from drive_to(rig.base, station, plan, gate)
         except StationSkipped as skipped:
+            clock.left.skipped(len(views))
             yield MissionWarning(f"{skipped}: its views are left for a resume", station.number)
             continue
+        clock.left.moved()
         pose = status.pose
         log.info("station %d reached at %s", station.number, pose)
         yield StationReached(station.number, pose.x_m, pose.y_m, pose.yaw_deg, attempts)
         yield from _some(battery.check(station.number))
         for view in views:
             gate.checkpoint()
+            clock.left.begin()
             yield (yield from capture_one(context, station.number, view, pose))
+            clock.left.captured()
             yield clock.progress(f"station {station.number} view {view}", captured=True)
             yield from _some(battery.check(station.number, view))
 
@@ -148,23 +156,30 @@ def write_capture(
 
 
 class ProgressClock:
-    """Captures done of the plan's total, and the time left at this run's pace so far."""
+    """Captures done of the plan's total, the time elapsed, and the time left from the
+    measured time per move and per view (:class:`~fieldapp.mission.estimate.RemainingTime`,
+    :attr:`left`) for this run's ``moves`` and views."""
 
     def __init__(
-        self, total: int, already: int, clock: Callable[[], float] = time.monotonic
+        self,
+        total: int,
+        already: int,
+        moves: int = 0,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.total = total
         self.already = already
         self.done = 0
         self._clock = clock
         self._start_s = clock()
+        self.left = RemainingTime(moves, total - already, clock)
 
     def progress(self, step: str, captured: bool = False) -> MissionProgress:
         self.done += int(captured)
         elapsed_s = self._clock() - self._start_s
-        left = self.total - self.already - self.done
-        remaining_s = elapsed_s / self.done * left if self.done else None
-        return MissionProgress(self.already + self.done, self.total, elapsed_s, remaining_s, step)
+        return MissionProgress(
+            self.already + self.done, self.total, elapsed_s, self.left.remaining_s, step
+        )
 
 
 def frames_combined(frame: Frame) -> int:

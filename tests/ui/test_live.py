@@ -83,7 +83,8 @@ def test_frames_are_shown_with_rates_and_quality(
     assert wait_until(lambda: preview.frames_shown >= 10, 10.0)
     image = preview.images.depth_item.image
     assert image is not None and image.shape == (424, 512)
-    assert preview.images.colour_bar.levels() == pytest.approx((0.5, 4.5))
+    low, high = preview.images.colour_bar.levels()  # Auto: the scene's depth percentiles
+    assert 0.3 < low < high < 8.0 and (low, high) == preview.images.levels_m
     assert wait_until(
         lambda: "camera" in preview.stream_label.text() and "fps" in preview.stream_label.text()
     )

@@ -62,10 +62,12 @@ def test_start_pause_stop_resume_to_the_end(
     # the mission thread sets the state; the button follows once the GUI thread has the signal
     assert wait_until(lambda: page.controller.state is MissionState.PAUSED, 10.0)
     assert wait_until(lambda: page.pause_button.text().endswith("Continue"), 10.0)
+    assert wait_until(lambda: "(paused)" in page.progress.times.text())
     held = page.progress.captured
     assert never_within(lambda: page.progress.captured > held, 0.6)  # nothing while paused
     page.pause_button.click()
     assert wait_until(lambda: page.controller.state is MissionState.RUNNING, 5.0)
+    assert wait_until(lambda: "(paused)" not in page.progress.times.text())
 
     window.emergency_stop()
     assert wait_until(lambda: page.result is not None)

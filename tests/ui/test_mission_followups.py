@@ -1,6 +1,7 @@
 """The mission page's follow-ups from issue 25: the thumbnail grid follows the station being
-captured, a double-clicked thumbnail shows its depth large, the elapsed time keeps counting
-while paused (on a fake clock), and the Set-up tab asks before the base drives."""
+captured, a double-clicked thumbnail shows its depth and colour large, the elapsed time keeps
+counting while paused (on a fake clock) and says "paused", and the Set-up tab asks before the
+base drives."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+from PySide6 import QtCore
 from pytestqt.qtbot import QtBot
 
 from devices.camera.quality import QualityReport
@@ -57,6 +59,13 @@ def test_elapsed_time_counts_while_paused(qtbot: QtBot) -> None:
     clock.now_s += 125.0  # paused: no progress report for two minutes
     panel.ticker.timeout.emit()  # what the QTimer does each second
     assert panel.times.text() == f"elapsed {format_duration(185.0)} · remaining 3 min 00 s"
+    panel.set_paused(True)  # the page's state says PAUSED: the times say so too
+    assert panel.times.text() == f"elapsed {format_duration(185.0)} (paused) · remaining 3 min 00 s"
+    clock.now_s += 60.0
+    panel.tick()
+    assert panel.times.text().startswith(f"elapsed {format_duration(245.0)} (paused)")
+    panel.set_paused(False)
+    assert "(paused)" not in panel.times.text()
     panel.finish("complete: 12 captured, 0 missing")
     clock.now_s += 10.0
     panel.tick()
@@ -110,8 +119,14 @@ def test_a_double_clicked_thumbnail_shows_its_depth_large(
     assert len(viewers) == 1 and "station 6, view 2" in viewers[0].windowTitle()
     session = load_session(page.controller.folder)  # type: ignore[attr-defined]
     capture = next(c for c in session.captures if (c.station, c.view) == (6, 2))
-    expected = session.read_capture(capture).depth_m
+    images = session.read_capture(capture)
+    expected = images.depth_m
     shown = read_view_depth(session.folder, 6, 2)
+    box = viewers[0].panel.depth_plot.vb  # the whole image framed, not a corner of it
+    assert wait_until(lambda: box.viewRect().contains(QtCore.QRectF(1, 1, 510, 422)))
+    assert box.viewRect().width() < 2 * 512 and box.viewRect().height() < 2 * 424
+    colour = viewers[0].panel.second_item.image  # the colour beside the depth
+    assert viewers[0].panel.second_plot.isVisible() and np.array_equal(colour, images.color)
     assert np.array_equal(np.isnan(shown), np.isnan(expected))
     assert np.allclose(shown[~np.isnan(shown)], expected[~np.isnan(expected)])
     low, high = viewers[0].levels_m

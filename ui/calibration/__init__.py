@@ -20,4 +20,5 @@ def create_page(context: Any) -> QtWidgets.QWidget:
     return CalibratePage(
         default_calibration_path(context.settings),
         stream=lambda: getattr(hub, "stream", None),
+        ui_state=getattr(context, "ui_state", None),
     )

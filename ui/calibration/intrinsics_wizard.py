@@ -28,7 +28,10 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Calibration
 from ui.calibration.board_form import BoardForm
 from ui.calibration.live import BoardPreview, CoverageMap
-from ui.calibration.pages import PreparePage, SavePage, SolvePage
+from ui.calibration.pages import WIZARD_SIZE, PreparePage, SavePage, SolvePage
+from ui.calibration.pictures import ReprojectionPicture
+from ui.calibration.session_page import remembered_session
+from ui.state import UiState
 
 DEFAULT_BOARD = Board(9, 6, 40.0)
 PREPARE = f"""<p>Calibrates the depth camera's lens (focal lengths, centre, distortion) by
@@ -45,12 +48,15 @@ simulated with <code>fieldapp simulate --scene checkerboard</code>).</li></ul>""
 
 
 class CapturePage(QtWidgets.QWizardPage):
-    """Views of the board: taken from the live preview or added from files."""
+    """Views of the board: taken from the live preview or added from files; a view selected
+    in the list is shown with its corners (the live preview pauses) and can be removed."""
 
-    def __init__(self, board_form: BoardForm, stream: FrameStream | None) -> None:
+    def __init__(
+        self, board_form: BoardForm, stream: FrameStream | None, ui_state: UiState | None = None
+    ) -> None:
         super().__init__()
         self.setTitle("Capture views of the board")
-        self.board_form, self.stream = board_form, stream
+        self.board_form, self.stream, self.ui_state = board_form, stream, ui_state
         self.views: list[tuple[str, NDArray[Any], NDArray[np.float32]]] = []
         self.preview = BoardPreview(board_form.board())
         take = QtWidgets.QPushButton("Take this view")
@@ -58,11 +64,19 @@ class CapturePage(QtWidgets.QWizardPage):
         add = QtWidgets.QPushButton("Add images…")
         add.clicked.connect(self._ask_images)
         self.listing = QtWidgets.QListWidget()
+        self.listing.currentRowChanged.connect(self.show_view)
+        self.remove_button = QtWidgets.QPushButton("Remove the selected view")
+        self.remove_button.clicked.connect(lambda: self.remove(self.listing.currentRow()))
+        self.live_button = QtWidgets.QPushButton("Back to the live camera")
+        self.live_button.clicked.connect(self.back_to_live)
         self.coverage = CoverageMap()
         self.status = QtWidgets.QLabel("")
         self.status.setWordWrap(True)
         side = QtWidgets.QVBoxLayout()
-        for widget in (take, add, self.listing, QtWidgets.QLabel("Corner coverage"), self.coverage):
+        for widget in (
+            take, add, self.listing, self.remove_button, self.live_button,
+            QtWidgets.QLabel("Corner coverage"), self.coverage,
+        ):  # fmt: skip
             side.addWidget(widget)
         layout = QtWidgets.QGridLayout(self)
         layout.addWidget(self.preview, 0, 0)
@@ -102,6 +116,29 @@ class CapturePage(QtWidgets.QWizardPage):
             self.preview.show_image(read_calibration_image(paths[-1]))
         return refused
 
+    def show_view(self, row: int) -> None:
+        """Show view ``row`` as it was taken, with its corners; the live preview pauses."""
+        if not 0 <= row < len(self.views):
+            return
+        self.preview.stop()  # no live frame (nor a detection under way) replaces it
+        name, image, corners = self.views[row]
+        self.preview.show_detected(image, corners)
+        self.status.setText(f"{name}: {len(corners)} corners (Remove drops it)")
+
+    def remove(self, row: int) -> None:
+        """Drop view ``row`` from the calibration."""
+        if not 0 <= row < len(self.views):
+            return
+        name = self.views.pop(row)[0]
+        self.listing.takeItem(row)
+        self._update()
+        self.status.setText(f"{name} removed; " + self.status.text())
+        self.completeChanged.emit()
+
+    def back_to_live(self) -> None:
+        self.listing.clearSelection()
+        self.preview.follow(self.stream)
+
     def isComplete(self) -> bool:
         return len(self.views) >= MIN_VIEWS
 
@@ -115,13 +152,17 @@ class CapturePage(QtWidgets.QWizardPage):
         if self.views:
             size = (self.views[0][1].shape[1], self.views[0][1].shape[0])
             self.coverage.set_counts(coverage_of([c for _, _, c in self.views], size))
+        else:
+            self.coverage.set_counts(np.zeros_like(self.coverage.counts))
         count = len(self.views)
         need = f"{MIN_VIEWS} needed" if count < MIN_VIEWS else f"{RECOMMENDED_VIEWS} recommended"
         self.status.setText(f"{count} views ({need}); {self.coverage.missing_text()}")
 
     def _ask_images(self) -> None:
+        session = remembered_session(self.ui_state)
+        start = "" if session is None else str(session / "intrinsics")
         names, _ = QtWidgets.QFileDialog.getOpenFileNames(
-            self, "Board images", "", "Images (*.png *.jpg *.tif)"
+            self, "Board images", start, "Images (*.png *.jpg *.tif)"
         )
         try:
             self.add_images([Path(n) for n in names])
@@ -153,17 +194,23 @@ class IntrinsicsWizard(QtWidgets.QWizard):
         stream: FrameStream | None = None,
         serial: str | None = None,
         parent: QtWidgets.QWidget | None = None,
+        ui_state: UiState | None = None,
     ) -> None:
         super().__init__(parent)
         self.setWindowTitle("Calibrate the camera intrinsics")
+        self.ui_state = ui_state
         self.serial = serial
         self.board_form = BoardForm(DEFAULT_BOARD)
         self.prepare = PreparePage("What to prepare", PREPARE, self.board_form)
-        self.capture = CapturePage(self.board_form, stream)
-        self.solve = SolvePage(self._solve, describe)
+        self.capture = CapturePage(self.board_form, stream, ui_state)
+        self.reprojection = ReprojectionPicture(lambda: self.capture.views, self.board_form.board)
+        self.solve = SolvePage(
+            self._solve, describe, self.reprojection, self.reprojection.show_result
+        )
         self.save = SavePage(calibration_path, self._update)
         for page in (self.prepare, self.capture, self.solve, self.save):
             self.addPage(page)
+        self.resize(*WIZARD_SIZE)
 
     def _solve(self) -> Callable[[], IntrinsicsResult]:
         images = [(name, image) for name, image, _ in self.capture.views]

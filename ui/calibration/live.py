@@ -65,6 +65,7 @@ class BoardPreview(QtWidgets.QWidget):
         self.picture.setMinimumSize(320, 265)
         self.state = QtWidgets.QLabel("")
         self.state.setObjectName("boardState")
+        self.state.setWordWrap(True)  # the whole "BOARD NOT FOUND" advice, never cut off
         layout = QtWidgets.QVBoxLayout(self)
         layout.addWidget(self.state)
         layout.addWidget(self.picture, 1)
@@ -97,6 +98,10 @@ class BoardPreview(QtWidgets.QWidget):
         worker.finished.connect(lambda: self._done(worker))
         self._workers.add(worker)
         worker.start()
+
+    def show_detected(self, image: NDArray[Any], corners: NDArray[np.float32] | None) -> None:
+        """Show ``image`` with corners already found (a view taken earlier): no detection."""
+        self._show(image, corners)
 
     def wait(self, timeout_s: float = 10.0) -> bool:
         """Process events until no detection is running (for closing and tests)."""

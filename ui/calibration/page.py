@@ -13,6 +13,7 @@ from devices.camera.stream import FrameStream
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import load_calibration
 from fieldapp.settings import Settings
+from ui.state import UiState
 
 log = logging.getLogger(__name__)
 
@@ -28,6 +29,15 @@ WIZARDS: list[tuple[str, str, str]] = [
 ]
 """(key, button label, ``module:class`` under ``ui.calibration``): a wizard's module (and the
 solvers it needs: OpenCV, SciPy) is imported when the wizard is opened, not at start-up."""
+
+
+SECTION_NAMES = {
+    "depth_camera": "Depth camera (intrinsics)",
+    "view_step": "View step (turntable)",
+    "stations": "Station to station",
+    "ground": "Ground plane",
+}
+"""The calibration file's sections in the operator's words."""
 
 
 def wizard_factory(where: str) -> Callable[..., QtWidgets.QWizard]:
@@ -47,7 +57,7 @@ def summary(path: Path) -> str:
     except FieldappError as error:
         return f"{path}: not usable:\n{error}"
     lines = [str(path)]
-    for name in ("depth_camera", "view_step", "stations", "ground"):
+    for name, words in SECTION_NAMES.items():
         section = getattr(calibration, name)
         when = getattr(section, "calibrated", None) if section is not None else None
         state = (
@@ -55,7 +65,7 @@ def summary(path: Path) -> str:
             if section is None
             else (f"calibrated {when.get('date', '')}" if isinstance(when, dict) else "nominal")
         )
-        lines.append(f"  {name}: {state}")
+        lines.append(f"  {words}: {state}")
     return "\n".join(lines)
 
 
@@ -66,7 +76,8 @@ def default_calibration_path(settings: Settings) -> Path:
 
 class CalibratePage(QtWidgets.QWidget):
     """Launches each wizard on the calibration file; ``stream`` (or a function giving the
-    current one) feeds their live previews."""
+    current one) feeds their live previews; ``ui_state`` remembers the session folder across
+    the wizards (``None``: the application's QSettings)."""
 
     def __init__(
         self,
@@ -74,9 +85,11 @@ class CalibratePage(QtWidgets.QWidget):
         stream: FrameStream | Callable[[], FrameStream | None] | None = None,
         serial: str | None = None,
         parent: QtWidgets.QWidget | None = None,
+        ui_state: UiState | None = None,
     ) -> None:
         super().__init__(parent)
         self.stream, self.serial = stream, serial
+        self.ui_state = ui_state if ui_state is not None else UiState()
         self.wizard: QtWidgets.QWizard | None = None
         self.path = QtWidgets.QLineEdit(str(calibration_path))
         self.path.editingFinished.connect(self.refresh)
@@ -105,7 +118,11 @@ class CalibratePage(QtWidgets.QWidget):
         factory = wizard_factory({k: where for k, _, where in WIZARDS}[key])
         stream = self.stream() if callable(self.stream) else self.stream
         wizard = factory(
-            Path(self.path.text().strip()), stream=stream, serial=self.serial, parent=self
+            Path(self.path.text().strip()),
+            stream=stream,
+            serial=self.serial,
+            parent=self,
+            ui_state=self.ui_state,
         )
         wizard.finished.connect(lambda _: self._closed(wizard))
         self.wizard = wizard

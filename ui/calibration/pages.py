@@ -24,6 +24,8 @@ VERDICT_STYLE = {
     Level.REDO: "background:#c62828;color:white;padding:6px;font-weight:bold",
 }
 ERROR_STYLE = "color:#c62828;font-weight:bold"
+WIZARD_SIZE = (1100, 760)
+"""Room for the pictures of a result beside its figures."""
 
 
 class PreparePage(QtWidgets.QWizardPage):
@@ -56,10 +58,13 @@ class SolvePage(QtWidgets.QWizardPage):
         self,
         prepare: Callable[[], Job],
         describe: Callable[[Any], tuple[list[str], Verdict]],
+        picture: QtWidgets.QWidget | None = None,
+        show_picture: Callable[[Any], None] | None = None,
     ) -> None:
         super().__init__()
         self.setTitle("Solve and check the quality")
         self.prepare, self.describe = prepare, describe
+        self.picture, self.show_picture = picture, show_picture
         self.result: Any = None
         self.error: str | None = None
         self.worker: Any = None
@@ -73,8 +78,16 @@ class SolvePage(QtWidgets.QWizardPage):
         self.verdict.setWordWrap(True)
         self.verdict.setObjectName("verdict")
         layout = QtWidgets.QVBoxLayout(self)
-        for widget in (self.progress, self.status, self.verdict, self.figures):
+        for widget in (self.progress, self.status, self.verdict):
             layout.addWidget(widget)
+        if picture is None:
+            layout.addWidget(self.figures, 1)
+        else:  # the figures beside the pictures of the result
+            split = QtWidgets.QSplitter()
+            split.addWidget(self.figures)
+            split.addWidget(picture)
+            split.setSizes([420, 580])
+            layout.addWidget(split, 1)
 
     @property
     def running(self) -> bool:
@@ -120,6 +133,8 @@ class SolvePage(QtWidgets.QWizardPage):
         self.figures.setPlainText("\n".join(lines))
         self.verdict.setText(verdict.text())
         self.verdict.setStyleSheet(VERDICT_STYLE[verdict.level])
+        if self.show_picture is not None:
+            self.show_picture(result)
 
     def _failed(self, error: BaseException) -> None:
         if not isinstance(error, FieldappError):

@@ -1,7 +1,10 @@
 """Choosing the captures a view or station calibration solves from: an existing session
 folder (e.g. ``fieldapp simulate --scene checkerboard``), or a new session captured here from
 the live camera (:class:`~fieldapp.io.writer.SessionWriter`, one capture per station and view
-the operator sets). Selecting a capture shows it with the board's corners drawn."""
+the operator sets). Selecting a capture shows it with the board's corners drawn.
+
+The folder last loaded is remembered (QSettings, :data:`SESSION_KEY`) and loaded again when
+the next wizard opens, so a session is chosen once for the view, station and ground wizards."""
 
 from __future__ import annotations
 
@@ -17,6 +20,17 @@ from fieldapp.io.calibration import Calibration
 from fieldapp.io.session import Session, load_session
 from fieldapp.io.writer import SessionWriter
 from ui.calibration.live import BoardPreview
+from ui.state import UiState
+
+SESSION_KEY = "calibration/session_folder"
+
+
+def remembered_session(ui_state: UiState | None) -> Path | None:
+    """The calibration session folder used last, if it still exists."""
+    if ui_state is None:
+        return None
+    text = ui_state.text(SESSION_KEY)
+    return Path(text) if text and (Path(text) / "session.json").is_file() else None
 
 
 class SessionPage(QtWidgets.QWizardPage):
@@ -27,10 +41,12 @@ class SessionPage(QtWidgets.QWizardPage):
         board: Callable[[], Board],
         stream: FrameStream | None = None,
         calibration: Callable[[], Calibration | None] = lambda: None,
+        ui_state: UiState | None = None,
     ) -> None:
         super().__init__()
         self.setTitle("Captures to calibrate from")
         self.board, self.stream, self.calibration = board, stream, calibration
+        self.ui_state = ui_state
         self.session: Session | None = None
         self.writer: SessionWriter | None = None
         self.folder = QtWidgets.QLineEdit()
@@ -68,6 +84,8 @@ class SessionPage(QtWidgets.QWizardPage):
                 + (f" ({target})" if target else "")
             )
         self.status.setText(f"{self.session.id}: {len(self.session.captures)} captures")
+        if self.ui_state is not None:
+            self.ui_state.set_value(SESSION_KEY, str(folder))
         self.completeChanged.emit()
         return self.session
 
@@ -92,6 +110,9 @@ class SessionPage(QtWidgets.QWizardPage):
 
     def initializePage(self) -> None:
         self.preview.board = self.board()
+        remembered = remembered_session(self.ui_state)
+        if self.session is None and not self.folder.text().strip() and remembered is not None:
+            self._try(lambda: self.load(remembered))
 
     def cleanupPage(self) -> None:
         self.preview.stop()
@@ -115,7 +136,10 @@ class SessionPage(QtWidgets.QWizardPage):
         self.preview.show_image(images.color)
 
     def _browse(self) -> None:
-        name = QtWidgets.QFileDialog.getExistingDirectory(self, "Session folder")
+        start = remembered_session(self.ui_state)
+        name = QtWidgets.QFileDialog.getExistingDirectory(
+            self, "Session folder", str(start.parent) if start is not None else ""
+        )
         if name:
             self._try(lambda: self.load(Path(name)))
 

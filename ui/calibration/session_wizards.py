@@ -25,8 +25,10 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Calibration
 from fieldapp.io.session import Session
 from ui.calibration.board_form import BoardForm
-from ui.calibration.pages import PreparePage, SavePage, SolvePage
+from ui.calibration.pages import WIZARD_SIZE, PreparePage, SavePage, SolvePage
+from ui.calibration.pictures import StationLayout
 from ui.calibration.session_page import SessionPage
+from ui.state import UiState
 
 VIEWS_TEXT = """<p>Solves the turntable's view step (view k+1 into view k, the paper's Eq. 9)
 from a checkerboard seen whole at two consecutive views.</p><ul>
@@ -47,6 +49,21 @@ joined) and sets the field frame: z up, 0 on the ground, origin below the camera
 </ul>"""
 
 
+def station_lines(result: StationsResult, reference: int) -> list[str]:
+    """Where each station's camera (view 0) stands, named with its frame and axes."""
+    lines = [
+        f"Station cameras in the reference frame (station {reference}'s camera at view 0: "
+        "x right, y down, z forward):"
+    ]
+    for station, parent in sorted(result.tree.items()):
+        x, y, z = result.T_reference_station[station][:3, 3]
+        lines.append(
+            f"  station {station} (joined through station {parent}): "
+            f"x {x:+.3f} m, y {y:+.3f} m, z {z:+.3f} m"
+        )
+    return lines
+
+
 class _SessionWizard(QtWidgets.QWizard):
     def __init__(
         self,
@@ -56,18 +73,20 @@ class _SessionWizard(QtWidgets.QWizard):
         stream: FrameStream | None,
         serial: str | None,
         parent: QtWidgets.QWidget | None,
+        ui_state: UiState | None,
     ) -> None:
         super().__init__(parent)
         self.setWindowTitle(title)
         self.calibration_path, self.serial = calibration_path, serial
         self.board_form = BoardForm(board or Board(9, 6, 40.0))
-        self.session_page = SessionPage(self.board_form.board, stream, self.in_force)
+        self.session_page = SessionPage(self.board_form.board, stream, self.in_force, ui_state)
 
     def _add_pages(self, prepare: PreparePage, solve: SolvePage, save: SavePage) -> None:
         """Every session wizard's pages: prepare, choose or capture the session, solve, save."""
         self.solve, self.save = solve, save
         for page in (prepare, self.session_page, solve, save):
             self.addPage(page)
+        self.resize(*WIZARD_SIZE)
 
     def in_force(self) -> Calibration | None:
         """The rig's calibration file as it is now (None when absent)."""
@@ -98,9 +117,16 @@ class ViewsWizard(_SessionWizard):
         stream: FrameStream | None = None,
         serial: str | None = None,
         parent: QtWidgets.QWidget | None = None,
+        ui_state: UiState | None = None,
     ) -> None:
         super().__init__(
-            "Calibrate view to view", calibration_path, Board(9, 6, 50.0), stream, serial, parent
+            "Calibrate view to view",
+            calibration_path,
+            Board(9, 6, 50.0),
+            stream,
+            serial,
+            parent,
+            ui_state,
         )
         self._add_pages(
             PreparePage("What to prepare", VIEWS_TEXT, self.board_form),
@@ -139,6 +165,7 @@ class StationsWizard(_SessionWizard):
         serial: str | None = None,
         reference: int = 5,
         parent: QtWidgets.QWidget | None = None,
+        ui_state: UiState | None = None,
     ) -> None:
         super().__init__(
             "Calibrate station to station",
@@ -147,12 +174,26 @@ class StationsWizard(_SessionWizard):
             stream,
             serial,
             parent,
+            ui_state,
         )
         self.reference = reference
+        self.layout_view = StationLayout()
         self._add_pages(
             PreparePage("What to prepare", STATIONS_TEXT, self.board_form),
-            SolvePage(self._solve, self._describe),
+            SolvePage(
+                self._solve,
+                self._describe,
+                self.layout_view,
+                self._show_layout,
+            ),
             SavePage(calibration_path, self._update),
+        )
+
+    def _show_layout(self, result: StationsResult) -> None:
+        """The top view, levelled by the ground of the calibration in force when it has one."""
+        ground = self.base(self.in_force()).ground
+        self.layout_view.show_result(
+            result, self.reference, None if ground is None else ground.matrix
         )
 
     def _solve(self) -> Callable[[], StationsResult]:
@@ -167,12 +208,7 @@ class StationsWizard(_SessionWizard):
                 f"{1000 * p.fit.rmse_m:.2f} mm"
                 for p in result.pairs
             ],
-            *[
-                f"station {s} (via {parent}): "
-                + " ".join(f"{x:+.3f}" for x in result.T_reference_station[s][:3, 3])
-                + " m"
-                for s, parent in sorted(result.tree.items())
-            ],
+            *station_lines(result, self.reference),
             f"joint refinement: RMSE {1000 * result.bundle.rmse_m:.2f} mm over "
             f"{result.bundle.sightings} sightings",
             *[f"warning: {w}" for w in result.warnings],
@@ -191,8 +227,11 @@ class GroundWizard(_SessionWizard):
         stream: FrameStream | None = None,
         serial: str | None = None,
         parent: QtWidgets.QWidget | None = None,
+        ui_state: UiState | None = None,
     ) -> None:
-        super().__init__("Calibrate the ground", calibration_path, None, stream, serial, parent)
+        super().__init__(
+            "Calibrate the ground", calibration_path, None, stream, serial, parent, ui_state
+        )
         self._add_pages(
             PreparePage("What to prepare", GROUND_TEXT),
             SolvePage(self._solve, self._describe),

@@ -1,5 +1,6 @@
-"""Plain numpy for the preview (no Qt): the 3D point under a pixel, the frame's cloud for the
-3D view, IR scaled for display, and saving the current frame.
+"""Plain numpy for the preview (no Qt): the 3D point under a pixel (or the nearest measured
+one), the distance between two picked points, the depth histogram and its percentile range,
+the frame's cloud for the 3D view, IR scaled for display, and saving the current frame.
 
 Camera frame: OpenCV (x right, y down, z forward), metres.
 """
@@ -44,6 +45,78 @@ def read_pixel(
     x = (u - intrinsics.cx) / intrinsics.fx * z
     y = (v - intrinsics.cy) / intrinsics.fy * z
     return PixelReading(u, v, z, (x, y, z))
+
+
+def pick_point(
+    depth_m: NDArray[np.float32], intrinsics: Intrinsics, u: int, v: int, radius: int = 3
+) -> PixelReading | None:
+    """The measured pixel nearest (``u``, ``v``) within ``radius`` pixels (a click on a
+    one-pixel hole still picks the surface around it); ``None`` outside the image or when
+    nothing within ``radius`` has a depth."""
+    height, width = depth_m.shape
+    if not (0 <= u < width and 0 <= v < height):
+        return None
+    rows = slice(max(v - radius, 0), min(v + radius + 1, height))
+    cols = slice(max(u - radius, 0), min(u + radius + 1, width))
+    window = depth_m[rows, cols]
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(window) & (window > 0)
+    if not valid.any():
+        return None
+    dv, du = np.nonzero(valid)
+    nearest = int(np.argmin((dv + rows.start - v) ** 2 + (du + cols.start - u) ** 2))
+    return read_pixel(
+        depth_m, intrinsics, int(du[nearest]) + cols.start, int(dv[nearest]) + rows.start
+    )
+
+
+def distance_m(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
+    """Straight-line distance between two 3D points (metres)."""
+    return float(np.linalg.norm(np.subtract(a, b)))
+
+
+def valid_depths_m(depth_m: NDArray[np.float32], step: int = 2) -> NDArray[np.float32]:
+    """Every ``step``-th row and column's measured depths, flat (a sample is enough for the
+    histogram and the range)."""
+    sample = depth_m[::step, ::step]
+    with np.errstate(invalid="ignore"):
+        kept: NDArray[np.float32] = sample[np.isfinite(sample) & (sample > 0)]
+    return kept
+
+
+def auto_levels_m(
+    depths_m: NDArray[np.float32],
+    percentiles: tuple[float, float] = (2.0, 98.0),
+    min_span_m: float = 0.05,
+) -> tuple[float, float] | None:
+    """The colour range that follows the scene: the depths' ``percentiles`` (a stray far or
+    near pixel does not stretch it), at least ``min_span_m`` wide; ``None`` with no depth."""
+    if depths_m.size == 0:
+        return None
+    low, high = (float(x) for x in np.percentile(depths_m, percentiles))
+    middle = (low + high) / 2
+    if high - low < min_span_m:
+        low, high = middle - min_span_m / 2, middle + min_span_m / 2
+    return max(low, 0.0), high
+
+
+def depth_histogram(
+    depths_m: NDArray[np.float32], range_m: tuple[float, float] = (0.0, 8.0), bins: int = 160
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """(bin edges (bins + 1,) metres, counts (bins,)) of ``depths_m`` over ``range_m``."""
+    counts, edges = np.histogram(depths_m, bins=bins, range=range_m)
+    return edges, counts
+
+
+def best_arrangement(
+    area: tuple[float, float], image: tuple[float, float], count: int
+) -> tuple[str, float]:
+    """Side by side (``"row"``) or one above the other (``"column"``): whichever shows
+    ``count`` images of size ``image`` (w, h) larger in ``area`` (w, h); with the scale."""
+    (area_w, area_h), (image_w, image_h) = area, image
+    row = min(area_w / (count * image_w), area_h / image_h)
+    column = min(area_w / image_w, area_h / (count * image_h))
+    return ("row", row) if row >= column else ("column", column)
 
 
 def cloud_points(

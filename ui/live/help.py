@@ -26,3 +26,11 @@ QUALITY_HELP: dict[str, str] = {
     "frame age": "Time since the newest frame was taken. High: the camera stalled or the "
     "computer is overloaded.",
 }
+MEASURE_HELP = (
+    "Click a point on the depth (or colour) image, then a second: the straight-line distance "
+    "between the two surface points in 3D, in metres, from the camera's depth and its "
+    "intrinsics (a click on a pixel without depth takes the nearest measured pixel within 3 "
+    "pixels). A third click starts a new pair; a right click clears them. Freeze first to "
+    "measure on a still frame. Points are in the camera frame: x right, "
+    "y down, z forward."
+)

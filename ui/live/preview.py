@@ -1,8 +1,10 @@
 """The Live page: what the camera sees now.
 
 A QTimer polls :meth:`FrameStream.latest` (which never blocks) and shows a new frame when one
-has arrived: depth colour-mapped with fixed levels and a colour bar, beside the registered
-colour or IR image; the depth and 3D point under the cursor; the camera's and the display's
+has arrived: depth colour-mapped with a colour bar, beside (or above) the registered colour
+or IR image (:mod:`ui.live.image_panel`); the colour range automatic or set by hand, over a
+histogram of the depths (:mod:`ui.live.depth_range`); the depth and 3D point under the
+cursor; the distance in metres between two clicked points; the camera's and the display's
 frame rates and the frames dropped; the capture-quality figures (measured on a thread,
 :mod:`ui.live.quality_monitor`); the current frame's points in 3D. Freeze holds the frame;
 Save writes it (depth PNG in mm, colour, IR, JSON) on a worker.
@@ -20,17 +22,24 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-import pyqtgraph as pg
-from numpy.typing import NDArray
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from devices.camera import CameraError
 from devices.camera.frames import Frame, Intrinsics
 from devices.camera.quality import QualityReport, QualityThresholds
 from ui.live.cloud_view import CloudView
-from ui.live.frame_math import depth_indices, depth_lut, ir_for_display, read_pixel, save_frame
-from ui.live.help import QUALITY_HELP, STREAM_HELP
+from ui.live.depth_range import DepthRange
+from ui.live.frame_math import (
+    PixelReading,
+    distance_m,
+    ir_for_display,
+    pick_point,
+    read_pixel,
+    save_frame,
+    valid_depths_m,
+)
+from ui.live.help import MEASURE_HELP, QUALITY_HELP, STREAM_HELP
+from ui.live.image_panel import ImagePanel
 from ui.live.quality_monitor import QualityMonitor
 from ui.workers import WorkerSet
 
@@ -43,7 +52,7 @@ log = logging.getLogger(__name__)
 
 POLL_MS = 40
 CLOUD_PERIOD_S = 0.5
-DEPTH_LEVELS_M = (0.5, 4.5)
+HISTOGRAM_PERIOD_S = 0.25
 SECOND_VIEWS = ("Colour", "IR", "None")
 
 
@@ -77,59 +86,6 @@ def quality_rows(report: QualityReport, limits: QualityThresholds) -> list[tuple
     ]
 
 
-class ImagePanel(pg.GraphicsLayoutWidget):
-    """Depth (colour-mapped, colour bar, fixed levels) beside colour or IR."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.depth_plot = self.addPlot(row=0, col=0, title="Depth (m)")
-        self.second_plot = self.addPlot(row=0, col=2, title="Colour")
-        for plot in (self.depth_plot, self.second_plot):
-            plot.setAspectLocked(True)
-            plot.invertY(True)
-            plot.hideButtons()
-            plot.hideAxis("left")
-            plot.hideAxis("bottom")
-            plot.setMenuEnabled(False)
-        self.second_plot.setXLink(self.depth_plot)
-        self.second_plot.setYLink(self.depth_plot)
-        self.depth_item = pg.ImageItem(axisOrder="row-major")
-        self.second_item = pg.ImageItem(axisOrder="row-major")
-        self.depth_plot.addItem(self.depth_item)
-        self.second_plot.addItem(self.second_item)
-        colour_map = pg.colormap.get("turbo")
-        self.colour_bar = pg.ColorBarItem(
-            values=DEPTH_LEVELS_M, colorMap=colour_map, interactive=False, label="depth (m)",
-            colorMapMenu=False,
-        )  # fmt: skip
-        self.addItem(self.colour_bar, row=0, col=1)
-        lut = colour_map.getLookupTable(nPts=255, alpha=False)
-        self.depth_item.setLookupTable(depth_lut(lut))
-        self.levels_m: tuple[float, float] = DEPTH_LEVELS_M
-        self.depth_m: NDArray[np.float32] | None = None
-
-    def show_depth(self, depth_m: NDArray[np.float32]) -> None:
-        """Depth colour-mapped between the fixed levels (black where missing)."""
-        self.depth_m = depth_m
-        self.depth_item.setImage(depth_indices(depth_m, *self.levels_m), levels=(0, 255))
-
-    def fit(self) -> None:
-        """Frame the whole image, and keep framing it as the panel is resized."""
-        self.depth_plot.getViewBox().setDefaultPadding(0.0)
-        self.depth_plot.enableAutoRange()
-
-    def set_levels(self, low_m: float, high_m: float) -> None:
-        self.levels_m = (low_m, high_m)
-        self.colour_bar.setLevels((low_m, high_m))
-        if self.depth_m is not None:
-            self.show_depth(self.depth_m)
-
-    def show_second(self, kind: str) -> None:
-        visible = kind != "None"
-        self.second_plot.setVisible(visible)
-        self.second_plot.setTitle(kind if visible else "")
-
-
 class LivePreview(QtWidgets.QWidget):
     """Follows the hub's stream; works as well on a stream given to :meth:`attach`."""
 
@@ -142,6 +98,8 @@ class LivePreview(QtWidgets.QWidget):
         self.frames_shown = 0
         self._shown_frame_id = 0
         self._cloud_due_s = 0.0
+        self._histogram_due_s = 0.0
+        self.picks: list[PixelReading] = []
         self._stream_failed = False
         self.rate = DisplayRate()
         self._workers = WorkerSet()
@@ -161,10 +119,8 @@ class LivePreview(QtWidgets.QWidget):
         self.second_view = QtWidgets.QComboBox()
         self.second_view.addItems(SECOND_VIEWS)
         self.second_view.currentTextChanged.connect(self._second_view_changed)
-        self.low_m = _spin(DEPTH_LEVELS_M[0])
-        self.high_m = _spin(DEPTH_LEVELS_M[1])
-        for spin in (self.low_m, self.high_m):
-            spin.valueChanged.connect(self._levels_changed)
+        self.depth_range = DepthRange(self)
+        self.low_m, self.high_m = self.depth_range.low_m, self.depth_range.high_m
         self.freeze = QtWidgets.QPushButton("Freeze")
         self.freeze.setCheckable(True)
         self.freeze.toggled.connect(lambda on: self.freeze.setText("Frozen" if on else "Freeze"))
@@ -173,8 +129,8 @@ class LivePreview(QtWidgets.QWidget):
         tools = QtWidgets.QHBoxLayout()
         for widget in (
             QtWidgets.QLabel("Beside depth:"), self.second_view,
-            QtWidgets.QLabel("Depth levels (m):"), self.low_m, QtWidgets.QLabel("to"),
-            self.high_m,
+            QtWidgets.QLabel("Depth range (m):"), self.depth_range.auto, self.low_m,
+            QtWidgets.QLabel("to"), self.high_m,
         ):  # fmt: skip
             tools.addWidget(widget)
         tools.addStretch(1)
@@ -182,6 +138,8 @@ class LivePreview(QtWidgets.QWidget):
         tools.addWidget(self.save_button)
         self.images = ImagePanel()
         self.images.scene().sigMouseMoved.connect(self._mouse_moved)
+        self.images.scene().sigMouseClicked.connect(self._mouse_clicked)
+        self.depth_range.levels_changed.connect(self.images.set_levels)
         self.readout = QtWidgets.QLabel("Point at the depth image to read depth and 3D position.")
         self.cloud = CloudView()
         images_and_cursor = QtWidgets.QWidget()
@@ -217,14 +175,25 @@ class LivePreview(QtWidgets.QWidget):
             self.quality_values.append((name, value))
         self.quality_verdict = QtWidgets.QLabel("Quality: waiting for frames")
         self.quality_verdict.setWordWrap(True)
+        quality = QtWidgets.QWidget()
+        rows = QtWidgets.QVBoxLayout(quality)
+        rows.setContentsMargins(0, 0, 0, 0)
+        rows.addWidget(self.quality_table)
+        rows.addWidget(self.quality_verdict)
+        self.distance_label = QtWidgets.QLabel(MEASURE_PROMPT)
+        self.distance_label.setWordWrap(True)
+        self.distance_label.setToolTip(MEASURE_HELP)
+        self.distance_label.setTextInteractionFlags(
+            QtCore.Qt.TextInteractionFlag.TextSelectableByMouse
+        )
         panel = QtWidgets.QWidget()
         column = QtWidgets.QVBoxLayout(panel)
-        for title, widget in (("Stream", self.stream_label), ("Capture quality", None)):
+        for title, widget in (
+            ("Stream", self.stream_label), ("Capture quality", quality),
+            ("Depth histogram", self.depth_range.histogram), ("Distance", self.distance_label),
+        ):  # fmt: skip
             column.addWidget(QtWidgets.QLabel(f"<b>{title}</b>"))
-            if widget is not None:
-                column.addWidget(widget)
-        column.addWidget(self.quality_table)
-        column.addWidget(self.quality_verdict)
+            column.addWidget(widget)
         column.addStretch(1)
         return panel
 
@@ -318,10 +287,15 @@ class LivePreview(QtWidgets.QWidget):
         now_s = time.monotonic()
         self.rate.tick(now_s)
         first = self.images.depth_item.image is None
+        depths_m = valid_depths_m(frame.depth_m)
+        self.depth_range.follow(depths_m)
         self.images.show_depth(frame.depth_m)
         if first:
             self.images.fit()
         self._show_second()
+        if now_s >= self._histogram_due_s:
+            self._histogram_due_s = now_s + HISTOGRAM_PERIOD_S
+            self.depth_range.show_histogram(depths_m)
         if self.intrinsics is not None and now_s >= self._cloud_due_s:
             self._cloud_due_s = now_s + CLOUD_PERIOD_S
             self.cloud.show_frame(frame, self.intrinsics)
@@ -402,10 +376,41 @@ class LivePreview(QtWidgets.QWidget):
         self.images.show_second(kind)
         self._show_second()
 
-    def _levels_changed(self) -> None:
-        low, high = self.low_m.value(), self.high_m.value()
-        if high > low:
-            self.images.set_levels(low, high)
+    # --- distance between two picked points --------------------------------------------------
+
+    def _mouse_clicked(self, event: object) -> None:
+        button = event.button()  # type: ignore[attr-defined]
+        if button == QtCore.Qt.MouseButton.RightButton:
+            self.clear_picks()
+            return
+        if self.frame is None or button != QtCore.Qt.MouseButton.LeftButton:
+            return
+        position = event.scenePos()  # type: ignore[attr-defined]
+        for plot in (self.images.depth_plot, self.images.second_plot):
+            if plot.isVisible() and plot.sceneBoundingRect().contains(position):
+                point = plot.vb.mapSceneToView(position)
+                self.pick(int(point.x()), int(point.y()))
+                return
+
+    def pick(self, u: int, v: int) -> None:
+        """Pick the measured point at (or nearest) pixel (``u``, ``v``) of the shown frame: the
+        first and second picks give a distance, a third starts a new pair."""
+        if self.frame is None or self.intrinsics is None:
+            return
+        reading = pick_point(self.frame.depth_m, self.intrinsics, u, v)
+        if reading is None:
+            self.distance_label.setText(f"pixel ({u}, {v}): no depth near it; pick another.")
+            return
+        if len(self.picks) == 2:
+            self.picks = []
+        self.picks.append(reading)
+        self.images.show_marks([(p.u, p.v) for p in self.picks])
+        self.distance_label.setText(measurement_text(self.picks))
+
+    def clear_picks(self) -> None:
+        self.picks = []
+        self.images.show_marks([])
+        self.distance_label.setText(MEASURE_PROMPT)
 
     # --- saving and closing -----------------------------------------------------------------
 
@@ -442,10 +447,18 @@ class LivePreview(QtWidgets.QWidget):
         self._workers.wait()
 
 
-def _spin(value: float) -> QtWidgets.QDoubleSpinBox:
-    spin = QtWidgets.QDoubleSpinBox()
-    spin.setRange(0.0, 8.0)
-    spin.setSingleStep(0.1)
-    spin.setDecimals(1)
-    spin.setValue(value)
-    return spin
+MEASURE_PROMPT = "Click two points on the depth or colour image to measure between them."
+
+
+def measurement_text(picks: list[PixelReading]) -> str:
+    """The picked points (camera frame) and, with two, the 3D distance between them."""
+    lines = []
+    for name, pick in zip("AB", picks, strict=False):
+        x, y, z = pick.point_m or (0.0, 0.0, 0.0)
+        lines.append(f"{name}: pixel ({pick.u}, {pick.v}), x {x:+.3f} y {y:+.3f} z {z:+.3f} m")
+    if len(picks) == 2 and picks[0].point_m is not None and picks[1].point_m is not None:
+        length_m = distance_m(picks[0].point_m, picks[1].point_m)
+        lines.append(f"<b>distance A-B: {length_m:.3f} m</b> (in 3D)")
+    else:
+        lines.append("Click the second point.")
+    return "<br>".join(lines)

@@ -262,21 +262,22 @@ class MissionPage(QtWidgets.QWidget):
         self._update_buttons()
 
     def open_view(self, station: int, view: int) -> QtWidgets.QWidget | None:
-        """Show the capture's depth large (double-click on a thumbnail); ``None`` when it
-        cannot be read (a notice says why)."""
+        """Show the capture's depth and colour large (double-click on a thumbnail); ``None``
+        when it cannot be read (a notice says why)."""
         from fieldapp.errors import FieldappError
         from fieldapp.io.images import ImageError
-        from ui.mission.depth_view import DepthViewer, read_view_depth
+        from ui.mission.depth_view import DepthViewer, read_view
 
         folder = self.controller.folder
         if folder is None:
             return None
         try:
-            depth_m = read_view_depth(folder, station, view)
+            depth_m, color = read_view(folder, station, view)
         except (FieldappError, ImageError) as error:
             self.context.notifier.error(f"Station {station} view {view}", error)
             return None
-        viewer = DepthViewer(f"station {station}, view {view}: depth", depth_m, self)
+        title = f"station {station}, view {view}: depth and colour"
+        viewer = DepthViewer(title, depth_m, self, color=color)
         viewer.show()
         return viewer
 
@@ -293,6 +294,7 @@ class MissionPage(QtWidgets.QWidget):
             f"{state.value.upper()}</span>"
         )
         self.pause_button.setText("▶ Continue" if state is MissionState.PAUSED else "❚❚ Pause")
+        self.progress.set_paused(state is MissionState.PAUSED)
         self._update_buttons()
 
     def _show_outcome(self, result: MissionResult) -> None:

@@ -56,6 +56,7 @@ class ProgressPanel(QtWidgets.QWidget):
         super().__init__(parent)
         self.clock = clock
         self._last: tuple[MissionProgress, float] | None = None  # latest progress, when
+        self.paused = False
         self.ticker = QtCore.QTimer(self)
         self.ticker.setInterval(ELAPSED_TICK_MS)
         self.ticker.timeout.connect(self.tick)
@@ -155,10 +156,17 @@ class ProgressPanel(QtWidgets.QWidget):
             progress, at_s = self._last
             self._show_times(progress.elapsed_s + self.clock() - at_s)
 
+    def set_paused(self, paused: bool) -> None:
+        """The mission holds (or carries on): the times say so at once."""
+        self.paused = paused
+        self.tick()
+
     def _show_times(self, elapsed_s: float) -> None:
         remaining_s = self._last[0].remaining_s if self._last is not None else None
+        state = " (paused)" if self.paused else ""
         self.times.setText(
-            f"elapsed {format_duration(elapsed_s)} · remaining {format_duration(remaining_s)}"
+            f"elapsed {format_duration(elapsed_s)}{state} · "
+            f"remaining {format_duration(remaining_s)}"
         )
 
     def finish(self, text: str) -> None:
