@@ -16,14 +16,6 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from fieldapp.errors import FieldappError
 from fieldapp.recon.settings import ReconstructionSettings
-from fieldapp.results.corrected import (
-    Result,
-    add_correction,
-    apply_corrections,
-    centroid_xy_m,
-    snapshot_is_current,
-    undo_correction,
-)
 from fieldapp.results.corrections import (
     Corrections,
     Delete,
@@ -39,6 +31,7 @@ from ui.results.scene import CloudScene, build_scene
 from ui.workers import WorkerSet
 
 if TYPE_CHECKING:
+    from fieldapp.results.corrected import Result
     from ui.results.panel import ResultsPanel
 
 log = logging.getLogger(__name__)
@@ -176,6 +169,8 @@ class CorrectionBar(QtWidgets.QWidget):
         results = self.panel.results
         if results is None or plant not in results.plant_clouds:
             raise FieldappError(f"plant {plant} has no points in this results folder")
+        from fieldapp.results.corrected import centroid_xy_m
+
         return PlantRef(plant=plant, xy_m=centroid_xy_m(results.plant_clouds[plant].points))
 
     def _free_numbers(self, count: int) -> list[int]:
@@ -195,6 +190,10 @@ class CorrectionBar(QtWidgets.QWidget):
         if self.workers.busy:
             raise FieldappError("a correction is being applied: wait for it")
         corrections = self.corrections.model_copy(update={"session": results.session_id})
+        # the replay and the trait code (SciPy, Open3D): loaded at the first correction, not
+        # with the window
+        from fieldapp.results.corrected import add_correction, apply_corrections, undo_correction
+
         change: Any
         if add is not None:
             self.status.setText(f"{describe(add)}…")
@@ -271,6 +270,8 @@ class CorrectionBar(QtWidgets.QWidget):
             return
         self.corrections = saved or Corrections()
         self._update()
+        from fieldapp.results.corrected import snapshot_is_current
+
         if saved is not None and not snapshot_is_current(results.results_dir, saved):
             self._report("apply corrections", lambda: self._change(reapply=True))
 
