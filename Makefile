@@ -3,6 +3,10 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 RUN_ARGS ?= gui
+# The suite runs on TEST_WORKERS processes (pytest-xdist), a test file per process at a
+# time; each process one OpenMP thread, so two workers fill two cores without spinning.
+# TEST_WORKERS=0 runs it in this process (a debugger, -x, -s).
+TEST_WORKERS ?= 2
 LOCK   := requirements.lock
 PIP    := $(BIN)/python -m pip install --quiet -c $(LOCK)
 
@@ -17,7 +21,8 @@ test: $(VENV)/.installed-dev
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy fieldapp devices
 	$(BIN)/lint-imports
-	QT_QPA_PLATFORM=offscreen $(BIN)/python -m pytest $(PYTEST_ARGS)
+	QT_QPA_PLATFORM=offscreen OMP_NUM_THREADS=$${OMP_NUM_THREADS:-1} \
+	  $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=15 $(PYTEST_ARGS)
 
 sysdeps:
 	@sh packaging/sysdeps.sh
