@@ -100,6 +100,7 @@ class BaseClient:
         self._link_error: BaseError | None = None
         self._closed = threading.Event()
         self._goal_event = threading.Event()
+        self._goal_lock = threading.RLock()
         self._heartbeat = threading.Thread(target=self._beat, name="base-heartbeat", daemon=True)
         self._heartbeat.start()
 
@@ -223,25 +224,39 @@ class BaseClient:
             raise BaseRequestRejected(f"malformed status from the base: {error.message}") from None
 
     def _begin_goal(self, goal_id: str) -> None:
-        self._link_error = None
-        self._active_goal = goal_id
-        self._goal_event.set()
+        with self._goal_lock:
+            self._link_error = None
+            self._active_goal = goal_id
+            self._goal_event.set()
 
     def _end_goal(self) -> None:
-        self._active_goal = None
-        self._goal_event.clear()
+        with self._goal_lock:
+            self._active_goal = None
+            self._goal_event.clear()
 
     def _beat(self) -> None:
         while not self._closed.is_set():
             if not self._goal_event.wait(timeout=0.1) or self._closed.is_set():
                 continue
+            goal = self._active_goal
             try:
                 self.heartbeat()
             except BaseError as error:
-                log.warning("heartbeat failed during goal %s: %s", self._active_goal, error)
-                self._link_error = error
-                self._end_goal()
+                self._heartbeat_failed(goal, error)
             self._closed.wait(self.timing.heartbeat_period_s)
+
+    def _heartbeat_failed(self, goal: str | None, error: BaseError) -> None:
+        """A heartbeat sent during ``goal`` failed: that goal's link is lost. When another
+        goal has begun meanwhile (the failure was the link's before it, reported to a beat
+        that waited its turn), the new goal's own beats decide."""
+        with self._goal_lock:
+            if goal is None or self._active_goal != goal:
+                log.info("heartbeat of goal %s failed after it ended: %s", goal, error)
+                return
+            log.warning("heartbeat failed during goal %s: %s", goal, error)
+            self._link_error = error
+            self._active_goal = None
+            self._goal_event.clear()
 
     def close(self) -> None:
         """Stop heartbeats, then close the transport (the base is not told)."""

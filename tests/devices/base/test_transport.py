@@ -171,3 +171,39 @@ def _advance_unless(clock: FakeClock, done: bool) -> bool:
     if not done:
         clock.advance(0.5)
     return done
+
+
+class StaleHeartbeatTransport(ScriptedTransport):
+    """The first heartbeat waits until ``release`` and then fails (the link of the goal before
+    was lost); every later one is answered."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            {"hello": HELLO, "status": IDLE | {"state": "moving"}, "goto": {}, "heartbeat": {}}
+        )
+        self.first_heartbeat = threading.Event()
+        self.release = threading.Event()
+        self.heartbeats = 0
+
+    def request(self, request_id: str, data: bytes, policy: RetryPolicy) -> Reply:
+        if json.loads(data)["cmd"] == "heartbeat":
+            self.heartbeats += 1
+            if self.heartbeats == 1:
+                self.first_heartbeat.set()
+                assert self.release.wait(20)
+                raise BaseOffline("no reply in 3 tries (the goal before)")
+        return super().request(request_id, data, policy)
+
+
+def test_a_heartbeat_failure_of_the_goal_before_does_not_end_the_next_goal() -> None:
+    """Seen on a loaded machine: a beat waiting its turn behind a failed request of station 4
+    reported that failure after station 5's goal had begun, and station 5 was skipped too."""
+    transport = StaleHeartbeatTransport()
+    with BaseClient(transport, timing=ClientTiming(heartbeat_period_s=0.01)) as client:
+        client.goto("s04", Pose(0.5, 0.5, 0.0), wait=False)
+        assert transport.first_heartbeat.wait(20)  # the beat of s04 is in flight
+        client.goto("s05", Pose(0.6, 0.5, 0.0), wait=False)
+        transport.release.set()  # ... and fails now, with s05 under way
+        assert wait_real(lambda: transport.heartbeats >= 2 or client.link_error is not None)
+        assert client.link_error is None
+        assert next(client.follow_goal("s05")).state is BaseState.MOVING  # s05 goes on

@@ -12,7 +12,7 @@ import pytest
 from devices.geometry import invert, pose_error
 from fieldapp.cli import main
 from fieldapp.io.session import load_session
-from fieldapp.recon.outputs import CSV_COLUMNS, read_ply
+from fieldapp.recon.outputs import CSV_COLUMNS, GRID_COLUMNS, read_ply
 from fieldapp.recon.pipeline import NothingUsable, reconstruct, run_reconstruction
 from fieldapp.recon.result import Reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
@@ -151,7 +151,8 @@ def test_cli_on_a_session_with_missing_captures_writes_results_and_warns(
     assert "station 1 view 3 skipped" in captured.err
 
     lines = (out / "plants.csv").read_text().splitlines()
-    assert lines[0] == ",".join(CSV_COLUMNS)
+    # the simulated session carries its plan's planting grid: each plant's row and column
+    assert lines[0] == ",".join([*CSV_COLUMNS, *GRID_COLUMNS])
     assert lines[0].startswith("plant,x_m,y_m,height_cm,width_cm,points,")
     assert len(lines) - 1 >= 15  # the corner plant seen mostly from station 9 may be lost
     report = json.loads((out / "report.json").read_text())
@@ -234,6 +235,7 @@ def test_without_map_poses_plants_stay_in_the_field_frame(
     document = json.loads((folder / "session.json").read_text())
     for capture in document["captures"]:
         del capture["base_pose"]
+    del document["plan"]  # its stations' map poses would place the plot too
     (folder / "session.json").write_text(json.dumps(document))
     result = run_reconstruction(load_session(folder), ReconstructionSettings())
     assert result.frame == "field" and result.report()["T_map_field"] is None
