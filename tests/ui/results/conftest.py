@@ -16,6 +16,33 @@ def plot_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
+@pytest.fixture
+def panel(qtbot, tmp_path):
+    """A results panel with its own results database, shut down and released after the test."""
+    from fieldapp.settings import Settings
+    from ui.results import ResultsPanel
+
+    settings = Settings()
+    settings.paths.results_db = tmp_path / "results.sqlite"
+    widget = ResultsPanel(settings)
+    qtbot.addWidget(widget)
+    yield widget
+    widget.shutdown()
+    release_plot_menus(widget)
+
+
+def release_plot_menus(widget) -> None:
+    """pyqtgraph's context menus are parentless: pytest still holds the panel while the leak
+    check runs, so they are deleted here rather than with the panel."""
+    import pyqtgraph as pg
+
+    for plot in widget.findChildren(pg.PlotWidget):
+        item = plot.getPlotItem()
+        for menu in (item.vb.menu, item.ctrlMenu):
+            if menu is not None:
+                menu.deleteLater()
+
+
 @pytest.fixture(autouse=True)
 def _leak_check(no_leaks: None) -> None:
     """Every test here runs under the GUI tests' leak check (``tests/ui/conftest.py``): no

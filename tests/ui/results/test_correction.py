@@ -15,11 +15,9 @@ from fieldapp.errors import FieldappError
 from fieldapp.results.corrections import read_corrections
 from fieldapp.results.db import ResultsDB
 from fieldapp.results.files import read_plants_csv
-from ui.results import ResultsPanel
 from ui.results.correction import CORRECTED_BRUSH, parse_stems
 
 from ...fieldapp.results.seedlings import STEMS, seedlings, write_plot
-from .test_panel import release_plot_menus
 
 
 @pytest.fixture(scope="module")
@@ -30,19 +28,6 @@ def plots(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "apart": write_plot(base / "apart", groups, [1, 2]),
         "merged": write_plot(base / "merged", [np.concatenate(groups)], [1]),
     }
-
-
-@pytest.fixture
-def panel(qtbot, tmp_path):
-    from fieldapp.settings import Settings
-
-    settings = Settings()
-    settings.paths.results_db = tmp_path / "results.sqlite"
-    widget = ResultsPanel(settings)
-    qtbot.addWidget(widget)
-    yield widget
-    widget.shutdown()
-    release_plot_menus(widget)
 
 
 def _open(panel, plots, name, tmp_path) -> Path:

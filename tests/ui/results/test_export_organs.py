@@ -38,7 +38,7 @@ def test_the_leaves_tab_follows_the_selected_plant(qtbot, tmp_path: Path) -> Non
     from fieldapp.settings import Settings
     from ui.results import ResultsPanel
 
-    from .test_panel import release_plot_menus
+    from .conftest import release_plot_menus
 
     rng = np.random.default_rng(1)
     cloud = Cloud(rng.random((60, 3)), rng.integers(0, 255, (60, 3), dtype=np.uint8))

@@ -15,28 +15,12 @@ from fieldapp.results.organ_tables import read_table
 from ui.results.data import load_results_dir
 from ui.results.plant_drawing import DIM, STEM_RGB, leaf_rgb, plant_drawing
 
-from .test_panel import release_plot_menus
-
 
 @pytest.fixture(scope="module")
 def plot_results(plot_session: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("inspector") / "results"
     assert main(["reconstruct", str(plot_session), "--out", str(out), "--quiet"]) == 0
     return out
-
-
-@pytest.fixture
-def panel(qtbot, tmp_path):
-    from fieldapp.settings import Settings
-    from ui.results import ResultsPanel
-
-    settings = Settings()
-    settings.paths.results_db = tmp_path / "results.sqlite"
-    widget = ResultsPanel(settings)
-    qtbot.addWidget(widget)
-    yield widget
-    widget.shutdown()
-    release_plot_menus(widget)
 
 
 def test_each_plant_is_drawn_with_its_organs_height_and_width(plot_results: Path) -> None:

@@ -12,26 +12,8 @@ from PySide6 import QtWidgets
 
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.outputs import PlantRow, write_outputs
-from fieldapp.settings import Settings
-from ui.results import ResultsPanel, runner
+from ui.results import runner
 from ui.results.runner import choose_results_dir, free_results_dir
-
-
-@pytest.fixture
-def panel(qtbot, tmp_path):
-    settings = Settings()
-    settings.paths.results_db = tmp_path / "results.sqlite"
-    widget = ResultsPanel(settings)
-    qtbot.addWidget(widget)
-    yield widget
-    widget.shutdown()
-    import pyqtgraph as pg  # its context menus are parentless: deleted here (see test_panel)
-
-    for plot in widget.findChildren(pg.PlotWidget):
-        item = plot.getPlotItem()
-        for menu in (item.vb.menu, item.ctrlMenu):
-            if menu is not None:
-                menu.deleteLater()
 
 
 @pytest.fixture

@@ -11,33 +11,7 @@ import pytest
 from fieldapp.errors import FieldappError
 from fieldapp.recon.progress import STAGES
 from fieldapp.results.files import ManualRecord, read_plants_csv
-from ui.results import ResultsPanel
 from ui.results.data import load_results_dir
-
-
-@pytest.fixture
-def panel(qtbot, tmp_path):
-    from fieldapp.settings import Settings
-
-    settings = Settings()
-    settings.paths.results_db = tmp_path / "results.sqlite"
-    widget = ResultsPanel(settings)
-    qtbot.addWidget(widget)
-    yield widget
-    widget.shutdown()
-    release_plot_menus(widget)
-
-
-def release_plot_menus(widget):
-    """pyqtgraph's context menus are parentless: pytest still holds the panel while the leak
-    check runs, so they are deleted here rather than with the panel."""
-    import pyqtgraph as pg
-
-    for plot in widget.findChildren(pg.PlotWidget):
-        item = plot.getPlotItem()
-        for menu in (item.vb.menu, item.ctrlMenu):
-            if menu is not None:
-                menu.deleteLater()
 
 
 def _run(panel, plot_session, out):
