@@ -102,14 +102,20 @@ def test_skipped_camera_frames_are_counted_and_fps_measured() -> None:
     assert stats.fps == pytest.approx(50.0)  # a frame every 20 ms of the stream's clock
 
 
+def _ended(stream: FrameStream) -> FrameStream:
+    """``stream`` once its grabber has stopped (waiting generously, not timing)."""
+    deadline = time.monotonic() + 20
+    while stream.running and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert not stream.running
+    return stream
+
+
 def test_grabber_error_reaches_the_consumer() -> None:
     camera = ScriptedCamera([0], error=CameraDisconnected("unplugged"))
     camera.gate.release()
-    with camera, FrameStream(camera, timeout_s=1.0) as stream:
-        deadline = time.monotonic() + 20  # generous: waiting, not timing
-        while stream.running and time.monotonic() < deadline:
-            time.sleep(0.005)
-        assert not stream.running
+    with camera, FrameStream(camera, timeout_s=1.0) as started:
+        stream = _ended(started)
         with pytest.raises(CameraDisconnected, match="unplugged"):
             stream.latest()
         with pytest.raises(CameraDisconnected):
@@ -120,10 +126,8 @@ def test_grabber_error_reaches_the_consumer() -> None:
 def test_the_error_raised_again_and_again_keeps_its_traceback_short() -> None:
     camera = ScriptedCamera([0], error=CameraDisconnected("unplugged"))
     camera.gate.release()
-    with camera, FrameStream(camera, timeout_s=1.0) as stream:
-        deadline = time.monotonic() + 20  # generous: waiting, not timing
-        while stream.running and time.monotonic() < deadline:
-            time.sleep(0.005)
+    with camera, FrameStream(camera, timeout_s=1.0) as started:
+        stream = _ended(started)
         depths = []
         for _ in range(50):  # a live view polls a dead stream like this
             with pytest.raises(CameraDisconnected) as raised:
