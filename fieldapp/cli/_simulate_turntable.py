@@ -32,7 +32,7 @@ def turntable_calibration(rig: TurntableRig) -> Calibration:
     """Intrinsics and the nominal view step of ``rig``; one station, its own reference."""
     k = KINECT_V2_PAPER
     view_step = ViewStep(angle_deg=rig.view_step_deg, matrix=rig.T_view_next())
-    view_step.nominal = (  # type: ignore[attr-defined]
+    view_step.nominal = (
         f"simulated: plant turning {rig.view_step_deg:g} degrees about the table's axis "
         f"{rig.distance_m:g} m before the camera; no board"
     )

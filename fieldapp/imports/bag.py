@@ -10,6 +10,9 @@ without one the captures are depth-only and the camera is the depth stream's. Ev
 from __future__ import annotations
 
 import logging
+import queue
+import threading
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,11 +57,13 @@ class _Playback:
     """The recording played sensor by sensor as fast as it can be decoded, colour-aligned when
     present.
 
-    Not through ``rs.pipeline``: a pipeline starts playing before real time can be turned off,
-    so on a loaded machine its first frame sets are dropped as late (issues #1180, #2360 of
-    librealsense). Here the playback device is loaded, set to non-real time, and only then are
-    its depth and colour streams opened into one ``rs.syncer``; in non-real time the playback
-    waits for each frame to be taken, so every recorded frame set comes out.
+    Not through ``rs.pipeline`` nor an ``rs.syncer``: a pipeline starts playing before real time
+    can be turned off, and both hand frame sets on through a queue that drops the older one
+    when the reader is slower (librealsense issues #1180, #2360), so on a loaded machine some
+    were lost. Here the playback device is set to non-real time before any stream starts; each
+    frame goes into a bounded queue whose full state holds the playback back, so every
+    recorded frame comes out; depth and colour are paired here by timestamp (within half a
+    frame period) and the pair made one frame set for ``rs.align``.
     """
 
     def __init__(self, rs: Any, path: Path) -> None:
@@ -93,27 +98,72 @@ class _Playback:
         self.intrinsics = camera_stream.as_video_stream_profile().get_intrinsics()
         self.align = rs.align(rs.stream.color) if self.has_color else None
         self.others = sorted(others)
-        self.syncer = rs.syncer()
+        depth_fps = float(streams[rs.stream.depth].fps() or 30)
+        self.pair_tolerance_ms = 500.0 / depth_fps
+        self.queue: queue.Queue[Any] = queue.Queue(maxsize=8)
+        self.stopping = threading.Event()
+        self.pairs_dropped = 0
+        """Depth or colour frames without a partner within the tolerance (not imported)."""
+        self._pair: list[Any] = []
+        self._composer = rs.processing_block(self._compose)
+        self._composed = rs.frame_queue(2, keep_frames=True)
+        self._composer.start(self._composed)
         for sensor in self.opened:
-            sensor.start(self.syncer)
+            sensor.start(self._take)
+
+    def _take(self, frame: Any) -> None:
+        """The SDK's callback: queue ``frame``, waiting while the reader is behind (in non-real
+        time that holds the playback back) unless the import is stopping."""
+        frame.keep()
+        while not self.stopping.is_set():
+            try:
+                self.queue.put(frame, timeout=0.1)
+                return
+            except queue.Full:
+                continue
+
+    def _compose(self, _frame: Any, source: Any) -> None:
+        source.frame_ready(source.allocate_composite_frame(self._pair))
 
     def frames(self) -> Iterator[BagFrame]:
+        depths: deque[Any] = deque()
+        colours: deque[Any] = deque()
         while True:
-            ok, frames = self.syncer.try_wait_for_frames(WAIT_MS)
-            if not ok:
+            try:
+                frame = self.queue.get(timeout=WAIT_MS / 1000)
+            except queue.Empty:
                 if self.playback.current_status() == self.rs.playback_status.stopped:
+                    self.pairs_dropped += len(depths) + len(colours) if self.has_color else 0
                     return
                 continue
-            if self.align is not None:
-                frames = self.align.process(frames)
-                depth, color = frames.get_depth_frame(), frames.get_color_frame()
-                if not (depth and color):
-                    continue  # the syncer hands out the first frames unpaired
-                yield BagFrame(_depth_m(depth), _rgb(self.rs, color))
-            elif depth := frames.get_depth_frame():
-                yield BagFrame(_depth_m(depth), None)
+            if not self.has_color:
+                if frame.get_profile().stream_type() == self.rs.stream.depth:
+                    yield BagFrame(_depth_m(frame.as_depth_frame()), None)
+                continue
+            kind = frame.get_profile().stream_type()
+            (depths if kind == self.rs.stream.depth else colours).append(frame)
+            while depths and colours:
+                depth, colour = depths[0], colours[0]
+                dt_ms = depth.get_timestamp() - colour.get_timestamp()
+                if abs(dt_ms) <= self.pair_tolerance_ms:
+                    depths.popleft(), colours.popleft()
+                    yield self._aligned(depth, colour)
+                else:  # the older of the two has no partner: the other stream moved on
+                    (depths if dt_ms < 0 else colours).popleft()
+                    self.pairs_dropped += 1
+
+    def _aligned(self, depth: Any, colour: Any) -> BagFrame:
+        assert self.align is not None
+        self._pair = [depth, colour]
+        self._composer.invoke(depth)
+        ok, composite = self._composed.try_wait_for_frame(WAIT_MS)
+        if not ok:
+            raise FieldappError("the RealSense SDK did not pair a depth and a colour frame")
+        frames = self.align.process(composite.as_frameset())
+        return BagFrame(_depth_m(frames.get_depth_frame()), _rgb(self.rs, frames.get_color_frame()))
 
     def stop(self) -> None:
+        self.stopping.set()  # a callback waiting for room gives up
         for sensor in self.opened:
             try:
                 sensor.stop()
@@ -205,6 +255,11 @@ def _write(
         )
         result.captures += 1
         result.depth_only += frame.color is None
+    if playback.pairs_dropped:
+        lines.append(
+            f"{path}: {playback.pairs_dropped} depth or colour frames had no partner within "
+            f"{playback.pair_tolerance_ms:.1f} ms and were not imported"
+        )
     if playback.has_color and result.depth_only:
         lines.append(
             f"{path}: colour frames not used (not RGB8 or BGR8): {result.depth_only} captures "

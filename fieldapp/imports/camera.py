@@ -157,7 +157,7 @@ def import_calibration(
     if rig is not None and rig.view_step is not None and rig.stations is not None:
         return rig.model_copy(update={"depth_camera": camera})
     view_step = ViewStep(angle_deg=step_deg, matrix=T_view_k_view_k1(step_deg, axis_distance_m))
-    view_step.nominal = (  # type: ignore[attr-defined]
+    view_step.nominal = (
         f"fieldapp import: table turning {step_deg:g} degrees about a vertical axis "
         + (f"{axis_distance_m:g} m before the camera" if axis_distance_m else "through the camera")
         + "; not calibrated"

@@ -119,6 +119,9 @@ class ViewStep(SpecModel):
     matrix: RigidMatrix
     calibrated: Provenance | None = None
     refined_with_stations: Provenance | None = None
+    nominal: str | Provenance | None = None
+    """Where an uncalibrated step came from (an import, the turntable simulator): said so
+    nobody mistakes it for a calibration; the turntable reconstruction refines such a step."""
 
     @field_validator("angle_deg")
     @classmethod

@@ -103,7 +103,7 @@ def read_turntable(
         ],
         axis,
         [v.view for v in views],
-        getattr(view_step, "nominal", None) is not None and refine,
+        view_step.nominal is not None and refine,
         warnings,  # read_turntable's own list: place_views adds a warning when ICP failed
     )
     T_view0 = [axis.T_view0_view(turn) for turn in turns]
