@@ -155,6 +155,7 @@ class Reconstruction:
             "splits": [{"plants": ids} for ids in search.splits],
             "merges": search.merges,
             "missing_cells": [list(cell) for cell in search.missing_cells],
+            "unseen_cells": [list(cell) for cell in search.unseen_cells],
             "extra_plants": search.extra_plants,
         }
 

@@ -92,6 +92,7 @@ def test_the_planting_grid_from_the_plan_labels_rows_and_columns(
     report = touching.report()
     assert report["frame"] == "map" and report["plant_search"]["expected"] == 16
     assert report["plant_search"]["missing_cells"] == []
+    assert report["plant_search"]["unseen_cells"] == []  # every station captured: all cells seen
     assert report["plant_search"]["extra_plants"] == []
     for plant in touching.plants:  # the cell is the one the plant stands in, on the map
         row, column = plant.grid_cell or (0, 0)
