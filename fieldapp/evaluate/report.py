@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from fieldapp import __version__
+from fieldapp.evaluate.metrics import Agreement
 from fieldapp.evaluate.organs import UNITS, OrganEvaluation
 from fieldapp.evaluate.traits import TraitEvaluation
 from fieldapp.results.files import PlantRecord, read_plants_csv, read_report
@@ -153,20 +154,22 @@ def evaluation_section(evaluation: TraitEvaluation | None) -> str:
     rows = []
     images = []
     for trait, a in evaluation.by_trait.items():
-        rows.append(
-            [
-                trait,
-                a.n,
-                _number(a.r2, 4),
-                _number(a.rmse, 2),
-                _number(a.mape_percent, 2),
-                _number(a.bias, 2),
-                f"{_number(a.loa_low, 2)} .. {_number(a.loa_high, 2)}",
-            ]
-        )
+        rows.append([trait, *_agreement_cells(a)])
         images.append(_image(trait_scatter_png(trait, *evaluation.values(trait), a), trait))
     header = ["trait", "n", "R2", "RMSE (cm)", "MAPE (%)", "bias (cm)", "95 % limits (cm)"]
     return "<h2>Accuracy against the reference</h2>" + _table(header, rows) + "".join(images)
+
+
+def _agreement_cells(a: Agreement) -> list[object]:
+    """n, R2, RMSE, MAPE, bias and the 95 % limits of one trait's agreement, as table cells."""
+    return [
+        a.n,
+        _number(a.r2, 4),
+        _number(a.rmse, 2),
+        _number(a.mape_percent, 2),
+        _number(a.bias, 2),
+        f"{_number(a.loa_low, 2)} .. {_number(a.loa_high, 2)}",
+    ]
 
 
 def organ_evaluation_section(evaluation: OrganEvaluation | None) -> str:
@@ -180,19 +183,7 @@ def organ_evaluation_section(evaluation: OrganEvaluation | None) -> str:
     images = []
     for trait, level, a in evaluation.agreements():
         unit = UNITS[trait]
-        rows.append(
-            [
-                trait,
-                level,
-                unit,
-                a.n,
-                _number(a.r2, 4),
-                _number(a.rmse, 2),
-                _number(a.mape_percent, 2),
-                _number(a.bias, 2),
-                f"{_number(a.loa_low, 2)} .. {_number(a.loa_high, 2)}",
-            ]
-        )
+        rows.append([trait, level, unit, *_agreement_cells(a)])
         if a.n:
             images.append(
                 _image(trait_scatter_png(trait, *evaluation.values(trait), a, unit), trait)

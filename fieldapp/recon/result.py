@@ -71,7 +71,7 @@ class Reconstruction:
                 height_cm=p.traits.height_m * 100.0,
                 width_cm=p.traits.width_m * 100.0,
                 points=p.traits.points,
-                **_organ_columns(self.organs.get(p.id)),
+                **organ_columns(self.organs.get(p.id)),
                 row=p.grid_cell[0] if p.grid_cell else None,
                 column=p.grid_cell[1] if p.grid_cell else None,
             )
@@ -81,18 +81,9 @@ class Reconstruction:
     def leaf_rows(self) -> list[LeafRow]:
         """The lines of ``leaves.csv``: every leaf of every plant, plant by plant."""
         return [
-            LeafRow(
-                plant_id=plant_id,
-                leaf_id=leaf.leaf_id,
-                length_cm=100.0 * leaf.length_m,
-                max_width_cm=100.0 * leaf.max_width_m,
-                area_cm2=1e4 * leaf.area_m2,
-                angle_from_stem_deg=leaf.angle_from_stem_deg,
-                azimuth_deg=leaf.azimuth_deg,
-                insertion_height_cm=100.0 * leaf.insertion_height_m,
-            )
+            row
             for plant_id, organs in sorted(self.organs.items())
-            for leaf in organs.leaves
+            for row in leaf_rows(plant_id, organs)
         ]
 
     def plant_labels(self) -> dict[int, PointLabels]:
@@ -183,8 +174,26 @@ class Reconstruction:
         } | ({"turntable": self.turntable} if self.turntable is not None else {})
 
 
-def _organ_columns(organs: PlantOrgans | None) -> dict[str, Any]:
-    """The organ columns of a plant's ``plants.csv`` row, in their units."""
+def leaf_rows(plant_id: int, organs: PlantOrgans) -> list[LeafRow]:
+    """The ``leaves.csv`` lines of one plant, in their units (also used by manual corrections)."""
+    return [
+        LeafRow(
+            plant_id=plant_id,
+            leaf_id=leaf.leaf_id,
+            length_cm=100.0 * leaf.length_m,
+            max_width_cm=100.0 * leaf.max_width_m,
+            area_cm2=1e4 * leaf.area_m2,
+            angle_from_stem_deg=leaf.angle_from_stem_deg,
+            azimuth_deg=leaf.azimuth_deg,
+            insertion_height_cm=100.0 * leaf.insertion_height_m,
+        )
+        for leaf in organs.leaves
+    ]
+
+
+def organ_columns(organs: PlantOrgans | None) -> dict[str, Any]:
+    """The organ columns of a plant's ``plants.csv`` row, in their units (``{}``: all blank;
+    also used by manual corrections)."""
     if organs is None:
         return {}
     return {

@@ -23,6 +23,7 @@ from fieldapp.recon.outputs import (
     ply_bytes,
     read_labelled_ply,
 )
+from fieldapp.recon.result import leaf_rows, organ_columns
 from fieldapp.recon.settings import ReconstructionSettings
 from fieldapp.recon.traits import measure_plant, robust_top_z_m
 from fieldapp.results.organ_tables import read_table
@@ -154,11 +155,11 @@ def measure_again(state: PlotState, plant: int, settings: ReconstructionSettings
         traits.height_m * 100.0,
         traits.width_m * 100.0,
         traits.points,
-        **_organ_columns(organs),
+        **organ_columns(organs),
         row=None if old is None else old.row,
         column=None if old is None else old.column,
     )
-    state.leaves[plant] = [] if organs is None else _leaves(plant, organs)
+    state.leaves[plant] = [] if organs is None else leaf_rows(plant, organs)
 
 
 def _organs(points_m: NDArray[np.float64], foot: NDArray[np.float64]) -> PlantOrgans | None:
@@ -166,40 +167,6 @@ def _organs(points_m: NDArray[np.float64], foot: NDArray[np.float64]) -> PlantOr
         return measure_organs(points_m, foot)
     except (ValueError, np.linalg.LinAlgError):
         return None
-
-
-def _organ_columns(organs: PlantOrgans | None) -> dict[str, Any]:
-    """The organ columns of ``plants.csv``, in their units (``{}``: all blank)."""
-    if organs is None:
-        return {}
-    return {
-        "leaf_count": organs.leaf_count,
-        "leaf_area_cm2": 1e4 * organs.leaf_area_m2,
-        "stem_diameter_mm": None
-        if organs.stem_diameter_m is None
-        else 1e3 * organs.stem_diameter_m,
-        "projected_area_cm2": 1e4 * organs.projected_area_m2,
-        "hull_volume_cm3": 1e6 * organs.hull_volume_m3,
-        "height_max_cm": 100.0 * organs.height_max_m,
-        "height_p99_cm": 100.0 * organs.height_p99_m,
-        "height_whorl_cm": None if organs.height_whorl_m is None else 100.0 * organs.height_whorl_m,
-    }
-
-
-def _leaves(plant: int, organs: PlantOrgans) -> list[LeafRow]:
-    return [
-        LeafRow(
-            plant,
-            leaf.leaf_id,
-            100.0 * leaf.length_m,
-            100.0 * leaf.max_width_m,
-            1e4 * leaf.area_m2,
-            leaf.angle_from_stem_deg,
-            leaf.azimuth_deg,
-            100.0 * leaf.insertion_height_m,
-        )
-        for leaf in organs.leaves
-    ]
 
 
 def write_state(folder: Path, state: PlotState) -> None:
