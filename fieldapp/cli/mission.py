@@ -158,7 +158,9 @@ def _run(setup: MissionSetup) -> int:
         missing = setup.missing()
         console.print(f"{setup.folder}: {len(missing)} of {len(setup.plan.capture_keys())} "
                       "captures to take")  # fmt: skip
-        runner = setup.runner()
+        from fieldapp.settings import load_settings
+
+        runner = setup.runner(load_settings().battery)  # the levels the GUI checks, too
         result = _watch(runner, console)
     for line in result.lines():
         console.print(line)

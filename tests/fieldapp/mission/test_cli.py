@@ -40,6 +40,20 @@ def test_run_then_resume_of_a_complete_session(
     assert main(["verify", str(out)]) == 0
 
 
+def test_run_checks_the_battery_levels_of_the_settings(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("FIELDAPP_BATTERY__WARN_PCT", "100")
+    monkeypatch.setenv("FIELDAPP_BATTERY__CRITICAL_PCT", "100")  # even a full battery is low
+    plan_path = save_plan(small_plan(stations=(5,), views=1), tmp_path / "plan.yaml")
+    out = tmp_path / "S"
+    argv = ["mission", "run", "--plan", str(plan_path), "--sim", "--fast", "--out", str(out)]
+    assert main(argv) != 0
+    captured = capsys.readouterr()
+    assert "incomplete" in captured.out and "battery" in captured.err.lower()
+    assert not list(out.rglob("*.png"))  # nothing was captured
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
