@@ -17,14 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from fieldapp.evaluate.organs import (
-    LEAF_TRAITS,
     OrganEvaluation,
     PlantOrganPair,
     evaluate_organs,
     pair_plant,
 )
 from fieldapp.io.durable import write_bytes_durably
-from fieldapp.results.organ_tables import read_table
+from fieldapp.results.organ_tables import LEAF_TRAITS, read_table
 
 __all__ = [
     "evaluate_organ_references",

@@ -14,16 +14,9 @@ from typing import Any
 import numpy as np
 
 from fieldapp.evaluate.metrics import Agreement, agreement
+from fieldapp.results.organ_tables import LEAF_TRAITS
+from fieldapp.results.organ_tables import PLANT_ORGAN_TRAITS as PLANT_TRAITS
 
-LEAF_TRAITS = (
-    "length_cm",
-    "max_width_cm",
-    "area_cm2",
-    "angle_from_stem_deg",
-    "azimuth_deg",
-    "insertion_height_cm",
-)
-PLANT_TRAITS = ("leaf_count", "leaf_area_cm2", "stem_diameter_mm")
 UNITS = {
     "length_cm": "cm",
     "max_width_cm": "cm",

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from devices.geometry import Matrix4
+from fieldapp.io.planting import PlantingGrid
 from fieldapp.recon.settings import GridPrior, StemSettings
 from fieldapp.recon.stems import Stem, local_ground_z_m, stem_columns
 
@@ -59,6 +60,20 @@ def grid_nodes(
     xy_field = xy_map @ T_field_map[:2, :2].T + T_field_map[:2, 3]
     return GridNodes(
         xy_field, (row + 1).astype(np.intp), (column + 1).astype(np.intp), snap_radius_m
+    )
+
+
+def plan_nodes(grid: PlantingGrid, T_field_map: Matrix4) -> GridNodes:
+    """The nodes of a plan's planting grid (map frame, ``session-format.md``) in the field
+    frame."""
+    return grid_nodes(
+        grid.rows,
+        grid.columns,
+        grid.row_spacing_m,
+        grid.plant_spacing_m,
+        (grid.origin.x, grid.origin.y),
+        grid.row_direction_deg,
+        T_field_map,
     )
 
 

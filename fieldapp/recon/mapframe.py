@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from devices.geometry import Matrix4, make_transform, rotation_z, transform_points
 from fieldapp.io.session import Session
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.grid import GridNodes, grid_nodes
+from fieldapp.recon.grid import GridNodes, plan_nodes
 from fieldapp.recon.register import StationRegistration
 
 
@@ -141,13 +141,5 @@ def session_grid(
     if T_map_field is None:
         warnings.append("planting grid not used: the session has no map poses to place it")
         return None, None
-    nodes = grid_nodes(
-        grid.rows,
-        grid.columns,
-        grid.row_spacing_m,
-        grid.plant_spacing_m,
-        (grid.origin.x, grid.origin.y),
-        grid.row_direction_deg,
-        np.eye(4),  # the output frame is the map's
-    )
+    nodes = plan_nodes(grid, np.eye(4))  # the output frame is the map's
     return nodes, grid.expected_plants

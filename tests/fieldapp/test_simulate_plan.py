@@ -9,7 +9,7 @@ from devices.sim.rig import RigGeometry
 from devices.sim.scene import PlotLayout, plot_scene
 from fieldapp.cli.simulate import simulated_plan
 from fieldapp.io.planting import SessionPlan
-from fieldapp.recon.grid import grid_nodes
+from fieldapp.recon.grid import plan_nodes
 
 
 def test_the_simulated_plan_holds_the_grid_the_plants_were_sown_on() -> None:
@@ -18,15 +18,7 @@ def test_the_simulated_plan_holds_the_grid_the_plants_were_sown_on() -> None:
     grid = plan.planting_grid
     assert grid is not None and grid.expected_plants == 16
     assert [s.number for s in plan.stations] == list(rig.stations)
-    nodes = grid_nodes(
-        grid.rows,
-        grid.columns,
-        grid.row_spacing_m,
-        grid.plant_spacing_m,
-        (grid.origin.x, grid.origin.y),
-        grid.row_direction_deg,
-        np.eye(4),
-    )
+    nodes = plan_nodes(grid, np.eye(4))  # in the map frame
     T_map_field = invert(rig.T_field_map)
     for seed in (0, 3):
         plants = plot_scene(seed).plants
