@@ -17,6 +17,12 @@ import platformdirs
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+# pydantic imports this module lazily, at the first schema that needs it; two threads doing so at
+# once (the GUI building pages while a worker builds models) can meet an import cycle inside
+# pydantic and one gets a partially initialised module (ImportError, seen once in the packaged
+# smoke test). Settings load first in every entry point, on the main thread: import it here.
+import pydantic._internal._validators  # noqa: F401  isort: skip
+
 from fieldapp.io.jsonfile import field_path
 from fieldapp.recon.settings import ReconstructionSettings
 from fieldapp.results.settings import ResultsSettings
