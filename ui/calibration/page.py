@@ -117,18 +117,31 @@ class CalibratePage(QtWidgets.QStackedWidget):
     def _overview(self) -> QtWidgets.QWidget:
         overview = QtWidgets.QWidget()
         layout = QtWidgets.QVBoxLayout(overview)
+        rig = QtWidgets.QGroupBox("Rig calibration")
+        rig_layout = QtWidgets.QVBoxLayout(rig)
         row = QtWidgets.QHBoxLayout()
-        row.addWidget(QtWidgets.QLabel("Rig calibration file"))
+        row.addWidget(QtWidgets.QLabel("Calibration file"))
         row.addWidget(self.path, 1)
-        layout.addLayout(row)
-        layout.addWidget(self.state)
-        layout.addWidget(self.session)
+        rig_layout.addLayout(row)
+        rig_layout.addWidget(self.state)
+        rig_layout.addWidget(self.session)
+        layout.addWidget(rig)
+        steps = QtWidgets.QGroupBox("Calibrations, in this order")
+        steps_layout = QtWidgets.QVBoxLayout(steps)
+        hint = QtWidgets.QLabel(
+            "Each opens here as a page. <i>&lt; Calibration overview</i> (or Alt+Left on its "
+            "first step) comes back and leaves it as it is, a solve under way included; "
+            "its Cancel or Finish closes it. Esc is STOP, as everywhere."
+        )
+        hint.setWordWrap(True)
+        steps_layout.addWidget(hint)
         for key, label, _ in WIZARDS:
             button = QtWidgets.QPushButton(label)
             button.setStyleSheet("text-align:left; padding:10px; font-size:14px")
             button.clicked.connect(lambda _=False, k=key: self.open_wizard(k))
-            layout.addWidget(button)
+            steps_layout.addWidget(button)
             self.buttons[key] = button
+        layout.addWidget(steps)
         layout.addStretch(1)
         return overview
 

@@ -40,8 +40,10 @@ class Workspace(QtWidgets.QWidget):
         self.steps.setObjectName("calibrationSteps")
         self.steps.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
         self.steps.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.NoSelection)
-        self.steps.setFixedWidth(210)
+        self.steps.setFixedWidth(240)
         self.steps.setWordWrap(True)
+        self.steps.setTextElideMode(QtCore.Qt.TextElideMode.ElideNone)
+        self.steps.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         self.steps.setStyleSheet("#calibrationSteps::item { padding:8px 4px; }")
         for number, page_id in enumerate(wizard.pageIds(), start=1):
             self.steps.addItem(f"{number}. {wizard.page(page_id).title()}")
@@ -101,6 +103,7 @@ class Workspace(QtWidgets.QWidget):
             item.setFont(font)
             item.setForeground(QtGui.QColor("#1565c0" if row == index else "#37474f"))
             item.setBackground(QtGui.QColor("#e3f2fd" if row == index else "transparent"))
+        self.steps.doItemsLayout()  # a bold step may wrap onto two lines
         self.step.setText(self.state_text())
 
     @QtCore.Slot()

@@ -41,6 +41,7 @@ def test_intrinsics_wizard_to_a_saved_calibration(qtbot, boards_session, tmp_pat
     wizard = IntrinsicsWizard(tmp_path / "rig.json", serial="SIM-1")
     qtbot.addWidget(wizard)
     wizard.show()
+    wizard.resize(1000, 720)  # the pictures scale to the room they have, never grow it
     wizard.next()
     page = wizard.capture
     assert not page.isComplete()
@@ -70,6 +71,8 @@ def test_intrinsics_wizard_to_a_saved_calibration(qtbot, boards_session, tmp_pat
     worst = max(timed, key=lambda v: v.error_px)
     assert picture.choice.count() == len(timed) and worst.name in picture.choice.currentText()
     assert not picture.picture.pixmap().isNull() and worst.name in picture.caption.text()
+    QtWidgets.QApplication.processEvents()  # the layout settles with the pictures shown
+    assert (wizard.width(), wizard.height()) == (1000, 720)
     for view in timed:  # the corners reprojected through the solved lens
         found = picture.reprojection_of(view.name)
         assert found is not None
