@@ -104,6 +104,10 @@ class SessionPage(QtWidgets.QWizardPage):
 
     def initializePage(self) -> None:
         self.preview.board = self.board()
+        self.load_remembered()
+
+    def load_remembered(self) -> None:
+        """Load the folder another wizard chose, unless one is chosen or typed here."""
         remembered = remembered_session(self.ui_state)
         if self.session is None and not self.folder.text().strip() and remembered is not None:
             self._try(lambda: self.load(remembered))
