@@ -54,8 +54,8 @@ class Workspace(QtWidgets.QWidget):
         row.addWidget(self.steps)
         row.addWidget(wizard, 1)
         layout.addLayout(row, 1)
-        back = QtGui.QShortcut(QtGui.QKeySequence(QtGui.QKeySequence.StandardKey.Back), self)
-        back.setContext(QtCore.Qt.ShortcutContext.WidgetWithChildrenShortcut)
+        back = QtGui.QShortcut(QtGui.QKeySequence("Alt+Left"), self)  # not Backspace
+        back.setContext(QtCore.Qt.ShortcutContext.WindowShortcut)  # only the page shown
         back.activated.connect(self.go_back)
         wizard.currentIdChanged.connect(lambda _: self.update_steps())
         wizard.solve.completeChanged.connect(self.update_steps)

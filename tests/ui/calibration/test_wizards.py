@@ -244,7 +244,10 @@ def test_calibrate_page_opens_each_wizard_as_a_page(qtbot, tmp_path):
     page = CalibratePage(tmp_path / "rig.json", ui_state=UiState(tmp_path / "ui.ini"))
     qtbot.addWidget(page)
     page.show()
+    page.activateWindow()  # for the Alt+Left shortcut
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is page, timeout=90_000)
     assert "no calibration yet" in page.state.text()
+    alt_left = QtCore.Qt.Key.Key_Left, QtCore.Qt.KeyboardModifier.AltModifier
     for key in ("intrinsics", "views", "stations", "ground"):
         wizard = page.open_wizard(key)
         space = page.currentWidget()
@@ -256,9 +259,9 @@ def test_calibrate_page_opens_each_wizard_as_a_page(qtbot, tmp_path):
         assert page.wizard is wizard and wizard.isVisible()
         wizard.next()
         assert space.step_index() == 1 and space.steps.item(1).font().bold()
-        space.go_back()  # Alt+Left: the wizard's Back, then the overview
+        qtbot.keyClick(wizard.currentPage(), *alt_left)  # the wizard's Back, then the overview
         assert wizard.currentId() == wizard.pageIds()[0] and page.wizard is wizard
-        space.go_back()
+        qtbot.keyClick(wizard.currentPage(), *alt_left)
         assert page.currentWidget() is page.overview and key in page.wizards
         assert "continue: step 1 of" in page.buttons[key].text()
     assert page.open_wizard("views") is page.wizards["views"]  # the same one, as left
