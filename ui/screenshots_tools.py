@@ -2,9 +2,8 @@
 ``xvfb-run -a -s "-screen 0 1600x1000x24" .venv/bin/python -m ui.screenshots_tools docs/images``.
 
 The Live page with the automatic depth range, its histogram and a distance between two
-clicked points; a paused mission and a capture opened from its grid; the intrinsics solve
-page with its error bars and reprojection overlay, a view picked from the capture list, and
-the stations solve page with its top view (on a simulated checkerboard session, ~1 min).
+clicked points; a paused mission and a capture opened from its grid; the calibration pages
+(``ui.calibration.screenshots``: on a simulated checkerboard session, ~1 min).
 """
 
 from __future__ import annotations
@@ -84,47 +83,10 @@ def mission(out: Path) -> None:
 
 
 def calibration(out: Path) -> None:
-    from fieldapp.cli import main as cli
-    from ui.calibration.intrinsics_wizard import IntrinsicsWizard
-    from ui.calibration.session_wizards import StationsWizard, ViewsWizard
-    from ui.state import UiState
+    """The calibration pages in the main window (``ui.calibration.screenshots``)."""
+    from ui.calibration.screenshots import shoot
 
-    with tempfile.TemporaryDirectory() as tmp_name:
-        tmp = Path(tmp_name)
-        boards = tmp / "boards"
-        args = ["simulate", "--out", str(boards), "--scene", "checkerboard", "--stations", "4,5"]
-        cli([*args, "--views", "0-7", "--intrinsics-images", "12"])
-        state, rig = UiState(tmp / "ui.ini"), tmp / "rig.json"
-        intrinsics = IntrinsicsWizard(rig, ui_state=state)
-        intrinsics.show()
-        intrinsics.next()
-        intrinsics.capture.add_images(sorted((boards / "intrinsics").glob("*.png")))
-        intrinsics.capture.listing.setCurrentRow(2)
-        pump(timeout_s=1.0)
-        save(intrinsics, out, "calib-capture-view")
-        intrinsics.next()
-        intrinsics.solve.wait(120)
-        pump(timeout_s=1.0)
-        save(intrinsics, out, "calib-reprojection")
-        intrinsics.reject()
-        views = ViewsWizard(rig, ui_state=state)
-        views.show()
-        views.board_form.square_mm.setValue(50.0)
-        views.next()
-        views.session_page.load(boards)
-        views.next()
-        views.solve.wait(120)
-        views.next()
-        views.save.save()
-        views.reject()
-        stations = StationsWizard(rig, ui_state=state)
-        stations.show()
-        stations.next()  # the session folder is remembered
-        stations.next()
-        stations.solve.wait(120)
-        pump(timeout_s=1.0)
-        save(stations, out, "calib-stations")
-        stations.reject()
+    shoot(out)
 
 
 AREAS = ("live", "mission", "calibration")

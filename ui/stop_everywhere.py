@@ -73,8 +73,12 @@ class StopEverywhere(QtCore.QObject):
         kind = event.type()
         if kind == QtCore.QEvent.Type.KeyPress and isinstance(event, QtGui.QKeyEvent):
             return self._key(watched, event)
-        shown = kind == QtCore.QEvent.Type.Show
-        if shown and isinstance(watched, QtWidgets.QDialog) and self._ours(watched):
+        if (
+            kind == QtCore.QEvent.Type.Show
+            and isinstance(watched, QtWidgets.QDialog)
+            and watched.isWindow()  # a wizard shown as a page has the window's own STOP
+            and self._ours(watched)
+        ):
             self._float_stop(watched)
         return False
 

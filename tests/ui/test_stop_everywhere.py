@@ -94,6 +94,8 @@ def test_the_stop_button_works_while_a_modal_dialog_blocks_the_window(
 def test_esc_in_a_wizard_stops_and_keeps_the_wizard_open(
     make_window: Callable[..., MainWindow], qtbot: QtBot, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """A calibration wizard is a page of the window: Esc in it is STOP, the wizard stays on
+    its step, and the window's own STOP button is the one to click (no floating copy)."""
     window = make_window()
     calls: list[str] = []
     monkeypatch.setattr(window.context.hub, "emergency_stop", lambda: calls.append("stop"))
@@ -101,12 +103,16 @@ def test_esc_in_a_wizard_stops_and_keeps_the_wizard_open(
     calibrate = window.pages["calibrate"]
     wizard = calibrate.open_wizard("views")  # type: ignore[attr-defined]
     qtbot.waitExposed(wizard)
-    qtbot.keyClick(wizard, QtCore.Qt.Key.Key_Escape)
-    assert calls == ["stop"] and wizard.isVisible()
-    button = floating_stop(wizard)
-    assert button is not None
-    qtbot.mouseClick(button, QtCore.Qt.MouseButton.LeftButton)
+    wizard.next()
+    step = wizard.currentId()
+    qtbot.keyClick(wizard.currentPage(), QtCore.Qt.Key.Key_Escape)
+    assert calls == ["stop"] and wizard.isVisible() and wizard.currentId() == step
+    assert floating_stop(wizard) is None and window.stop_button.isVisible()
+    qtbot.mouseClick(window.stop_button, QtCore.Qt.MouseButton.LeftButton)
     assert calls == ["stop", "stop"]
+    window.show_page("mission")  # another page and back: the wizard as it was left
+    window.show_page("calibrate")
+    assert calibrate.wizard is wizard and wizard.currentId() == step  # type: ignore[attr-defined]
     wizard.reject()
 
 

@@ -28,9 +28,9 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Calibration
 from ui.calibration.board_form import BoardForm
 from ui.calibration.live import BoardPreview, CoverageMap
-from ui.calibration.pages import WIZARD_SIZE, PreparePage, SavePage, SolvePage
+from ui.calibration.pages import CalibrationWizard, PreparePage, SavePage, SolvePage
 from ui.calibration.pictures import ReprojectionPicture
-from ui.calibration.session_page import remembered_session
+from ui.calibration.remembered import remembered_session
 from ui.state import UiState
 
 DEFAULT_BOARD = Board(9, 6, 40.0)
@@ -187,7 +187,7 @@ def describe(result: IntrinsicsResult) -> tuple[list[str], Verdict]:
     return lines, intrinsics_verdict(result)
 
 
-class IntrinsicsWizard(QtWidgets.QWizard):
+class IntrinsicsWizard(CalibrationWizard):
     def __init__(
         self,
         calibration_path: Path,
@@ -210,7 +210,7 @@ class IntrinsicsWizard(QtWidgets.QWizard):
         self.save = SavePage(calibration_path, self._update)
         for page in (self.prepare, self.capture, self.solve, self.save):
             self.addPage(page)
-        self.resize(*WIZARD_SIZE)
+        self.watch_solve()
 
     def _solve(self) -> Callable[[], IntrinsicsResult]:
         images = [(name, image) for name, image, _ in self.capture.views]
@@ -220,7 +220,5 @@ class IntrinsicsWizard(QtWidgets.QWizard):
         result: IntrinsicsResult = self.solve.result
         return service.merge_intrinsics(current, result, self.board_form.board(), self.serial)
 
-    def done(self, result: int) -> None:
-        self.capture.preview.stop()
-        self.solve.wait()
-        super().done(result)
+    def previews(self) -> list[Any]:
+        return [self.capture.preview]

@@ -63,6 +63,9 @@ class BoardPreview(QtWidgets.QWidget):
         self.picture = QtWidgets.QLabel("no image yet")
         self.picture.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
         self.picture.setMinimumSize(320, 265)
+        # scaled to the room it has: its pixmap never grows the page (nor the window)
+        ignored = QtWidgets.QSizePolicy.Policy.Ignored
+        self.picture.setSizePolicy(ignored, ignored)
         self.state = QtWidgets.QLabel("")
         self.state.setObjectName("boardState")
         self.state.setWordWrap(True)  # the whole "BOARD NOT FOUND" advice, never cut off

@@ -8,7 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 from superqt.utils import create_worker
 
 from fieldapp.calib import service
@@ -24,8 +24,6 @@ VERDICT_STYLE = {
     Level.REDO: "background:#c62828;color:white;padding:6px;font-weight:bold",
 }
 ERROR_STYLE = "color:#c62828;font-weight:bold"
-WIZARD_SIZE = (1100, 760)
-"""Room for the pictures of a result beside its figures."""
 
 
 class PreparePage(QtWidgets.QWizardPage):
@@ -149,6 +147,65 @@ class SolvePage(QtWidgets.QWizardPage):
         self.worker = None
         self.progress.hide()
         self.completeChanged.emit()
+
+
+class CalibrationWizard(QtWidgets.QWizard):
+    """What every calibration wizard shares, shown as a page of the Calibrate area (see
+    :class:`ui.calibration.workspace.Workspace`) or, in tests, as a window of its own:
+
+    - Esc never closes it (Esc is the application's STOP, see ``ui/stop_everywhere.py``);
+    - Back is disabled while the solve runs, so a solve under way is never left behind;
+    - Cancel while solving asks first (``ask(question) -> bool``, a message box by default);
+    - closing waits for the solve and stops the live previews (:meth:`previews`).
+
+    Subclasses set :attr:`solve` (their :class:`SolvePage`) before adding their pages."""
+
+    solve: SolvePage
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.ask: Callable[[str], bool] = self._ask
+        self.setOption(QtWidgets.QWizard.WizardOption.NoBackButtonOnStartPage, True)
+        self.currentIdChanged.connect(lambda _: self._update_back())
+
+    @property
+    def solving(self) -> bool:
+        return self.solve.running
+
+    def previews(self) -> list[Any]:
+        """The live previews (``stop()``-able) to stop when the wizard closes."""
+        return []
+
+    def watch_solve(self) -> None:
+        """Keep Back disabled while ``solve`` runs (call once its page is added)."""
+        self.solve.completeChanged.connect(self._update_back)
+
+    def reject(self) -> None:
+        """Cancel: while a solve runs, only when the operator agrees to lose it."""
+        question = "A solve is running. Close this calibration and lose its result?"
+        if self.solving and not self.ask(question):
+            return
+        super().reject()
+
+    def done(self, result: int) -> None:
+        for preview in self.previews():
+            preview.stop()
+        self.solve.wait()
+        super().done(result)
+
+    def keyPressEvent(self, event: QtGui.QKeyEvent) -> None:
+        if event.key() == QtCore.Qt.Key.Key_Escape:
+            event.ignore()  # a dialog would close on Esc: here Esc is STOP, nothing else
+            return
+        super().keyPressEvent(event)
+
+    def _update_back(self) -> None:
+        if self.currentPage() is self.solve and self.solving:
+            self.button(QtWidgets.QWizard.WizardButton.BackButton).setEnabled(False)
+
+    def _ask(self, question: str) -> bool:
+        answer = QtWidgets.QMessageBox.question(self, self.windowTitle(), question)
+        return answer == QtWidgets.QMessageBox.StandardButton.Yes
 
 
 class SavePage(QtWidgets.QWizardPage):

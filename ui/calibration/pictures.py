@@ -112,7 +112,10 @@ class ReprojectionPicture(QtWidgets.QWidget):
         self.choice.currentIndexChanged.connect(self._show_choice)
         self.picture = QtWidgets.QLabel("")
         self.picture.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
-        self.picture.setMinimumSize(360, 300)
+        self.picture.setMinimumSize(360, 260)
+        # scaled to the room it has: its pixmap never grows the page (nor the window)
+        ignored = QtWidgets.QSizePolicy.Policy.Ignored
+        self.picture.setSizePolicy(ignored, ignored)
         self.caption = QtWidgets.QLabel("")
         self.caption.setWordWrap(True)
         row = QtWidgets.QHBoxLayout()

@@ -3,8 +3,9 @@ folder (e.g. ``fieldapp simulate --scene checkerboard``), or a new session captu
 the live camera (:class:`~fieldapp.io.writer.SessionWriter`, one capture per station and view
 the operator sets). Selecting a capture shows it with the board's corners drawn.
 
-The folder last loaded is remembered (QSettings, :data:`SESSION_KEY`) and loaded again when
-the next wizard opens, so a session is chosen once for the view, station and ground wizards."""
+The folder last loaded is remembered (QSettings, :mod:`ui.calibration.remembered`) and loaded
+again when the next wizard opens, so a session is chosen once for the view, station and ground
+wizards."""
 
 from __future__ import annotations
 
@@ -20,17 +21,10 @@ from fieldapp.io.calibration import Calibration
 from fieldapp.io.session import Session, load_session
 from fieldapp.io.writer import SessionWriter
 from ui.calibration.live import BoardPreview
+from ui.calibration.remembered import SESSION_KEY, remembered_session
 from ui.state import UiState
 
-SESSION_KEY = "calibration/session_folder"
-
-
-def remembered_session(ui_state: UiState | None) -> Path | None:
-    """The calibration session folder used last, if it still exists."""
-    if ui_state is None:
-        return None
-    text = ui_state.text(SESSION_KEY)
-    return Path(text) if text and (Path(text) / "session.json").is_file() else None
+__all__ = ["SESSION_KEY", "SessionPage", "remembered_session"]
 
 
 class SessionPage(QtWidgets.QWizardPage):
@@ -110,6 +104,10 @@ class SessionPage(QtWidgets.QWizardPage):
 
     def initializePage(self) -> None:
         self.preview.board = self.board()
+        self.load_remembered()
+
+    def load_remembered(self) -> None:
+        """Load the folder another wizard chose, unless one is chosen or typed here."""
         remembered = remembered_session(self.ui_state)
         if self.session is None and not self.folder.text().strip() and remembered is not None:
             self._try(lambda: self.load(remembered))

@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 from PySide6 import QtWidgets
 
@@ -25,7 +26,7 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Calibration
 from fieldapp.io.session import Session
 from ui.calibration.board_form import BoardForm
-from ui.calibration.pages import WIZARD_SIZE, PreparePage, SavePage, SolvePage
+from ui.calibration.pages import CalibrationWizard, PreparePage, SavePage, SolvePage
 from ui.calibration.pictures import StationLayout
 from ui.calibration.session_page import SessionPage
 from ui.state import UiState
@@ -64,7 +65,7 @@ def station_lines(result: StationsResult, reference: int) -> list[str]:
     return lines
 
 
-class _SessionWizard(QtWidgets.QWizard):
+class _SessionWizard(CalibrationWizard):
     def __init__(
         self,
         title: str,
@@ -86,7 +87,7 @@ class _SessionWizard(QtWidgets.QWizard):
         self.solve, self.save = solve, save
         for page in (prepare, self.session_page, solve, save):
             self.addPage(page)
-        self.resize(*WIZARD_SIZE)
+        self.watch_solve()
 
     def in_force(self) -> Calibration | None:
         """The rig's calibration file as it is now (None when absent)."""
@@ -104,10 +105,8 @@ class _SessionWizard(QtWidgets.QWizard):
     def base(self, current: Calibration | None) -> Calibration:
         return current if current is not None else self.session.calibration
 
-    def done(self, result: int) -> None:
-        self.session_page.preview.stop()
-        self.solve.wait()
-        super().done(result)
+    def previews(self) -> list[Any]:
+        return [self.session_page.preview]
 
 
 class ViewsWizard(_SessionWizard):
