@@ -237,6 +237,7 @@ class CorrectionBar(QtWidgets.QWidget):
             self._showing_own = False
         present = {p.plant for p in corrected.plot.plants}
         self.select_plants([p for p in self.involved if p in present])
+        self.panel.stage.setText(f"corrected: {len(present)} plants")  # not the run's count
         applied = self.corrections.applied
         unmatched = applied.unmatched if applied else []
         count = len(self.corrections.operations)

@@ -227,6 +227,7 @@ class _ClickableGL(gl.GLViewWidget):  # type: ignore[misc]
         as the view turns (GLTextItem and painting inside paintGL draw nothing on some
         drivers)."""
         for widget in self.overlays.get(group, ([], []))[1]:
+            widget.hide()  # at once: a deferred delete waits for the event loop
             widget.deleteLater()
         widgets = []
         for text, _ in labels:

@@ -10,7 +10,7 @@ import shutil
 
 import numpy as np
 import pytest
-from PySide6 import QtCore
+from PySide6 import QtCore, QtWidgets
 
 from fieldapp.io.durable import write_bytes_durably
 from fieldapp.recon.outputs import ply_bytes, read_labelled_ply
@@ -135,6 +135,8 @@ def test_split_by_picking_the_stems_in_the_3d_view(qtbot, gl_panel, plots, tmp_p
     assert list(table(panel)) == [1, 2]
     assert table(panel)[2].x_m == pytest.approx(STEMS[1][0], abs=0.02)
     assert not view.picking and len(view.view.markers.pos) == 0
+    stem_labels = [w for w in widget.findChildren(QtWidgets.QLabel) if w.text().startswith("stem")]
+    assert not [w for w in stem_labels if not w.isHidden()]  # the markers' numbers gone too
     assert panel.correction.selected_plants() == [1, 2]
     assert [op.kind for op in read_corrections(folder).operations] == ["split"]
 
@@ -156,3 +158,31 @@ def test_the_operator_field_is_labelled(panel):
     assert bar.author_label.buddy() is bar.author
     for tip in (bar.author.toolTip(), bar.author_label.toolTip()):
         assert "corrections.json" in tip and "results database" in tip
+
+
+def test_without_opengl_the_side_view_picks_too(qtbot, plots):
+    """The fallback side view (x against height) picks the same way."""
+    view = view3d.CloudView()
+    qtbot.addWidget(view)
+    assert not view.is_3d  # the offscreen platform has no OpenGL
+    results = load_results_dir(plots["merged"])
+    view.show_scene(build_scene(results))
+    view.resize(800, 600)
+    view.show()
+    qtbot.waitExposed(view)
+    points = results.plant_clouds[1].points
+    view.start_picking(points)
+    picked, missed = [], []
+    view.point_picked.connect(picked.append)
+    view.pick_missed.connect(lambda: missed.append(True))
+    side = view.view
+    qtbot.waitUntil(lambda: side.plotItem.vb.viewRect().width() > 0.1)
+    top = np.argmax(np.where(np.hypot(*(points[:, :2] - STEMS[1]).T) < 0.01, points[:, 2], -1))
+    for x_m, z_m in ((points[top, 0], points[top, 2] - 0.005), (0.15, 0.5)):  # stem, then air
+        scene_point = side.plotItem.vb.mapViewToScene(QtCore.QPointF(x_m, z_m))
+        click = side.mapFromScene(scene_point)
+        qtbot.mouseClick(side.viewport(), QtCore.Qt.MouseButton.LeftButton, pos=click)
+    assert len(picked) == 1 and missed == [True]
+    assert np.hypot(*(picked[0][:2] - STEMS[1])) < 0.01
+    view.stop_picking()
+    view.close()
