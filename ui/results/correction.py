@@ -356,12 +356,21 @@ class CorrectionBar(QtWidgets.QWidget):
 
     def _build(self) -> None:
         self.toolbar = QtWidgets.QToolBar("Corrections")
-        self.merge_action = self._action("Merge", self.merge, "Merge the selected plants")
-        self.split_action = self._action(
-            "Split…", self.start_split, "Split the selected plant: click its stems on the map"
+        self.merge_action = self._action(
+            "Merge", self.merge, "Merge the plants selected in the table (Ctrl-click 2 or more)"
         )
-        self.delete_action = self._action("Delete", self.delete, "Not a plant: delete it")
-        self.renumber_action = self._action("Renumber as", self.renumber, "Give it a number")
+        self.split_action = self._action(
+            "Split…",
+            self.start_split,
+            "Split the plant selected in the table: then click each of its stems in the 3D "
+            "view or on the map",
+        )
+        self.delete_action = self._action(
+            "Delete", self.delete, "The plant selected in the table is no plant: delete it"
+        )
+        self.renumber_action = self._action(
+            "Renumber as", self.renumber, "Give the plant selected in the table this number"
+        )
         self.number = QtWidgets.QSpinBox()
         self.number.setRange(1, 99_999)
         self.toolbar.addWidget(self.number)
