@@ -1,13 +1,14 @@
 """Correcting the plants by hand in the results panel: merge the plants selected in the table,
-split one by clicking its stems on the map (or typing them), delete a phantom, renumber a
-plant, undo (Ctrl+Z). The corrections are applied, the plants measured again and the folder
-reread on a worker; the table, 3D view and map then show the corrected plot. A new
-reconstruction gets the saved corrections again (:mod:`fieldapp.results.corrected`)."""
+split one by clicking its stems in the 3D view or on the map (or typing them:
+:mod:`ui.results.stem_picking`), delete a phantom, renumber a plant, undo (Ctrl+Z). The
+corrections are applied, the plants measured again and the folder reread on a worker; the
+table, 3D view and map then show the corrected plot with the plants the correction made
+selected and highlighted. A new reconstruction gets the saved corrections again
+(:mod:`fieldapp.results.corrected`)."""
 
 from __future__ import annotations
 
 import logging
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,6 +29,7 @@ from fieldapp.results.corrections import (
 )
 from ui.results.data import PlotResults, load_results_dir
 from ui.results.scene import CloudScene, build_scene
+from ui.results.stem_picking import StemPicker
 from ui.workers import WorkerSet
 
 if TYPE_CHECKING:
@@ -37,8 +39,11 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 CORRECTED_BRUSH = QtGui.QBrush(QtGui.QColor(255, 236, 160))
-_NUMBER = r"[-+]?\d+(?:\.\d*)?"
-_POINT = re.compile(rf"\s*({_NUMBER})\s*[, ]\s*({_NUMBER})\s*")
+AUTHOR_TIP = (
+    "Your name, kept as the author of each correction you make: in corrections.json in the "
+    "results folder and in the results database. It starts as the computer's login name; "
+    "type yours."
+)
 
 
 @dataclass(frozen=True)
@@ -50,18 +55,6 @@ class Corrected:
     scene: CloudScene
     db_problem: str = ""
     """Why the results database could not keep them (they are in the folder all the same)."""
-
-
-def parse_stems(text: str) -> list[tuple[float, float]]:
-    """``"0.10, 0.20; 0.35, 0.22"`` -> [(0.1, 0.2), (0.35, 0.22)] (metres, map frame);
-    raises :class:`FieldappError` naming the bad entry."""
-    stems = []
-    for part in (p for p in text.split(";") if p.strip()):
-        match = _POINT.fullmatch(part)
-        if match is None:
-            raise FieldappError(f"stem points: {part.strip()!r} is not 'x, y' in metres")
-        stems.append((float(match[1]), float(match[2])))
-    return stems
 
 
 def _job(
@@ -97,12 +90,17 @@ class CorrectionBar(QtWidgets.QWidget):
         self.corrections = Corrections()
         self.workers = WorkerSet()
         self._showing_own = False
-        self.split_plant: int | None = None
+        self.involved: list[int] = []
+        """The plants the last correction applied made or gave back (selected after it)."""
         self._build()
         panel.results_shown.connect(self._shown)
         panel.runner.succeeded.connect(self._reconstructed)
-        panel.map.scene().sigMouseClicked.connect(self._map_clicked)
         self._update()
+
+    @property
+    def split_plant(self) -> int | None:
+        """The plant whose stems are being picked (None: no split being prepared)."""
+        return self.picker.plant
 
     # --- the actions -------------------------------------------------------------------
 
@@ -114,16 +112,20 @@ class CorrectionBar(QtWidgets.QWidget):
         self._change(add=Merge(plants=refs, into=min(plants), author=self._author()))
 
     def start_split(self) -> None:
-        """Pick the stems of the selected plant on the map (or type them), then split."""
+        """Pick the stems of the selected plant in the 3D view or on the map (or type them),
+        then split. The plant is the one selected now, whatever is clicked meanwhile."""
         plant = self._one("split")
-        self.split_plant = plant  # map clicks may select another plant meanwhile
-        self.stems.clear()
-        self.split_row.setVisible(True)
-        self.status.setText(f"split plant {plant}: click each stem on the map, then Apply split")
+        results = self.panel.results
+        if results is None or plant not in results.plant_clouds:
+            raise FieldappError(f"plant {plant} has no points in this results folder")
+        self.picker.start(plant, results.plant_clouds[plant].points)
+        self.status.setText(
+            f"split plant {plant}: click each stem near its foot (3D view or map), then Apply split"
+        )
 
     def split(self) -> None:
         plant = self.split_plant if self.split_plant is not None else self._one("split")
-        stems = parse_stems(self.stems.text())
+        stems = self.picker.stems_xy_m()
         if len(stems) < 2:
             raise FieldappError("split: pick two or more stems")
         numbers = self._free_numbers(len(stems) - 1)
@@ -195,13 +197,16 @@ class CorrectionBar(QtWidgets.QWidget):
         from fieldapp.results.corrected import add_correction, apply_corrections, undo_correction
 
         change: Any
+        self.involved = []
         if add is not None:
             self.status.setText(f"{describe(add)}…")
+            self.involved = made_by(add)
 
             def change(folder: Path, settings: ReconstructionSettings) -> Result:
                 return add_correction(folder, corrections, add, settings)
         elif undo:
             self.status.setText(f"undo {describe(corrections.operations[-1])}…")
+            self.involved = undone_by(corrections.operations[-1])
 
             def change(folder: Path, settings: ReconstructionSettings) -> Result:
                 return undo_correction(folder, corrections, settings)
@@ -230,6 +235,9 @@ class CorrectionBar(QtWidgets.QWidget):
             self.panel.show_results(corrected.plot, corrected.scene)
         finally:
             self._showing_own = False
+        present = {p.plant for p in corrected.plot.plants}
+        self.select_plants([p for p in self.involved if p in present])
+        self.panel.stage.setText(f"corrected: {len(present)} plants")  # not the run's count
         applied = self.corrections.applied
         unmatched = applied.unmatched if applied else []
         count = len(self.corrections.operations)
@@ -297,21 +305,28 @@ class CorrectionBar(QtWidgets.QWidget):
         self.corrections = document.model_copy(update={"applied": None})
         self._change(reapply=True)
 
-    def _map_clicked(self, event: Any) -> None:
-        if self.split_plant is None:
-            return
-        position = self.panel.map.plotItem.vb.mapSceneToView(event.scenePos())
-        self.add_stem(position.x(), position.y())
-
     def _end_split(self) -> None:
-        self.split_plant = None
-        self.split_row.setVisible(False)
+        self.picker.end()
         self.status.setText("")
 
     def add_stem(self, x_m: float, y_m: float) -> None:
         """Add a stem point (map frame) to the split being prepared."""
-        text = self.stems.text().strip()
-        self.stems.setText(f"{text}; {x_m:.3f}, {y_m:.3f}" if text else f"{x_m:.3f}, {y_m:.3f}")
+        self.picker.add(x_m, y_m)
+
+    def select_plants(self, plants: list[int]) -> None:
+        """Select ``plants`` in the table (the first current) and highlight exactly their
+        points in the 3D view and their circles on the map."""
+        panel = self.panel
+        panel.select_plant(plants[0] if plants else None)
+        selection = panel.table.selectionModel()
+        flags = QtCore.QItemSelectionModel.SelectionFlag
+        for plant in plants[1:]:
+            row = panel.plant_model.row_of(plant)
+            if row is not None:
+                index = panel.proxy.mapFromSource(panel.plant_model.index(row, 0))
+                selection.select(index, flags.Select | flags.Rows)
+        panel.view3d.highlight(plants)
+        panel.map.highlight(plants)
 
     def _mark(self, results: PlotResults) -> None:
         """Colour the table rows of the plants corrected by hand."""
@@ -341,12 +356,21 @@ class CorrectionBar(QtWidgets.QWidget):
 
     def _build(self) -> None:
         self.toolbar = QtWidgets.QToolBar("Corrections")
-        self.merge_action = self._action("Merge", self.merge, "Merge the selected plants")
-        self.split_action = self._action(
-            "Split…", self.start_split, "Split the selected plant: click its stems on the map"
+        self.merge_action = self._action(
+            "Merge", self.merge, "Merge the plants selected in the table (Ctrl-click 2 or more)"
         )
-        self.delete_action = self._action("Delete", self.delete, "Not a plant: delete it")
-        self.renumber_action = self._action("Renumber as", self.renumber, "Give it a number")
+        self.split_action = self._action(
+            "Split…",
+            self.start_split,
+            "Split the plant selected in the table: then click each of its stems in the 3D "
+            "view or on the map",
+        )
+        self.delete_action = self._action(
+            "Delete", self.delete, "The plant selected in the table is no plant: delete it"
+        )
+        self.renumber_action = self._action(
+            "Renumber as", self.renumber, "Give the plant selected in the table this number"
+        )
         self.number = QtWidgets.QSpinBox()
         self.number.setRange(1, 99_999)
         self.toolbar.addWidget(self.number)
@@ -354,24 +378,22 @@ class CorrectionBar(QtWidgets.QWidget):
         self.undo_action.setShortcut(QtGui.QKeySequence.StandardKey.Undo)
         self.undo_action.setShortcutContext(QtCore.Qt.ShortcutContext.WidgetWithChildrenShortcut)
         self.panel.addAction(self.undo_action)  # Ctrl+Z anywhere in the results panel
+        self.toolbar.addSeparator()
         self.author = QtWidgets.QLineEdit(_login())
-        self.author.setPlaceholderText("operator (optional)")
-        self.author.setToolTip("who made the corrections (kept with each one)")
+        self.author.setPlaceholderText("your name")
+        self.author.setToolTip(AUTHOR_TIP)
         self.author.setMaximumWidth(160)
+        self.author_label = QtWidgets.QLabel(" Corrected by: ")
+        self.author_label.setToolTip(AUTHOR_TIP)
+        self.author_label.setBuddy(self.author)
+        self.toolbar.addWidget(self.author_label)
         self.toolbar.addWidget(self.author)
         self.status = QtWidgets.QLabel("")
-        self.stems = QtWidgets.QLineEdit()
-        self.stems.setPlaceholderText("stems: x, y; x, y (m, map frame) — or click them on the map")
-        apply = QtWidgets.QPushButton("Apply split")
-        apply.clicked.connect(lambda: self._report("split", self.split))
-        cancel = QtWidgets.QPushButton("Cancel")
-        cancel.clicked.connect(self._end_split)
-        self.split_row = QtWidgets.QWidget()
-        split_layout = QtWidgets.QHBoxLayout(self.split_row)
-        split_layout.setContentsMargins(0, 0, 0, 0)
-        for widget in (self.stems, apply, cancel):
-            split_layout.addWidget(widget)
-        self.split_row.setVisible(False)
+        self.picker = StemPicker(self.panel)
+        self.picker.apply_requested.connect(lambda: self._report("split", self.split))
+        self.picker.cancel.clicked.connect(self._end_split)
+        self.split_row = self.picker
+        self.stems = self.picker.stems
         top = QtWidgets.QHBoxLayout()
         top.setContentsMargins(0, 0, 0, 0)
         top.addWidget(self.toolbar)
@@ -414,3 +436,19 @@ def _login() -> str:
         return getpass.getuser()
     except (OSError, KeyError):
         return ""
+
+
+def made_by(operation: Merge | Split | Delete | Relabel) -> list[int]:
+    """The plants ``operation`` leaves in the plot (what to select after it)."""
+    if isinstance(operation, Merge | Relabel):
+        return [operation.into]
+    if isinstance(operation, Split):
+        return list(operation.into)
+    return []
+
+
+def undone_by(operation: Merge | Split | Delete | Relabel) -> list[int]:
+    """The plants undoing ``operation`` gives back."""
+    if isinstance(operation, Merge):
+        return [p.plant for p in operation.plants]
+    return [operation.plant.plant]

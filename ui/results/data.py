@@ -1,5 +1,6 @@
 """What the results panel shows, from a reconstruction just run or a results folder on disk:
-the plants' traits, the global cloud and each plant's cloud (field frame), ``report.json``."""
+the plants' traits, the global cloud and each plant's cloud (field frame), which plant each
+point of the global cloud belongs to, ``report.json``."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from numpy.typing import NDArray
 
 from fieldapp.errors import FormatError, Problem
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.outputs import read_ply
+from fieldapp.recon.outputs import read_labelled_ply
 from fieldapp.results.files import PlantRecord, read_plants_csv, read_report
 from fieldapp.results.organ_tables import read_table
 
@@ -31,6 +32,16 @@ class PlotResults:
     warnings: list[str] = field(default_factory=list)
     leaves: dict[int, list[dict[str, Any]]] = field(default_factory=dict)
     """Per plant, its ``leaves.csv`` rows from the bottom (empty: organs not measured)."""
+    point_plants: NDArray[np.int32] | None = None
+    """(N,) the plant of each point of ``cloud`` (0: none), as the reconstruction or the
+    corrections assigned it; ``None``: not known (see :func:`plant_of_points`)."""
+
+    def plant_of_point(self) -> NDArray[np.int32]:
+        """(N,) the plant of each point of ``cloud``: ``point_plants``, else found exactly
+        from the plant clouds."""
+        if self.point_plants is None:
+            self.point_plants = plant_of_points(self.cloud, self.plant_clouds)
+        return self.point_plants
 
     def plant(self, plant_id: int) -> PlantRecord:
         for record in self.plants:
@@ -52,7 +63,7 @@ def load_results_dir(folder: Path) -> PlotResults:
         raise FormatError([Problem(str(folder), "", "no plants.csv: not a results folder")])
     plants = read_plants_csv(folder / "plants.csv")
     report = read_report(folder / "report.json")
-    cloud = _read_cloud(folder / "cloud.ply")
+    cloud, point_plants = _read_labelled_cloud(folder / "cloud.ply")
     plant_clouds = {}
     for record in plants:
         path = folder / "plants" / f"{record.plant}.ply"
@@ -72,12 +83,45 @@ def load_results_dir(folder: Path) -> PlotResults:
         report,
         warnings=warnings,
         leaves=leaves,
+        point_plants=point_plants,
     )
 
 
+def plant_of_points(cloud: Cloud, plant_clouds: dict[int, Cloud]) -> NDArray[np.int32]:
+    """(N,) for each point of ``cloud`` the plant whose cloud holds the very same point (the
+    files keep the same float32 coordinates), 0 for a point of no plant. For a cloud written
+    without per-point labels (organs not measured)."""
+    found = np.zeros(len(cloud), np.int32)
+    if len(cloud) == 0 or not plant_clouds:
+        return found
+    keys = _point_keys(cloud.points)
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    for plant, plant_cloud in plant_clouds.items():
+        if len(plant_cloud) == 0:
+            continue
+        wanted = _point_keys(plant_cloud.points)
+        where = np.clip(np.searchsorted(sorted_keys, wanted), 0, len(keys) - 1)
+        hit = sorted_keys[where] == wanted
+        found[order[where[hit]]] = plant
+    return found
+
+
+def _point_keys(points_m: NDArray[np.float64]) -> NDArray[np.void]:
+    """(N,) one sortable key per point: its float32 coordinates' bytes."""
+    exact = np.ascontiguousarray(points_m, np.float32)
+    return exact.view(np.dtype((np.void, 12))).ravel()
+
+
 def _read_cloud(path: Path) -> Cloud:
+    return _read_labelled_cloud(path)[0]
+
+
+def _read_labelled_cloud(path: Path) -> tuple[Cloud, NDArray[np.int32] | None]:
+    """The cloud of ``path`` and its points' plants when the file has them."""
     try:
-        return read_ply(path)
+        cloud, labels = read_labelled_ply(path)
+        return cloud, None if labels is None else labels.plant_id
     except FileNotFoundError:
         raise FormatError([Problem(str(path), "", "file is missing")]) from None
     except (ValueError, OSError) as error:

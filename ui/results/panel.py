@@ -317,6 +317,9 @@ class ResultsPanel(QtWidgets.QWidget):
         chosen = current if current.isValid() and selection.isSelected(current) else rows[0]
         source = self.proxy.mapToSource(chosen)
         self.select_plant(self.plant_model.plants[source.row()].plant)
+        plants = [self.plant_model.plants[self.proxy.mapToSource(i).row()].plant for i in rows]
+        self.view3d.highlight(plants)  # every plant selected (a merge's), exactly its points
+        self.map.highlight(plants)
 
     def _growth(self, trait: str) -> dict:  # type: ignore[type-arg]
         from fieldapp.results.history import growth_series

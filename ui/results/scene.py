@@ -1,8 +1,10 @@
 """What the 3D view and the map draw, as plain arrays: a subsample of the global cloud with
-colours, which plant each point belongs to, the plant labels and the ground grid's extent."""
+colours, which plant each point belongs to (as the results folder says, exactly), the plant
+labels and the ground grid's extent; and the screen-space geometry of picking in the views."""
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,6 +17,11 @@ MAX_POINTS = 150_000
 DIM = 0.35
 """Brightness of the other plants' points while one plant is selected."""
 HIGHLIGHT = np.array([1.0, 0.25, 0.1, 1.0], np.float32)
+PICK_PX = 6.0
+"""A click picks a point drawn at most this far from it (widget pixels)."""
+FRONT_M = 0.03
+"""Of the points under a click, those this close to the nearest one (along the view) are the
+ones in front: a click picks among them, not a point seen through a gap behind them."""
 
 
 @dataclass(frozen=True)
@@ -37,13 +44,15 @@ class CloudScene:
     extent_m: tuple[float, float, float, float]
     """(x_min, x_max, y_min, y_max) of the plot, for the ground grid."""
 
-    def colors_for(self, selected: int | None) -> NDArray[np.float32]:
-        """(N, 4) colours with ``selected``'s points highlighted and the others dimmed."""
-        if selected is None:
+    def colors_for(self, selected: int | Collection[int] | None) -> NDArray[np.float32]:
+        """(N, 4) colours with the points of ``selected`` (a plant or several) highlighted and
+        the others dimmed."""
+        plants = [selected] if isinstance(selected, int) else list(selected or [])
+        if not plants:
             return self.colors
         colors = self.colors.copy()
         colors[:, :3] *= DIM
-        mine = self.plant_of_point == selected
+        mine = np.isin(self.plant_of_point, plants)
         colors[mine] = 0.5 * self.colors[mine] + 0.5 * HIGHLIGHT
         return colors
 
@@ -57,30 +66,20 @@ class CloudScene:
 def build_scene(results: PlotResults, max_points: int = MAX_POINTS, seed: int = 0) -> CloudScene:
     """The scene of ``results``: at most ``max_points`` points, drawn at random."""
     points, colors = results.cloud.points, results.cloud.colors
+    plants = results.plant_of_point()
     if len(points) > max_points:
         chosen = np.sort(np.random.default_rng(seed).choice(len(points), max_points, False))
-        points, colors = points[chosen], colors[chosen]
+        points, colors, plants = points[chosen], colors[chosen], plants[chosen]
     rgba = np.ones((len(points), 4), np.float32)
     rgba[:, :3] = colors.astype(np.float32) / 255.0
     labels = [Label(p.plant, results.top_m(p.plant), p.width_cm / 200.0) for p in results.plants]
     return CloudScene(
         points.astype(np.float32),
         rgba,
-        label_points(points[:, :2], labels),
+        plants.astype(np.int32),
         labels,
         _extent(points, labels),
     )
-
-
-def label_points(points_xy_m: NDArray[np.float64], labels: list[Label]) -> NDArray[np.int32]:
-    """(N,) for each point the plant whose base is nearest, if within its radius + 1 cm."""
-    found = np.zeros(len(points_xy_m), np.int32)
-    best = np.full(len(points_xy_m), np.inf)
-    for label in labels:
-        distance = np.linalg.norm(points_xy_m - label.position_m[:2], axis=1)
-        closer = (distance < best) & (distance <= label.radius_m + 0.01)
-        found[closer], best[closer] = label.plant, distance[closer]
-    return found
 
 
 def nearest_plant(
@@ -119,6 +118,33 @@ def project(
     w = homogeneous[:, 3:4]
     ndc = np.where(w > 1e-9, homogeneous[:, :3] / np.where(w > 1e-9, w, 1.0), np.nan)
     return np.c_[(ndc[:, 0] + 1) / 2 * width_px, (1 - ndc[:, 1]) / 2 * height_px]
+
+
+def depth_m(points_m: NDArray[np.float64], mvp: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(N,) distance of ``points_m`` (N, 3) in front of the camera along its axis (the clip
+    space w of a perspective ``mvp``; metres for a view in metres)."""
+    return np.c_[points_m, np.ones(len(points_m))] @ mvp[3]
+
+
+def pick_on_screen(
+    screen_xy: tuple[float, float],
+    pixels: NDArray[np.float64],
+    depth: NDArray[np.float64] | None = None,
+    max_px: float = PICK_PX,
+) -> int | None:
+    """The index of the point a click at ``screen_xy`` picks, of points drawn at ``pixels``
+    (N, 2; NaN: not drawn): the nearest on screen within ``max_px``, taken among the front
+    ones (within :data:`FRONT_M` of the nearest ``depth`` (N,), when given) so that the click
+    picks what the ray from the camera through it meets first; None when none is that close."""
+    if len(pixels) == 0:
+        return None
+    distance_px = np.hypot(pixels[:, 0] - screen_xy[0], pixels[:, 1] - screen_xy[1])
+    near = np.flatnonzero(np.nan_to_num(distance_px, nan=np.inf) <= max_px)
+    if len(near) == 0:
+        return None
+    if depth is not None:
+        near = near[depth[near] <= depth[near].min() + FRONT_M]
+    return int(near[np.argmin(distance_px[near])])
 
 
 def _extent(points: NDArray[np.float64], labels: list[Label]) -> tuple[float, float, float, float]:

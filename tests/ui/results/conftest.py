@@ -16,6 +16,22 @@ def plot_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
+@pytest.fixture(scope="session")
+def plots(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Two labelled seedling plots for the corrections: ``apart`` (plants 1 and 2) and
+    ``merged`` (both seedlings as plant 1); copy one before changing it."""
+    import numpy as np
+
+    from ...fieldapp.results.seedlings import seedlings, write_plot
+
+    base = tmp_path_factory.mktemp("correction-ui")
+    groups = seedlings(0)
+    return {
+        "apart": write_plot(base / "apart", groups, [1, 2]),
+        "merged": write_plot(base / "merged", [np.concatenate(groups)], [1]),
+    }
+
+
 @pytest.fixture
 def panel(qtbot, tmp_path):
     """A results panel with its own results database, shut down and released after the test."""

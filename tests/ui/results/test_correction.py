@@ -4,10 +4,6 @@ folder and the results database and come back after a new reconstruction."""
 
 from __future__ import annotations
 
-import shutil
-from pathlib import Path
-
-import numpy as np
 import pytest
 from PySide6 import QtCore
 
@@ -15,45 +11,14 @@ from fieldapp.errors import FieldappError
 from fieldapp.results.corrections import read_corrections
 from fieldapp.results.db import ResultsDB
 from fieldapp.results.files import read_plants_csv
-from ui.results.correction import CORRECTED_BRUSH, parse_stems
+from ui.results.correction import CORRECTED_BRUSH
+from ui.results.stem_picking import parse_stems
 
 from ...fieldapp.results.seedlings import STEMS, seedlings, write_plot
-
-
-@pytest.fixture(scope="module")
-def plots(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    base = tmp_path_factory.mktemp("correction-ui")
-    groups = seedlings(0)
-    return {
-        "apart": write_plot(base / "apart", groups, [1, 2]),
-        "merged": write_plot(base / "merged", [np.concatenate(groups)], [1]),
-    }
-
-
-def _open(panel, plots, name, tmp_path) -> Path:
-    folder = Path(shutil.copytree(plots[name], tmp_path / name))
-    panel.open_results(folder)
-    return folder
-
-
-def _select(panel, *plants):
-    selection = panel.table.selectionModel()
-    selection.clearSelection()
-    for plant in plants:
-        row = panel.proxy.mapFromSource(panel.plant_model.index(panel.plant_model.row_of(plant), 0))
-        selection.select(
-            row,
-            QtCore.QItemSelectionModel.SelectionFlag.Select
-            | QtCore.QItemSelectionModel.SelectionFlag.Rows,
-        )
-
-
-def _settled(qtbot, panel):
-    qtbot.waitUntil(lambda: not panel.correction.workers.busy, timeout=60_000)
-
-
-def _table(panel):
-    return {p.plant: p for p in panel.plant_model.plants}
+from .correcting import open_copy as _open
+from .correcting import select as _select
+from .correcting import settled as _settled
+from .correcting import table as _table
 
 
 def test_merge_then_undo_with_ctrl_z(qtbot, panel, plots, tmp_path):
