@@ -222,6 +222,7 @@ def _labels(
             s.reach_m,
             s.ambiguity_margin_m,
             s.inward_penalty,
+            s.bend_penalty_m,
         )
         labels[:] = assignment.stem
         ambiguous = assignment.ambiguous

@@ -149,6 +149,7 @@ def stem_parts(
         s.reach_m,
         s.ambiguity_margin_m,
         s.inward_penalty,
+        s.bend_penalty_m,
     )
     part = assignment.stem.copy()
     reached = part != UNREACHED

@@ -34,7 +34,9 @@ GRID = {  # the simulator's 4 x 4 plot at 0.8 m, centred on the field origin = m
 @pytest.fixture(scope="module")
 def touching_session(tmp_path_factory: pytest.TempPathFactory) -> Simulated:
     folder = tmp_path_factory.mktemp("sim") / "touching"
-    assert main(["simulate", "--out", str(folder), "--seed", "0", "--stage", "touching"]) == 0
+    # seed 3: its leaf tips lie on the neighbours' leaves (width RMSE 7.6 cm without the bend
+    # cost, RECONSTRUCTION.md "Touching canopies")
+    assert main(["simulate", "--out", str(folder), "--seed", "3", "--stage", "touching"]) == 0
     return Simulated(folder, json.loads((folder / "truth.json").read_text()))
 
 
@@ -61,8 +63,7 @@ def test_every_plant_of_a_touching_canopy_is_found_and_measured(
     assert np.sqrt(np.mean(e["dh_cm"] ** 2)) <= 1.0
     assert np.mean(np.abs(e["dh_cm"]) / e["h_cm"]) <= 0.015
     assert np.mean(np.abs(e["dw_cm"]) / e["w_cm"]) <= 0.03
-    # issue 20 asks for 2.0 cm; seeds 0-3 give 2.1, 4.1, 2.8 and 7.6 cm (RECONSTRUCTION.md)
-    assert np.sqrt(np.mean(e["dw_cm"] ** 2)) <= 2.5
+    assert np.sqrt(np.mean(e["dw_cm"] ** 2)) <= 2.0  # issue 20's target
 
 
 def test_touching_plants_are_reported_split_and_ambiguous_ones_flagged(
@@ -109,6 +110,6 @@ def test_the_planting_grid_from_the_plan_labels_rows_and_columns(
     assert len(without.plants) == 16  # the targets hold without a grid prior too
     assert np.sqrt(np.mean(e0["dh_cm"] ** 2)) <= 1.0
     assert np.mean(np.abs(e0["dw_cm"]) / e0["w_cm"]) <= 0.03
-    assert np.sqrt(np.mean(e0["dw_cm"] ** 2)) <= 2.5
+    assert np.sqrt(np.mean(e0["dw_cm"] ** 2)) <= 2.0
     for key in ("dw_cm", "dh_cm"):  # the same or better with the grid (to 0.01 mm)
         assert np.sqrt(np.mean(e[key] ** 2)) <= np.sqrt(np.mean(e0[key] ** 2)) + 1e-3
