@@ -253,13 +253,52 @@ def remove_outliers(
 ) -> tuple[Cloud, dict[str, int]]:
     """Statistical then radius outlier removal on the fused plant cloud of the plot (every
     station's view of a leaf together: a real surface has support, a stray point has none).
-    Returns the cloud kept and the points kept by each filter."""
-    kept = cloud.select(
-        statistical_outliers(cloud.points, settings.sor_neighbors, settings.sor_std_ratio, workers)
+    Returns the cloud kept and the points kept by each filter. Both filters are answered by
+    one k-nearest-neighbour search (:func:`outlier_inliers`)."""
+    statistical, radius = outlier_inliers(
+        cloud.points,
+        settings.sor_neighbors,
+        settings.sor_std_ratio,
+        settings.ror_radius_m,
+        settings.ror_min_points,
+        workers,
     )
-    counts = {"statistical_outliers": len(kept)}
-    kept = kept.select(
-        radius_outliers(kept.points, settings.ror_radius_m, settings.ror_min_points, workers)
-    )
-    counts["radius_outliers"] = len(kept)
-    return kept, counts
+    counts = {"statistical_outliers": int(statistical.sum()), "radius_outliers": int(radius.sum())}
+    return cloud.select(radius), counts
+
+
+def outlier_inliers(
+    points: NDArray[np.float64],
+    neighbors: int,
+    std_ratio: float,
+    radius_m: float,
+    min_points: int,
+    workers: int = 1,
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Masks (N,) of the inliers of :func:`statistical_outliers` on ``points`` (N, 3) and of
+    those that then also pass :func:`radius_outliers` among the statistical inliers: the same
+    masks as the two filters run one after the other, from one tree and one query.
+
+    The ``neighbors`` + 1 nearest points, sorted by distance, give each point's mean distance
+    (SOR) and every statistical inlier within ``radius_m`` (ROR) whenever the farthest of them
+    lies beyond ``radius_m``; the few points where it does not, and that have fewer than
+    ``min_points`` inliers among them, are counted again by a radius query among the inliers.
+    """
+    n = len(points)
+    if n == 0:
+        return np.ones(0, dtype=bool), np.ones(0, dtype=bool)
+    tree = cKDTree(points)
+    k = min(neighbors + 1, n)
+    distances, index = tree.query(points, k=k, workers=workers)
+    distances, index = distances.reshape(n, k), index.reshape(n, k)
+    statistical = np.ones(n, dtype=bool)
+    if n > neighbors:
+        mean_distance = distances[:, 1:].mean(axis=1)
+        statistical = mean_distance <= mean_distance.mean() + std_ratio * mean_distance.std()
+    near = (distances <= radius_m) & statistical[index] & (index != np.arange(n)[:, None])
+    count = near.sum(axis=1)
+    unsure = np.flatnonzero(statistical & (count < min_points) & (distances[:, -1] <= radius_m))
+    if k < n and len(unsure):
+        inliers = cKDTree(points[statistical])
+        count[unsure] = inliers.query_ball_point(points[unsure], radius_m, return_length=True) - 1
+    return statistical, statistical & (count >= min_points)

@@ -82,9 +82,14 @@ def measure_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -
 
 
 def projected_area_m2(points_m: NDArray[np.float64], cell_m: float = CANOPY_CELL_M) -> float:
-    """Area of the plant's shadow from straight above: occupied ``cell_m`` cells."""
-    cells = np.unique(np.floor(points_m[:, :2] / cell_m).astype(np.int64), axis=0)
-    return float(len(cells) * cell_m * cell_m)
+    """Area of the plant's shadow from straight above: occupied ``cell_m`` cells (counted by
+    one integer key per cell: ``np.unique`` of rows costs ten times as much)."""
+    if len(points_m) == 0:
+        return 0.0
+    cells = np.floor(points_m[:, :2] / cell_m).astype(np.int64)
+    cells -= cells.min(axis=0)
+    keys = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]
+    return float(len(np.unique(keys)) * cell_m * cell_m)
 
 
 def hull_volume_m3(points_m: NDArray[np.float64]) -> float:

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fieldapp.io import ply
-from fieldapp.io.durable import write_bytes_durably, write_json_durably
+from fieldapp.io.durable import json_bytes, write_files_durably
 from fieldapp.recon.cloud import Cloud
 
 if TYPE_CHECKING:
@@ -219,29 +219,25 @@ def write_outputs(
             "settings": provenance.settings,
             "software_version": provenance.document["software"]["version"],
         }
-    written = [folder / "cloud.ply"]
     stale = folder / "plants"
     if stale.is_dir():
         for old in stale.glob("*.ply"):
             if old.stem.isdigit() and int(old.stem) not in plant_clouds:
                 old.unlink()
-    write_bytes_durably(written[0], ply_bytes(cloud, labels))
+    files = {folder / "cloud.ply": ply_bytes(cloud, labels)}
     for plant, plant_cloud in plant_clouds.items():
-        path = folder / "plants" / f"{plant}.ply"
-        write_bytes_durably(path, ply_bytes(plant_cloud, (plant_labels or {}).get(plant)))
-        written.append(path)
-    write_bytes_durably(folder / "plants.csv", csv_text(rows).encode("utf-8"))
-    written.append(folder / "plants.csv")
+        plant_ply = ply_bytes(plant_cloud, (plant_labels or {}).get(plant))
+        files[folder / "plants" / f"{plant}.ply"] = plant_ply
+    files[folder / "plants.csv"] = csv_text(rows).encode("utf-8")
     if leaves is not None:
-        write_bytes_durably(folder / "leaves.csv", leaves_csv_text(leaves).encode("utf-8"))
-        written.append(folder / "leaves.csv")
+        files[folder / "leaves.csv"] = leaves_csv_text(leaves).encode("utf-8")
     elif provenance is not None and (folder / "leaves.csv").exists():
         (folder / "leaves.csv").unlink()  # an earlier run's leaves are not this run's plants
     if isinstance(report.get("provenance"), dict):
-        write_json_durably(folder / PROVENANCE_FILE, report["provenance"])
-        written.append(folder / PROVENANCE_FILE)
-    write_json_durably(folder / "report.json", report)
-    return [*written, folder / "report.json"]
+        files[folder / PROVENANCE_FILE] = json_bytes(report["provenance"])
+    files[folder / "report.json"] = json_bytes(report)  # last: the run's record
+    write_files_durably(files)
+    return list(files)
 
 
 def existing_outputs(folder: Path) -> list[Path]:

@@ -138,9 +138,12 @@ def local_ground_z_m(
 
 def robust_top_z_m(points_m: NDArray[np.float64], support_points: int, radius_m: float) -> float:
     """The z of the highest point with at least ``support_points`` other points within
-    ``radius_m``; the highest point of all when none has such support."""
+    ``radius_m``; the highest point of all when none has such support. Only the points that
+    can lie within ``radius_m`` of a candidate (no lower than the lowest candidate less
+    ``radius_m``) are searched."""
     order = np.argsort(points_m[:, 2])[::-1][:TOP_CANDIDATES]
-    counts = cKDTree(points_m).query_ball_point(points_m[order], radius_m, return_length=True)
+    reach = points_m[points_m[:, 2] >= points_m[order[-1], 2] - radius_m]
+    counts = cKDTree(reach).query_ball_point(points_m[order], radius_m, return_length=True)
     supported = np.flatnonzero(counts - 1 >= support_points)
     chosen = order[supported[0]] if len(supported) else order[0]
     return float(points_m[chosen, 2])

@@ -11,6 +11,7 @@ from fieldapp.recon.filters import (
     filter_station,
     keep_soil,
     otsu_threshold,
+    outlier_inliers,
     pass_through,
     radius_outliers,
     remove_outliers,
@@ -71,6 +72,48 @@ def test_statistical_and_radius_outlier_removal_drop_isolated_points() -> None:
     ror = radius_outliers(points, 0.008, 5)
     assert not sor[-3:].any() and not ror[-3:].any()
     assert sor[:-3].mean() > 0.95 and ror[:-3].all()
+
+
+def _sor_then_ror(
+    points: np.ndarray, neighbors: int, std_ratio: float, radius_m: float, min_points: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The two filters one after the other, each with its own tree (the paper's order)."""
+    statistical = statistical_outliers(points, neighbors, std_ratio)
+    radius = np.zeros(len(points), dtype=bool)
+    radius[statistical] = radius_outliers(points[statistical], radius_m, min_points)
+    return statistical, radius
+
+
+@pytest.mark.parametrize(
+    ("neighbors", "radius_m", "min_points"),
+    [(35, 0.008, 1), (35, 0.008, 5), (8, 0.02, 12), (3, 0.05, 40), (35, 0.001, 1)],
+)
+def test_one_query_gives_the_masks_of_sor_then_ror(
+    neighbors: int, radius_m: float, min_points: int
+) -> None:
+    """Whatever the radius and the count asked (beyond the neighbours searched, too: the
+    points left unsure are counted again), duplicates and strays included."""
+    rng = np.random.default_rng(neighbors + min_points)
+    surface = ground_patch(rng, 0.05, 3000, noise_m=0.0005)
+    blobs = rng.normal(0.0, 0.004, (6, 30, 3)) + rng.uniform(-0.2, 0.2, (6, 1, 3))
+    strays = rng.uniform(-0.3, 0.3, (40, 3))
+    points = np.concatenate([surface, surface[:50], blobs.reshape(-1, 3), strays])
+    statistical, radius = outlier_inliers(points, neighbors, 1.5, radius_m, min_points)
+    expected_statistical, expected_radius = _sor_then_ror(
+        points, neighbors, 1.5, radius_m, min_points
+    )
+    np.testing.assert_array_equal(statistical, expected_statistical)
+    np.testing.assert_array_equal(radius, expected_radius)
+    assert 0 < radius.sum() < len(points)  # not all kept, not all dropped
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 5])
+def test_one_query_on_clouds_smaller_than_the_neighbours(n: int) -> None:
+    points = np.random.default_rng(n).uniform(0.0, 0.01, (n, 3))
+    statistical, radius = outlier_inliers(points, 35, 1.5, 0.008, 1)
+    expected_statistical, expected_radius = _sor_then_ror(points, 35, 1.5, 0.008, 1)
+    np.testing.assert_array_equal(statistical, expected_statistical)
+    np.testing.assert_array_equal(radius, expected_radius)
 
 
 def test_voxel_mean_averages_points_and_colours_per_voxel() -> None:

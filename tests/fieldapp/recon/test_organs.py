@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 from devices.sim.organ_truth import organ_truth
 from devices.sim.plants import STEM_PART, PlantMesh, make_plant
 from fieldapp.evaluate.organs import azimuth_difference_deg, pair_leaves
-from fieldapp.recon.organ_traits import measure_organs
+from fieldapp.recon.organ_traits import measure_organs, projected_area_m2
 from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_STEM, ORGAN_WHORL
 
 SEEDS = range(12)
@@ -191,3 +191,15 @@ def test_whatever_a_segmentation_hands_over_is_measured_without_failing(points) 
     assert organs.leaf_count == len(organs.organs.leaves)
     with pytest.raises(ValueError, match="without points"):
         measure_organs(np.zeros((0, 3)), np.zeros(3))
+
+
+def test_projected_area_counts_the_occupied_cells_seen_from_above() -> None:
+    """Cells on either side of zero, points stacked in z counted once, any xy extent."""
+    rng = np.random.default_rng(3)
+    cells = np.array([[-3, 0], [-3, 1], [0, 0], [2, -5], [40, 7], [40, 8]])
+    inside = (cells[:, None, :] + rng.uniform(0.05, 0.95, (len(cells), 20, 2))) * 0.01
+    heights = rng.uniform(0.0, 0.5, (len(cells), 20, 1))
+    points = np.concatenate([inside, heights], axis=2).reshape(-1, 3)
+    assert projected_area_m2(points) == pytest.approx(len(cells) * 1e-4)
+    assert projected_area_m2(points, cell_m=1.0) == pytest.approx(3.0)  # (-1, 0) (0, 0) (0, -1)
+    assert projected_area_m2(np.zeros((0, 3))) == 0.0

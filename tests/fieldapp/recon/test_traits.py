@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from fieldapp.recon.traits import (
+    TOP_CANDIDATES,
     base_xy_m,
     local_ground_z_m,
     measure_plant,
@@ -66,6 +67,23 @@ def test_robust_top_ignores_a_stray_point_above_the_plant() -> None:
     stray = np.array([[0.0, 0.0, 0.4]])
     top = robust_top_z_m(np.concatenate([plant, stray]), support_points=3, radius_m=0.006)
     assert top == pytest.approx(0.25, abs=1e-9)
+
+
+def test_robust_top_counts_support_below_the_candidates() -> None:
+    """The lowest point tested as the top (the last of :data:`TOP_CANDIDATES`) is the only one
+    with support, and its support lies below every candidate: it is the top."""
+    strays = np.column_stack(
+        [
+            np.arange(TOP_CANDIDATES - 1) * 0.1,
+            np.zeros(TOP_CANDIDATES - 1),
+            np.full(TOP_CANDIDATES - 1, 1.0),
+        ]
+    )
+    top = np.array([[-1.0, 0.0, 0.5]])
+    support = top + np.array([[0.001, 0.0, -0.003], [0.0, 0.001, -0.003], [0.0, 0.0, -0.004]])
+    body = np.column_stack([np.full(50, -2.0), np.zeros(50), np.linspace(0.0, 0.45, 50)])
+    points = np.concatenate([strays, top, support, body])
+    assert robust_top_z_m(points, support_points=3, radius_m=0.006) == 0.5
 
 
 def test_measure_plant_on_a_raised_bed() -> None:
