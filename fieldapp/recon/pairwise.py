@@ -6,23 +6,33 @@ side and diagonal neighbours (5.4-9 m2 on the simulated plots); stations two apa
 lens at the end of both cameras' range (1.7-3.2 m2) that registers unreliably. The points of
 an overlap are those in the shared cells and one cell around them (so a few cm or degrees of arrival
 error do not cut the overlap short): soil, plants, spheres, anything the two stations saw.
-Each overlap is registered coarse to fine by GICP (:func:`align`, one thread per pair, so the
-result never depends on the thread count), and its information matrix is the point-to-plane
-Hessian of the aligned overlap: flat soil constrains height and tilt, relief, stems and spheres
-the position and heading.
+Each overlap is registered coarse to fine by GICP (:func:`align`), and its information
+matrix is the point-to-plane Hessian of the aligned overlap: flat soil constrains height and
+tilt, relief, stems and spheres the position and heading.
+
+The result never depends on the thread count: only the k-d trees and the point covariances
+(each point's its own) run on the ``threads`` OpenMP threads; voxel sampling (small_gicp's
+multi-threaded sampling varies from run to run) and the optimisation (its reduction sums in
+the threads' order) run on one. The OpenMP threads sleep between parallel regions
+(``OMP_WAIT_POLICY=PASSIVE``, unless set otherwise before small_gicp loads): spinning, two
+threads cost 75 % more CPU than one. small_gicp holds Python's GIL, so pairs registered on
+several Python threads overlap only in their numpy and scipy parts.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
-import small_gicp
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from devices.geometry import Matrix4, invert, transform_points
 from fieldapp.recon.settings import RegistrationSettings
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # read once, when small_gicp's libgomp loads
+import small_gicp
 
 NORMAL_NEIGHBOURS = 12
 """Target points whose covariance gives each correspondence's normal."""
@@ -70,10 +80,11 @@ def preprocess(
     points_m: NDArray[np.float64], voxel_m: float, threads: int = 1
 ) -> tuple[small_gicp.PointCloud, small_gicp.KdTree]:
     """``points_m`` (N, 3) as GICP takes them: one point (the mean) per voxel of ``voxel_m``,
-    each with the covariance of its ``COVARIANCE_NEIGHBOURS`` nearest, and their k-d tree."""
-    cloud, tree = small_gicp.preprocess_points(
-        points_m, voxel_m, COVARIANCE_NEIGHBOURS, num_threads=1
-    )
+    each with the covariance of its ``COVARIANCE_NEIGHBOURS`` nearest, and their k-d tree;
+    the same for any ``threads`` (see the module's docstring)."""
+    cloud = small_gicp.voxelgrid_sampling(points_m, voxel_m, num_threads=1)
+    tree = small_gicp.KdTree(cloud, num_threads=threads)
+    small_gicp.estimate_covariances(cloud, tree, COVARIANCE_NEIGHBOURS, num_threads=threads)
     return cloud, tree
 
 
