@@ -6,26 +6,39 @@ side and diagonal neighbours (5.4-9 m2 on the simulated plots); stations two apa
 lens at the end of both cameras' range (1.7-3.2 m2) that registers unreliably. The points of
 an overlap are those in the shared cells and one cell around them (so a few cm or degrees of arrival
 error do not cut the overlap short): soil, plants, spheres, anything the two stations saw.
-Each overlap is registered coarse to fine by GICP (:func:`fieldapp.recon.register.icp`, one
-thread per pair, so the result never depends on the thread count), and its information
+Each overlap is registered coarse to fine by GICP (:func:`align`), and its information
 matrix is the point-to-plane Hessian of the aligned overlap: flat soil constrains height and
 tilt, relief, stems and spheres the position and heading.
+
+The result never depends on the thread count: only the k-d trees and the point covariances
+(each point's its own) run on the ``threads`` OpenMP threads; voxel sampling (small_gicp's
+multi-threaded sampling varies from run to run) and the optimisation (its reduction sums in
+the threads' order) run on one. The OpenMP threads sleep between parallel regions
+(``OMP_WAIT_POLICY=PASSIVE``, unless set otherwise before small_gicp loads): spinning, two
+threads cost 75 % more CPU than one. small_gicp holds Python's GIL, so pairs registered on
+several Python threads overlap only in their numpy and scipy parts.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
-import small_gicp
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from devices.geometry import Matrix4, invert, transform_points
 from fieldapp.recon.settings import RegistrationSettings
 
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # read once, when small_gicp's libgomp loads
+import small_gicp
+
 NORMAL_NEIGHBOURS = 12
 """Target points whose covariance gives each correspondence's normal."""
+
+COVARIANCE_NEIGHBOURS = 10
+"""Points whose covariance GICP gives each point (small_gicp's default)."""
 
 
 @dataclass(frozen=True)
@@ -63,26 +76,39 @@ class IcpOutcome:
     target_points: int
 
 
-def icp(
+def preprocess(
+    points_m: NDArray[np.float64], voxel_m: float, threads: int = 1
+) -> tuple[small_gicp.PointCloud, small_gicp.KdTree]:
+    """``points_m`` (N, 3) as GICP takes them: one point (the mean) per voxel of ``voxel_m``,
+    each with the covariance of its ``COVARIANCE_NEIGHBOURS`` nearest, and their k-d tree;
+    the same for any ``threads`` (see the module's docstring)."""
+    cloud = small_gicp.voxelgrid_sampling(points_m, voxel_m, num_threads=1)
+    tree = small_gicp.KdTree(cloud, num_threads=threads)
+    small_gicp.estimate_covariances(cloud, tree, COVARIANCE_NEIGHBOURS, num_threads=threads)
+    return cloud, tree
+
+
+def align(
     target_m: NDArray[np.float64],
     source_m: NDArray[np.float64],
     settings: RegistrationSettings,
     threads: int = 1,
     init_T_target_source: Matrix4 | None = None,
-) -> IcpOutcome:
-    """Align ``source_m`` (N, 3) onto ``target_m`` (M, 3), coarse to fine voxel sizes
-    (small_gicp); the fit is scored at the finest size. From ``init_T_target_source`` (a
-    guess that agrees with the plot's other pairs within ``edge_tolerance_m`` / ``_deg``, so
-    within the finest size's correspondence reach at the cameras' range) only the finest size
-    runs: the coarse sizes reach far enough to slide into another minimum of smooth relief."""
+) -> tuple[Matrix4, bool]:
+    """``T_target_source`` aligning ``source_m`` (N, 3) onto ``target_m`` (M, 3) coarse to
+    fine over the voxel sizes (small_gicp), and whether the last size converged. From
+    ``init_T_target_source`` (a guess that agrees with the plot's other pairs within
+    ``edge_tolerance_m`` / ``_deg``, so within the finest size's correspondence reach at the
+    cameras' range) only the finest size runs: the coarse sizes reach far enough to slide
+    into another minimum of smooth relief."""
     T = np.eye(4) if init_T_target_source is None else np.array(init_T_target_source)
     sizes = settings.voxel_sizes_m
     if init_T_target_source is not None:
         sizes = sizes[-1:]
     converged = True
     for voxel_m in sizes:
-        target, tree = small_gicp.preprocess_points(target_m, voxel_m, num_threads=threads)
-        source, _ = small_gicp.preprocess_points(source_m, voxel_m, num_threads=threads)
+        target, tree = preprocess(target_m, voxel_m, threads)
+        source, _ = preprocess(source_m, voxel_m, threads)
         result = small_gicp.align(
             target,
             source,
@@ -92,27 +118,68 @@ def icp(
             max_correspondence_distance=max(
                 settings.max_correspondence_m, settings.correspondence_factor * voxel_m
             ),
-            num_threads=threads,
+            num_threads=1,
             max_iterations=settings.max_iterations,
         )
         T = np.asarray(result.T_target_source, dtype=np.float64)
         converged = bool(result.converged)
+    return T, converged
+
+
+def icp(
+    target_m: NDArray[np.float64],
+    source_m: NDArray[np.float64],
+    settings: RegistrationSettings,
+    threads: int = 1,
+    init_T_target_source: Matrix4 | None = None,
+) -> IcpOutcome:
+    """:func:`align`, the fit scored on all the points (:func:`score`)."""
+    T, converged = align(target_m, source_m, settings, threads, init_T_target_source)
     fitness, rmse = score(target_m, transform_points(T, source_m), settings.max_correspondence_m)
     return IcpOutcome(T, converged, fitness, rmse, len(source_m), len(target_m))
+
+
+@dataclass(frozen=True)
+class Matches:
+    """Each source point's nearest target point: ``distances_m`` (N,) (``inf`` beyond the
+    reach), ``nearest`` (N,) indices into the target points, ``tree`` the target's k-d tree."""
+
+    tree: cKDTree
+    distances_m: NDArray[np.float64]
+    nearest: NDArray[np.intp]
+
+    @property
+    def matched(self) -> NDArray[np.bool_]:
+        """(N,) the source points with a target point within reach."""
+        return np.isfinite(self.distances_m)
+
+
+def match(
+    target_m: NDArray[np.float64], source_m: NDArray[np.float64], max_distance_m: float
+) -> Matches:
+    """Nearest target point (M, 3) of each source point (N, 3) within ``max_distance_m``."""
+    tree = cKDTree(target_m)
+    distances, nearest = tree.query(source_m, k=1, distance_upper_bound=max_distance_m)
+    return Matches(tree, distances, nearest)
+
+
+def fitness_rmse(matches: Matches) -> tuple[float, float]:
+    """(fitness, RMSE in metres): the share of source points matched and the RMS distance of
+    the matched pairs (Open3D's definitions)."""
+    matched = matches.matched
+    if not matched.any():
+        return 0.0, float("nan")
+    return float(matched.mean()), float(np.sqrt(np.mean(matches.distances_m[matched] ** 2)))
 
 
 def score(
     target_m: NDArray[np.float64], source_m: NDArray[np.float64], max_distance_m: float
 ) -> tuple[float, float]:
-    """(fitness, RMSE in metres): the share of source points with a target point within
-    ``max_distance_m`` and the RMS distance of those pairs (Open3D's definitions)."""
+    """(fitness, RMSE in metres) of ``source_m`` (N, 3) on ``target_m`` (M, 3): pairs within
+    ``max_distance_m`` (:func:`fitness_rmse`)."""
     if len(source_m) == 0 or len(target_m) == 0:
         return 0.0, float("nan")
-    distances, _ = cKDTree(target_m).query(source_m, k=1, distance_upper_bound=max_distance_m)
-    inliers = np.isfinite(distances)
-    if not inliers.any():
-        return 0.0, float("nan")
-    return float(inliers.mean()), float(np.sqrt(np.mean(distances[inliers] ** 2)))
+    return fitness_rmse(match(target_m, source_m, max_distance_m))
 
 
 def cell_keys(points_m: NDArray[np.float64], cell_m: float) -> NDArray[np.int64]:
@@ -129,8 +196,9 @@ def _dilate(keys: NDArray[np.int64]) -> NDArray[np.int64]:
 
 def thin(points_m: NDArray[np.float64], voxel_m: float) -> NDArray[np.float64]:
     """The first point (in input order) of each occupied voxel of ``voxel_m``: (K, 3)."""
-    ijk = np.floor(points_m / voxel_m).astype(np.int64)
-    _, first = np.unique(ijk, axis=0, return_index=True)
+    ijk = np.floor(points_m / voxel_m).astype(np.int64) + (1 << 20)  # 21 bits per axis
+    keys = (ijk[:, 0] << 42) + (ijk[:, 1] << 21) + ijk[:, 2]  # one sort of (N,), not of rows
+    _, first = np.unique(keys, return_index=True)
     return points_m[np.sort(first)]
 
 
@@ -167,54 +235,50 @@ def register_overlap(
     centre_b_m: NDArray[np.float64],
     settings: RegistrationSettings,
     init_T_a_b: Matrix4 | None = None,
+    threads: int = 1,
 ) -> PairFit:
     """Align b's overlap points onto a's; ``centre_b_m`` (3,) is b's ground centre (field);
-    ``init_T_a_b``: a close guess (fine voxel sizes only, see :func:`icp`), else identity."""
-    outcome = icp(overlap.points_a_m, overlap.points_b_m, settings, 1, init_T_a_b)
-    information = point_to_plane_information(
-        overlap.points_a_m,
-        transform_points(outcome.T_target_source, overlap.points_b_m),
-        outcome.T_target_source,
-        centre_b_m,
-        settings,
-        outcome.rmse_m,
-    )
+    ``init_T_a_b``: a close guess (fine voxel sizes only, see :func:`align`), else identity.
+    The fit is scored and its information taken from one matching of all the points."""
+    target_m, source_m = overlap.points_a_m, overlap.points_b_m
+    T_a_b, converged = align(target_m, source_m, settings, threads, init_T_a_b)
+    aligned_m = transform_points(T_a_b, source_m)
+    if len(target_m) == 0 or len(source_m) == 0:
+        fitness, rmse, information = 0.0, float("nan"), np.zeros((6, 6))
+    else:
+        matches = match(target_m, aligned_m, settings.max_correspondence_m)
+        fitness, rmse = fitness_rmse(matches)
+        information = point_to_plane_information(
+            target_m, aligned_m, matches, T_a_b, centre_b_m, settings, rmse
+        )
     return PairFit(
-        overlap.a,
-        overlap.b,
-        outcome.T_target_source,
-        information,
-        outcome.converged,
-        outcome.fitness,
-        outcome.rmse_m,
-        outcome.source_points,
+        overlap.a, overlap.b, T_a_b, information, converged, fitness, rmse, len(source_m)
     )
 
 
 def point_to_plane_information(
     target_m: NDArray[np.float64],
     source_aligned_m: NDArray[np.float64],
+    matches: Matches,
     T_a_b: Matrix4,
     centre_b_m: NDArray[np.float64],
     settings: RegistrationSettings,
     rmse_m: float,
 ) -> NDArray[np.float64]:
     """(6, 6) information of the pair: the mean point-to-plane Hessian of the aligned pairs
-    within ``max_correspondence_m``, times ``edge_effective_points`` / sigma^2 (sigma: the fit's
-    RMSE, at least ``edge_noise_m``). Jacobians are taken for a right perturbation of node b
-    (its frame at ``centre_b_m`` with field axes)."""
-    tree = cKDTree(target_m)
-    distances, nearest = tree.query(
-        source_aligned_m, k=1, distance_upper_bound=settings.max_correspondence_m
-    )
-    matched = np.isfinite(distances)
+    (``matches`` of ``source_aligned_m`` on ``target_m``, within ``max_correspondence_m``),
+    times ``edge_effective_points`` / sigma^2 (sigma: the fit's RMSE, at least
+    ``edge_noise_m``). Jacobians are taken for a right perturbation of node b (its frame at
+    ``centre_b_m`` with field axes). Each matched target point's normal is computed once."""
+    matched = matches.matched
     if matched.sum() < 6:
         return np.zeros((6, 6))
-    _, around = tree.query(target_m[nearest[matched]], k=min(NORMAL_NEIGHBOURS, len(target_m)))
+    targets, which = np.unique(matches.nearest[matched], return_inverse=True)
+    _, around = matches.tree.query(target_m[targets], k=min(NORMAL_NEIGHBOURS, len(target_m)))
     neighbourhoods = target_m[around]  # (K, n, 3)
     centred = neighbourhoods - neighbourhoods.mean(axis=1, keepdims=True)
     _, vectors = np.linalg.eigh(np.einsum("kni,knj->kij", centred, centred))
-    normals: NDArray[np.float64] = vectors[:, :, 0] @ T_a_b[:3, :3]  # b's axes (R^T n, rows)
+    normals: NDArray[np.float64] = (vectors[:, :, 0] @ T_a_b[:3, :3])[which]  # b's axes, rows
     q = transform_points(invert(T_a_b), source_aligned_m[matched]) - centre_b_m
     J = np.concatenate([np.cross(q, normals), normals], axis=1)  # (K, 6)
     sigma = max(rmse_m if np.isfinite(rmse_m) else 0.0, settings.edge_noise_m)

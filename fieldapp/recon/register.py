@@ -90,16 +90,20 @@ def register_stations(
     }
     overlaps = find_overlaps(field_points, settings)
     fits: list[PairFit] = []
-    with ThreadPoolExecutor(max_workers=threads) as pool:  # one GICP thread per pair
+    # pairs on ``threads`` Python threads, each pair's k-d trees and covariances on as many
+    # OpenMP threads: the same fits for any count (pairwise's docstring)
+    with ThreadPoolExecutor(max_workers=threads) as pool:
         # closing this generator closes map's iterator, which cancels the pairs not started
-        for fit in pool.map(lambda o: register_overlap(o, nodes[o.b][:3, 3], settings), overlaps):
+        for fit in pool.map(
+            lambda o: register_overlap(o, nodes[o.b][:3, 3], settings, threads=threads), overlaps
+        ):
             fits.append(fit)
             yield len(fits) / len(overlaps), f"stations {fit.a}-{fit.b} registered"
         first = _first_solution(nodes, fits, reference, settings)
         guesses = _consensus_guesses(nodes, fits, first, settings)
         again = pool.map(
             lambda k: register_overlap(
-                overlaps[k], nodes[overlaps[k].b][:3, 3], settings, guesses[k]
+                overlaps[k], nodes[overlaps[k].b][:3, 3], settings, guesses[k], threads
             ),
             sorted(guesses),
         )
