@@ -92,27 +92,27 @@ def _skipped(station: int, capture: Capture, error: FormatError) -> str:
 
 @dataclass(frozen=True)
 class MeasuredPixels:
-    """What a station keeps of one capture's images: its measured pixels (finite depth), in
-    row-major order.
+    """One capture's images and the excess green of its measured pixels (finite depth).
 
-    ``measured``: (H, W) bool; ``depth_m``: (M,) float32; ``colors``: (M, 3) uint8 RGB;
-    ``exg``: (M,) float64, their excess green.
+    ``images``: as read; ``measured``: (H, W) bool; ``exg``: (M,) float64, the excess green of
+    the measured pixels in row-major order (the rest is never used).
     """
 
-    capture: Capture
+    images: CaptureImages
     measured: NDArray[np.bool_]
-    depth_m: NDArray[np.float32]
-    colors: NDArray[np.uint8]
     exg: NDArray[np.float64]
+
+    @property
+    def capture(self) -> Capture:
+        return self.images.capture
 
 
 def measured_pixels(images: CaptureImages) -> MeasuredPixels:
-    """A capture's measured pixels and their excess green (the rest is never used)."""
+    """A capture's images with the excess green of its measured pixels. Computed over the whole
+    frame, then picked: cheaper than gathering the measured pixels' colours first."""
     measured = np.isfinite(images.depth_m)
-    colors = images.color[measured]
-    return MeasuredPixels(
-        images.capture, measured, images.depth_m[measured], colors, excess_green(colors)
-    )
+    exg = excess_green(images.color.reshape(-1, 3))[measured.reshape(-1)]
+    return MeasuredPixels(images, measured, exg)
 
 
 class FrameWorkers:
@@ -182,7 +182,7 @@ def read_station(
         ),
         sorted(views),
         threshold,
-        sum(len(frame.depth_m) for frame in frames),
+        sum(len(frame.exg) for frame in frames),
         separation,
     )
     return scan, warnings
@@ -230,14 +230,10 @@ def _green_and_soil(
         soil = on_grid & ~green
 
     def cloud(picked: NDArray[np.bool_]) -> Cloud:
-        return backproject_pixels(
-            index[picked],
-            frame.depth_m[picked],
-            frame.colors[picked],
-            rays,
-            crop.radius_m,
-            crop.min_depth_m,
-        )
+        pixels = index[picked]
+        depth_m = frame.images.depth_m.reshape(-1)[pixels]
+        colors = frame.images.color.reshape(-1, 3)[pixels]
+        return backproject_pixels(pixels, depth_m, colors, rays, crop.radius_m, crop.min_depth_m)
 
     return cloud(green), cloud(soil)
 
