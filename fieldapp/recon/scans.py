@@ -91,8 +91,8 @@ def _skipped(station: int, capture: Capture, error: FormatError) -> str:
 
 
 @dataclass(frozen=True)
-class MeasuredPixels:
-    """One capture's images and the excess green of its measured pixels (finite depth).
+class ReadFrame:
+    """One capture read: its images and the excess green of its measured pixels (finite depth).
 
     ``images``: as read; ``measured``: (H, W) bool; ``exg``: (M,) float64, the excess green of
     the measured pixels in row-major order (the rest is never used).
@@ -107,12 +107,12 @@ class MeasuredPixels:
         return self.images.capture
 
 
-def measured_pixels(images: CaptureImages) -> MeasuredPixels:
+def frame_of(images: CaptureImages) -> ReadFrame:
     """A capture's images with the excess green of its measured pixels. Computed over the whole
     frame, then picked: cheaper than gathering the measured pixels' colours first."""
     measured = np.isfinite(images.depth_m)
     exg = excess_green(images.color.reshape(-1, 3))[measured.reshape(-1)]
-    return MeasuredPixels(images, measured, exg)
+    return ReadFrame(images, measured, exg)
 
 
 class FrameWorkers:
@@ -161,8 +161,8 @@ def read_station(
     if view_step is None:
         raise FieldappError(f"{session.folder}: the calibration has no view_step")
     with FrameWorkers(threads) as workers:
-        read = workers.map(lambda capture: _read_measured(session, station, capture), captures)
-        frames = [frame for frame in read if isinstance(frame, MeasuredPixels)]
+        read = workers.map(lambda capture: _read_frame(session, station, capture), captures)
+        frames = [frame for frame in read if isinstance(frame, ReadFrame)]
         warnings = [warning for warning in read if isinstance(warning, str)]
         if not frames:
             return None, warnings
@@ -188,16 +188,16 @@ def read_station(
     return scan, warnings
 
 
-def _read_measured(session: Session, station: int, capture: Capture) -> MeasuredPixels | str:
+def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame | str:
     """A capture's measured pixels, or the warning saying why it was skipped."""
     try:
-        return measured_pixels(read_scan_capture(session, capture))
+        return frame_of(read_scan_capture(session, capture))
     except FormatError as error:
         return _skipped(station, capture, error)
 
 
 def _separation(
-    frames: list[MeasuredPixels], exg_threshold: float | Literal["otsu"]
+    frames: list[ReadFrame], exg_threshold: float | Literal["otsu"]
 ) -> tuple[Separation, float]:
     """How the station's plants are told from its soil, and the ExG threshold (infinite by
     geometry), judged on every measured pixel of the station."""
@@ -210,7 +210,7 @@ def _separation(
 
 
 def _green_and_soil(
-    frame: MeasuredPixels,
+    frame: ReadFrame,
     separation: Separation,
     threshold: float,
     grid: NDArray[np.bool_],
