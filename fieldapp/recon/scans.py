@@ -9,7 +9,9 @@ shrinks by an order of magnitude.
 
 from __future__ import annotations
 
+import ctypes
 import logging
+import os
 from collections import defaultdict
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -134,6 +136,27 @@ class FrameWorkers:
     def __exit__(self, *_: object) -> None:
         if self._pool is not None:
             self._pool.shutdown()
+            return_freed_memory()
+
+
+def return_freed_memory() -> None:
+    """Give the system back the memory the frame threads freed. glibc keeps it in each
+    thread's own malloc arena, where the main thread's later stages cannot reuse it: without
+    this, reading the frames on two threads raised a 3 x 3 plot's peak memory by about 20 MB
+    (issue 22). Nothing happens where the C library is not glibc."""
+    if "glibc" not in (_libc_version() or ""):
+        return
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (OSError, AttributeError):
+        log.debug("malloc_trim is not available")
+
+
+def _libc_version() -> str | None:
+    try:
+        return os.confstr("CS_GNU_LIBC_VERSION")
+    except (ValueError, OSError):
+        return None
 
 
 def _soil_grid(shape: tuple[int, ...], stride: int) -> NDArray[np.bool_]:

@@ -78,3 +78,19 @@ def test_two_threads_read_two_frames_at_once(
     monkeypatch.setattr(scans, "read_scan_capture", read_with_another)
     scan, warnings = _read(load_session(small_session), 4, 2)
     assert scan is not None and scan.views == [0, 1] and warnings == []
+
+
+def test_the_frame_threads_give_back_the_memory_they_freed(
+    small_session: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Once per station read on several threads (glibc keeps a thread's freed memory in its
+    own arena), never on one thread; and it runs where it is real."""
+    calls: list[int] = []
+    real = scans.return_freed_memory
+    monkeypatch.setattr(scans, "return_freed_memory", lambda: calls.append(1) or real())
+    session = load_session(small_session)
+    _read(session, 4, 1)
+    assert calls == []
+    _read(session, 4, 2)
+    _read(session, 5, 2)
+    assert calls == [1, 1]
