@@ -11,7 +11,13 @@ settings and config folders (a first start). Prints every run, the median and th
 Dask, OpenCV) were loaded by then (target: none; start-up within 3 s on a quiet 2-core
 machine).
 
+With ``--reconstruct`` it measures the start-up of ``fieldapp reconstruct`` instead (issue 22):
+the CPU and wall time of ``fieldapp reconstruct --help`` (no heavy import) and of a process
+importing what a reconstruction imports before its first stage (the pipeline, numpy, SciPy,
+OpenCV, pydantic, rich), the difference being what the run itself starts with.
+
     .venv/bin/python benchmarks/bench_startup.py --runs 5
+    .venv/bin/python benchmarks/bench_startup.py --runs 5 --reconstruct
 """
 
 from __future__ import annotations
@@ -28,6 +34,11 @@ import time
 from pathlib import Path
 
 TARGET_S = 3.0
+RECONSTRUCT_IMPORTS = (
+    "import fieldapp.cli; from fieldapp.cli import reconstruct; import rich.progress, "
+    "fieldapp.io.session, fieldapp.provenance, fieldapp.recon.outputs, "
+    "fieldapp.recon.pipeline, fieldapp.settings"
+)
 
 
 def one_start(folder: Path) -> tuple[float, float, list[str]]:
@@ -51,10 +62,44 @@ def one_start(folder: Path) -> tuple[float, float, list[str]]:
     return shown["shown_s"] - started_s, cpu_s, shown["heavy_modules"]
 
 
+def timed(command: list[str]) -> tuple[float, float]:
+    """(wall seconds, CPU seconds) of one run of ``command``."""
+    cpu_before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started_s = time.monotonic()
+    subprocess.run(command, check=True, capture_output=True, timeout=300)
+    elapsed_s = time.monotonic() - started_s
+    cpu_after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu_s = (cpu_after.ru_utime - cpu_before.ru_utime) + (cpu_after.ru_stime - cpu_before.ru_stime)
+    return elapsed_s, cpu_s
+
+
+def reconstruct_startup(runs: int) -> int:
+    """Start-up of ``fieldapp reconstruct``: its help, and the imports of a run."""
+    commands = {
+        "fieldapp reconstruct --help": [sys.executable, "-m", "fieldapp", "reconstruct", "--help"],
+        "imports of a reconstruction": [sys.executable, "-c", RECONSTRUCT_IMPORTS],
+    }
+    load_before = os.getloadavg()[0]
+    for name, command in commands.items():
+        results = [timed(command) for _ in range(runs)]
+        walls, cpus = [w for w, _ in results], [c for _, c in results]
+        print(
+            f"{name}: CPU median {statistics.median(cpus):.2f} s (best {min(cpus):.2f}), "
+            f"wall median {statistics.median(walls):.2f} s (best {min(walls):.2f}), {runs} runs"
+        )
+    print(f"{os.cpu_count()} CPUs, load average {load_before:.1f} -> {os.getloadavg()[0]:.1f}")
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=5)
+    parser.add_argument(
+        "--reconstruct", action="store_true", help="the start-up of fieldapp reconstruct"
+    )
     args = parser.parse_args()
+    if args.reconstruct:
+        return reconstruct_startup(args.runs)
     load_before = os.getloadavg()[0]
     times_s, cpus_s = [], []
     heavy: set[str] = set()

@@ -19,6 +19,7 @@ from collections.abc import Callable, Sequence
 from importlib.metadata import entry_points
 
 from fieldapp import __version__
+from fieldapp.cli import _blas  # noqa: F401  (before numpy loads: OpenBLAS on one thread)
 from fieldapp.errors import FieldappError
 
 Handler = Callable[[argparse.Namespace], int]

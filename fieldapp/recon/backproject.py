@@ -51,13 +51,37 @@ def backproject(
             f"depth {depth_m.shape} / colour {color.shape[:2]} do not match the camera "
             f"{rays.shape[:2]}"
         )
-    depth = np.asarray(depth_m, dtype=np.float64)
-    valid = np.isfinite(depth) & (depth > max(min_depth_m, 0.0))
+    measured = np.isfinite(depth_m)  # the depth limits are tested in float64, on fewer pixels
     if pixels is not None:
-        valid &= pixels
-    z = depth[valid]
-    ray = rays[valid]
+        measured &= pixels
+    index = np.flatnonzero(measured)
+    depth = depth_m.reshape(-1)[index]
+    return backproject_pixels(
+        index, depth, color.reshape(-1, 3)[index], rays, crop_radius_m, min_depth_m
+    )
+
+
+def backproject_pixels(
+    index: NDArray[np.intp],
+    depth_m: NDArray[np.floating],
+    colors: NDArray[np.uint8],
+    rays: NDArray[np.float64],
+    crop_radius_m: float,
+    min_depth_m: float = 0.0,
+) -> Cloud:
+    """Some pixels of one frame as a coloured cloud in the camera frame: the same points, in
+    the same order, as :func:`backproject` of a mask holding those pixels.
+
+    ``index``: (M,) the pixels' flat (row-major) indices, ascending; ``depth_m``: (M,) their
+    depth in metres, measured (finite); ``colors``: (M, 3) uint8 RGB. Only the pixels picked
+    are gathered and multiplied, so a frame's few plant pixels cost little.
+    """
+    z = np.asarray(depth_m, dtype=np.float64)
+    near = z > max(min_depth_m, 0.0)
+    if not near.all():
+        index, z, colors = index[near], z[near], colors[near]
+    ray = rays.reshape(-1, 3)[index]
     points = ray * z[:, None]
     range_m = z * np.sqrt(ray[:, 0] ** 2 + ray[:, 1] ** 2 + 1.0)
     inside = range_m <= crop_radius_m
-    return Cloud(points[inside], color[valid][inside])
+    return Cloud(points[inside], colors[inside])

@@ -158,6 +158,7 @@ def _station_scans(
             settings.crop,
             settings.filters.exg_threshold,
             settings.ground.soil_pixel_stride,
+            settings.threads,
         ),
         lambda index, _: f"station {index + 1} of {len(grouped)}",
     )

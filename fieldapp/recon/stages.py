@@ -123,12 +123,13 @@ def station_scan(
     crop: CropSettings,
     exg_threshold: float | Literal["otsu"],
     soil_pixel_stride: int,
+    threads: int = 1,
 ) -> Staged[StationScan | None]:
     """Steps 1-2 for one station: depth to points through the ray table ``rays`` ((H, W, 3)
     float64), early excess-green filtering, every view into view 0 by the view step (Eq. 9);
-    ``None`` when no capture could be read."""
+    ``None`` when no capture could be read. Its frames are read on ``threads`` threads."""
     scan, warnings = read_station(
-        session, station, captures, crop, exg_threshold, soil_pixel_stride, rays
+        session, station, captures, crop, exg_threshold, soil_pixel_stride, rays, threads
     )
     return Staged(scan, tuple(warnings))
 

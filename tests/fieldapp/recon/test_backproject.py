@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from devices.camera.frames import KINECT_V2_PAPER, Intrinsics
-from fieldapp.recon.backproject import backproject, ray_table
+from fieldapp.recon.backproject import backproject, backproject_pixels, ray_table
 
 
 def test_flat_wall_backprojects_to_its_depth_and_pixels() -> None:
@@ -51,3 +51,25 @@ def test_mismatched_images_are_refused() -> None:
     rays = ray_table(KINECT_V2_PAPER)
     with pytest.raises(ValueError, match="do not match"):
         backproject(np.ones((10, 10), np.float32), np.zeros((10, 10, 3), np.uint8), rays, 2.0)
+
+
+def test_picked_pixels_backproject_as_the_whole_frame_masked() -> None:
+    """Back-projecting a frame's picked pixels gives the points of ``backproject`` with that
+    mask, in the same order; the nearest depth is tested in metres as float64 (a depth of
+    exactly float32(0.3) is beyond a 0.3 m minimum, as in ``backproject``)."""
+    rng = np.random.default_rng(4)
+    rays = ray_table(KINECT_V2_PAPER)
+    depth = rng.uniform(0.2, 2.5, (424, 512)).astype(np.float32)
+    depth[rng.random((424, 512)) < 0.1] = np.nan
+    depth[5, 7] = np.float32(0.3)
+    color = rng.integers(0, 256, (424, 512, 3), dtype=np.uint8)
+    picked = rng.random((424, 512)) < 0.3
+    picked[5, 7] = True
+    whole = backproject(depth, color, rays, 2.0, 0.3, picked)
+    index = np.flatnonzero(np.isfinite(depth) & picked)
+    flat_depth, flat_color = depth.reshape(-1)[index], color.reshape(-1, 3)[index]
+    some = backproject_pixels(index, flat_depth, flat_color, rays, 2.0, 0.3)
+    np.testing.assert_array_equal(some.points, whole.points)
+    np.testing.assert_array_equal(some.colors, whole.colors)
+    assert np.float64(np.float32(0.3)) * rays[5, 7, 2] in some.points[:, 2]
+    assert 0 < len(whole) < picked.sum()
