@@ -1,13 +1,15 @@
-"""Batch speed: N sessions one by one in one process, then as a batch on a local Dask cluster.
+"""Batch speed: N sessions one by one, then as a batch on a local Dask cluster.
 
     .venv/bin/python benchmarks/bench_batch.py [--sessions 12] [--workers 2]
-        [--stations 4,5] [--views 0-7] [--keep DIR]
+        [--stations 4,5] [--views 0-7] [--keep DIR] [--in-process]
 
 Simulates N plot sessions (seeds 0..N-1) into a temporary folder (or ``--keep DIR``, reused
 when it already holds them), then:
 
-- one by one: ``run_reconstruction`` + ``write_outputs`` for each session in this process,
-  with the default settings (two reconstruction threads), as ``fieldapp reconstruct`` would;
+- one by one: ``fieldapp reconstruct`` of each session in turn, each in its own process as a
+  user runs them (start-up included), with the default settings (two reconstruction
+  threads); with ``--in-process``, ``run_reconstruction`` + ``write_outputs`` for each
+  session in this process instead (no start-up per session: the harder comparison);
 - batch: what ``fieldapp batch`` does (plan, local cluster of ``--workers`` single-threaded
   workers, one task per session, runs recorded in a fresh results database), cluster start-up
   and shutdown included.
@@ -44,6 +46,28 @@ def simulate(root: Path, count: int, stations: str, views: str) -> list[Path]:
                 main([*argv, "--stations", stations, "--views", views])
         folders.append(folder)
     return folders
+
+
+def one_by_one_cli(folders: list[Path], out: Path) -> tuple[float, float, float]:
+    """``fieldapp reconstruct`` of each session in turn, each its own process as a user runs
+    it (start-up included, default settings: two threads): (wall s, CPU s, peak MB)."""
+    import subprocess
+    import sys
+
+    from fieldapp.io.session import load_session
+
+    fieldapp = Path(sys.executable).with_name("fieldapp")
+    start, cpu, peak = time.perf_counter(), 0.0, 0.0
+    for folder in folders:
+        target = out / load_session(folder).id
+        argv = [str(fieldapp), "reconstruct", str(folder), "--out", str(target)]
+        process = subprocess.Popen([*argv, "--quiet"], stdout=subprocess.DEVNULL)
+        _, status, usage = os.wait4(process.pid, 0)
+        if os.waitstatus_to_exitcode(status) != 0:
+            raise RuntimeError(f"{' '.join(argv)} failed")
+        cpu += usage.ru_utime + usage.ru_stime
+        peak = max(peak, usage.ru_maxrss / 1024.0)
+    return time.perf_counter() - start, cpu, peak
 
 
 def one_by_one(folders: list[Path], out: Path) -> tuple[float, float]:
@@ -116,6 +140,11 @@ def main() -> None:
     parser.add_argument("--stations", default="4,5")
     parser.add_argument("--views", default="0-7")
     parser.add_argument("--keep", type=Path, help="simulate into (and reuse) this folder")
+    parser.add_argument(
+        "--in-process",
+        action="store_true",
+        help="one by one in this process (no start-up per session), not fieldapp reconstruct",
+    )
     args = parser.parse_args()
     import logging
 
@@ -128,8 +157,15 @@ def main() -> None:
         folders = simulate(root / "sessions", args.sessions, args.stations, args.views)
         print(f"{len(folders)} sessions: stations {args.stations}, views {args.views}")
         print(f"load average before: {os.getloadavg()[0]:.2f}")
-        serial_s, serial_cpu_s = one_by_one(folders, outputs / "one-by-one")
-        print(f"one by one: {serial_s:.1f} s wall, {serial_cpu_s:.1f} s CPU")
+        if args.in_process:
+            serial_s, serial_cpu_s = one_by_one(folders, outputs / "one-by-one")
+            print(f"one by one in this process: {serial_s:.1f} s wall, {serial_cpu_s:.1f} s CPU")
+        else:
+            serial_s, serial_cpu_s, serial_mb = one_by_one_cli(folders, outputs / "one-by-one")
+            print(
+                f"one by one (fieldapp reconstruct): {serial_s:.1f} s wall, {serial_cpu_s:.1f} s "
+                f"CPU, peak {serial_mb:.0f} MB"
+            )
         print(f"load average: {os.getloadavg()[0]:.2f}")
         wall_s, client_s, workers_s, peak_mb, done = batch(folders, outputs / "batch", args.workers)
         print(

@@ -271,13 +271,24 @@ def fuse(
 ) -> Fused:
     """Step 6: one plant cloud of the plot, overlaps averaged; outliers removed where every
     station's view of a leaf is together (statistical, then radius)."""
+    fused, soil_m = _joined(filtered, registrations, filters.voxel_size_m)
+    cloud, outlier_counts = remove_outliers(fused, filters, threads)
+    return Fused(cloud, soil_m, {"fused": len(fused)} | outlier_counts)
+
+
+def _joined(
+    filtered: dict[int, FilteredStation],
+    registrations: dict[int, StationRegistration],
+    voxel_m: float,
+) -> tuple[Cloud, NDArray[np.float64]]:
+    """Every station's plants in the plot's frame, averaged in ``voxel_m`` voxels, and the
+    soil samples ((M, 3) float64). Its own function so that the stations' moved copies are
+    freed before the outlier removal's neighbour search, the pipeline's largest."""
     plants = Cloud.concatenate(
         [f.plants.transformed(registrations[s].T_correction) for s, f in filtered.items()]
     )
     soil = [transform_points(registrations[s].T_correction, f.soil_m) for s, f in filtered.items()]
-    fused = voxel_mean(plants, filters.voxel_size_m)
-    cloud, outlier_counts = remove_outliers(fused, filters, threads)
-    return Fused(cloud, np.concatenate(soil), {"fused": len(fused)} | outlier_counts)
+    return voxel_mean(plants, voxel_m), np.concatenate(soil)
 
 
 def _kept_by_filters(filtered: dict[int, FilteredStation]) -> dict[str, int]:
