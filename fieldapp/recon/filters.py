@@ -18,6 +18,7 @@ from fieldapp.recon.geometry_split import plants_above_local_ground
 from fieldapp.recon.settings import FilterSettings
 
 OTSU_BINS = 256
+OUTLIER_QUERY_BLOCK = 65_536  # points per neighbour query of the outlier filters: bounds its memory
 VALLEY_SMOOTHING_BINS = 5
 MIN_GREEN_CONTRAST = 0.1
 """Least difference of the mean ExG of Otsu's two classes for colour to separate plants: green
@@ -290,15 +291,29 @@ def outlier_inliers(
         return np.ones(0, dtype=bool), np.ones(0, dtype=bool)
     tree = cKDTree(points)
     k = min(neighbors + 1, n)
-    distances, index = tree.query(points, k=k, workers=workers)
-    distances, index = distances.reshape(n, k), index.reshape(n, k)
+    # The query in blocks, keeping of each block only what the filters need: the mean
+    # distance, and the neighbours within the radius as int32 (-1 beyond it, and for the
+    # point itself). Whole, the (N, k) distances and int64 indices were 576 bytes per point,
+    # the peak of a large plot's run.
+    mean_distance = np.empty(n)
+    near_index = np.empty((n, k), dtype=np.int32)
+    full = np.empty(n, dtype=bool)  # every one of the k within the radius: count unsure
+    for start in range(0, n, OUTLIER_QUERY_BLOCK):
+        block = slice(start, min(start + OUTLIER_QUERY_BLOCK, n))
+        distances, index = tree.query(points[block], k=k, workers=workers)
+        distances, index = distances.reshape(-1, k), index.reshape(-1, k)
+        mean_distance[block] = distances[:, 1:].mean(axis=1) if k > 1 else 0.0
+        itself = index == np.arange(block.start, block.stop)[:, None]
+        near_index[block] = np.where((distances <= radius_m) & ~itself, index, -1)
+        full[block] = distances[:, -1] <= radius_m
     statistical = np.ones(n, dtype=bool)
     if n > neighbors:
-        mean_distance = distances[:, 1:].mean(axis=1)
         statistical = mean_distance <= mean_distance.mean() + std_ratio * mean_distance.std()
-    near = (distances <= radius_m) & statistical[index] & (index != np.arange(n)[:, None])
-    count = near.sum(axis=1)
-    unsure = np.flatnonzero(statistical & (count < min_points) & (distances[:, -1] <= radius_m))
+    count = np.zeros(n, dtype=np.int64)
+    for start in range(0, n, OUTLIER_QUERY_BLOCK):
+        rows = near_index[start : start + OUTLIER_QUERY_BLOCK]
+        count[start : start + len(rows)] = ((rows >= 0) & statistical[rows]).sum(axis=1)
+    unsure = np.flatnonzero(statistical & (count < min_points) & full)
     if k < n and len(unsure):
         inliers = cKDTree(points[statistical])
         count[unsure] = inliers.query_ball_point(points[unsure], radius_m, return_length=True) - 1

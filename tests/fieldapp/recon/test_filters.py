@@ -2,6 +2,7 @@ import cv2
 import numpy as np
 import pytest
 
+from fieldapp.recon import filters
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.filters import (
     BY_COLOUR,
@@ -84,15 +85,18 @@ def _sor_then_ror(
     return statistical, radius
 
 
+@pytest.mark.parametrize("block", [65_536, 1000, 7])
 @pytest.mark.parametrize(
     ("neighbors", "radius_m", "min_points"),
     [(35, 0.008, 1), (35, 0.008, 5), (8, 0.02, 12), (3, 0.05, 40), (35, 0.001, 1)],
 )
 def test_one_query_gives_the_masks_of_sor_then_ror(
-    neighbors: int, radius_m: float, min_points: int
+    neighbors: int, radius_m: float, min_points: int, block: int, monkeypatch
 ) -> None:
     """Whatever the radius and the count asked (beyond the neighbours searched, too: the
-    points left unsure are counted again), duplicates and strays included."""
+    points left unsure are counted again), duplicates and strays included, and however the
+    query is cut into blocks."""
+    monkeypatch.setattr(filters, "OUTLIER_QUERY_BLOCK", block)
     rng = np.random.default_rng(neighbors + min_points)
     surface = ground_patch(rng, 0.05, 3000, noise_m=0.0005)
     blobs = rng.normal(0.0, 0.004, (6, 30, 3)) + rng.uniform(-0.2, 0.2, (6, 1, 3))
