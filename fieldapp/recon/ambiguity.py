@@ -6,16 +6,18 @@ the true one, often better (bare soil seed 1, stations 4, 5, 7, 8: three of six 
 mm off with fitness 0.68-0.79 against 0.64-0.72 at the truth). Several pairs that slid the
 same way agree with each other and outvote the right ones, and the plot ends silently wrong.
 
-So each usable pair is probed (:func:`probe`): GICP at the finest size only is started from
-its fit shifted by ``PROBE_SIGMAS`` of the pair's expected arrival error, either way along
-both horizontal axes. At a true, sharp minimum every probe comes back (within the edge
-tolerance); a probe that settles elsewhere with a usable fit marks the pair *ambiguous*.
-An ambiguous pair gives the graph no weight at all at first (it is left out of the first
-solution). Where the other pairs place both its stations well (:func:`settled`: each within
-``max_uncertainty_m`` / ``_deg`` in that solution), the pair is registered again from that
-solution (the plot's consistency chooses its minimum) and enters the final graph like any other;
-otherwise it stays out, and a station that loses its overlaps to it keeps a large
-uncertainty and is flagged unreliable with the reason (:func:`explain`), never silently wrong.
+So each usable pair that holds its horizontal position weakly (:func:`weakly_constrained`:
+bare soil, not a pair sharing plants or spheres) is probed (:func:`probe`): GICP at the finest
+reach is started from its fit shifted by ``PROBE_SIGMAS`` of the pair's relative arrival
+error, either way along both horizontal axes. At a true minimum every probe comes back (within
+the edge tolerance); a probe that settles elsewhere with a usable fit marks the pair
+*ambiguous*. An ambiguous pair gives the graph no weight at first: it is left out of the first
+solution. Where that solution places the pair's stations closely enough that at most one of
+the pair's known minima lies within its reach (:func:`settled`), the pair is registered again
+from the solution (the plot's consistency chooses its minimum) and enters the final graph like
+any other; otherwise it stays out, and its stations, held by their other pairs and priors,
+get the uncertainty that follows and, when not refined, the reason (:func:`notes`): never
+silently wrong.
 """
 
 from __future__ import annotations
@@ -90,9 +92,9 @@ def probe(
 ) -> Ambiguity | None:
     """The other minima of pair ``k`` found from the shifted starts (each once), or ``None``
     when every probe comes back to its fit (within the edge tolerance, measured at b's ground
-    centre ``node_b``) or settles where the fit is unusable. Each probe is GICP at the finest
-    size, as a pair registered again from a guess (:func:`pairwise.icp`); the two clouds are
-    prepared once for the four."""
+    centre ``node_b``) or settles where the fit is unusable. Each probe is GICP with the finest
+    size's reach, as a pair registered again from a guess (:func:`pairwise.icp`), on points
+    thinned to ``PROBE_THINNING`` times that size, prepared once for the four probes."""
     voxel_m = settings.voxel_sizes_m[-1]
     target, tree = small_gicp.preprocess_points(
         overlap.points_a_m, PROBE_THINNING * voxel_m, num_threads=1
