@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from devices.geometry import Matrix4, make_transform
+from devices.geometry import Matrix4, invert, make_transform, rotation_z, transform_points
 from fieldapp.recon import ambiguity, posegraph
 from fieldapp.recon.pairwise import Overlap, PairFit
+from fieldapp.recon.register import StationRegistration, register_stations
 from fieldapp.recon.settings import RegistrationSettings
 
 WAVELENGTH_M = 0.12
@@ -87,3 +88,28 @@ def test_only_pairs_that_hold_their_horizontal_position_weakly_are_probed() -> N
     plants = np.diag([1.0, 1.0, 1.0, 0.2**2, 0.3**2, 1.0])  # plants or spheres: 0.2-0.3
     assert ambiguity.weakly_constrained(1e4 * soil)
     assert not ambiguity.weakly_constrained(1e4 * plants)
+
+
+def test_a_station_held_only_by_an_ambiguous_pair_is_flagged_with_the_reason() -> None:
+    """Two stations 1.6 m apart on ground with 2 mm ridges every 12 cm along x (a gentle wave
+    along y): the one pair holds x only by the ridges and fits as well a ridge either way.
+    Nothing else places station 2, so the plot cannot choose: it is flagged, not refined."""
+
+    def ground(seed: int, centre_x_m: float) -> np.ndarray:
+        rng = np.random.default_rng(seed)
+        xy = rng.uniform(-1.5, 1.5, (60_000, 2)) + np.array([centre_x_m, 0.0])
+        z = 0.002 * np.sin(2 * np.pi * xy[:, 0] / WAVELENGTH_M) + 0.03 * np.sin(1.3 * xy[:, 1])
+        return np.column_stack([xy, z + rng.normal(0.0, 0.0005, len(xy))])
+
+    T_true = {1: np.eye(4), 2: _shift(1.6)}
+    points = {s: transform_points(invert(T), ground(s, T[0, 3])) for s, T in T_true.items()}
+    coarse = {1: T_true[1], 2: make_transform(rotation_z(0.5), np.array([1.63, -0.02, 0.0]))}
+    steps = register_stations(points, coarse, np.zeros(3), 1, RegistrationSettings())
+    while True:
+        try:
+            next(steps)
+        except StopIteration as done:
+            registrations: dict[int, StationRegistration] = done.value
+            break
+    assert registrations[2].verdict == "unreliable"
+    assert "pair 1-2 fits as well" in registrations[2].message  # a ridge (12 cm) away
