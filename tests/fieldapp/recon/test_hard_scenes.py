@@ -5,7 +5,8 @@ Each session is two side-by-side stations (4 and 5, eight views each): one overl
 register, and both cameras see every sphere, so a misplaced station draws each sphere twice.
 About 14 s of CPU per sphere session and 10 s per soil session (rendering 16 frames and
 reconstructing them): the targets are end-to-end figures, there is no cheaper way to check
-them.
+them. One more bare-soil session of four stations (a 2 x 2 block, about 15-20 s) checks that
+pairs fitting in more than one place never leave a station silently wrong.
 """
 
 from __future__ import annotations
