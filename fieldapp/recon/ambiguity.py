@@ -22,7 +22,7 @@ silently wrong.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -142,15 +142,21 @@ def ambiguous_pairs(
     nodes: dict[int, Matrix4],
     settings: RegistrationSettings,
     mapper: Mapper = map,
-) -> dict[int, Ambiguity]:
+) -> Generator[tuple[float, str], None, dict[int, Ambiguity]]:
     """Probe each fit of ``candidates`` (indices into ``fits``) that is weakly constrained
-    (:func:`weakly_constrained`): the ambiguous ones by index."""
+    (:func:`weakly_constrained`); yields (1.0, message) per pair probed, so the registration
+    can be followed and closed meanwhile, and returns the ambiguous ones by index."""
 
     def one(k: int) -> Ambiguity | None:
         return probe(k, overlaps[k], fits[k], nodes[fits[k].b], settings)
 
     weak = [k for k in candidates if weakly_constrained(fits[k].information)]
-    return {found.k: found for found in mapper(one, weak) if found is not None}
+    found: dict[int, Ambiguity] = {}
+    for k, result in zip(weak, mapper(one, weak), strict=True):
+        if result is not None:
+            found[k] = result
+        yield 1.0, f"stations {fits[k].a}-{fits[k].b} probed for a second minimum"
+    return found
 
 
 def weakly_constrained(information: NDArray[np.float64]) -> bool:

@@ -95,7 +95,7 @@ def register_stations(
         for fit in pool.map(lambda o: register_overlap(o, nodes[o.b][:3, 3], settings), overlaps):
             fits.append(fit)
             yield len(fits) / len(overlaps), f"stations {fit.a}-{fit.b} registered"
-        doubtful = ambiguity.ambiguous_pairs(
+        doubtful = yield from ambiguity.ambiguous_pairs(
             overlaps,
             fits,
             _usable_fits(nodes, fits, reference, settings),
