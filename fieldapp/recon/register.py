@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from devices.geometry import Matrix4, invert, make_transform, transform_points
-from fieldapp.recon import guards, posegraph, se3
+from fieldapp.recon import ambiguity, guards, posegraph, se3
 from fieldapp.recon.pairwise import Overlap, PairFit, find_overlaps, register_overlap
 from fieldapp.recon.settings import RegistrationSettings
 
@@ -99,8 +99,17 @@ def register_stations(
         ):
             fits.append(fit)
             yield len(fits) / len(overlaps), f"stations {fit.a}-{fit.b} registered"
-        first = _first_solution(nodes, fits, reference, settings)
+        doubtful = yield from ambiguity.ambiguous_pairs(
+            overlaps,
+            fits,
+            _usable_fits(nodes, fits, reference, settings),
+            nodes,
+            settings,
+            pool.map,
+        )
+        first = _first_solution(nodes, fits, reference, settings, set(doubtful))
         guesses = _consensus_guesses(nodes, fits, first, settings)
+        guesses |= ambiguity.settled(doubtful, first[1], nodes, settings)
         again = pool.map(
             lambda k: register_overlap(
                 overlaps[k], nodes[overlaps[k].b][:3, 3], settings, guesses[k], threads
@@ -110,7 +119,8 @@ def register_stations(
         for k, fit in zip(sorted(guesses), again, strict=True):
             fits[k] = fit
             yield 1.0, f"stations {fit.a}-{fit.b} registered again from the plot's solution"
-    return _solve_plot(
+    left_out = [doubtful[k] for k in sorted(set(doubtful) - set(guesses))]
+    registrations = _solve_plot(
         nodes,
         overlaps,
         fits,
@@ -118,7 +128,13 @@ def register_stations(
         settings,
         T_field_station_coarse,
         None if guesses else first[1],
+        {found.k for found in left_out},
     )
+    for station, note in ambiguity.notes(left_out).items():  # never silently wrong
+        if registrations[station].verdict in (guards.COARSE_KEPT, guards.UNRELIABLE):
+            message = f"{registrations[station].message}; {note}"
+            registrations[station] = replace(registrations[station], message=message)
+    return registrations
 
 
 def _first_solution(
@@ -126,10 +142,12 @@ def _first_solution(
     fits: list[PairFit],
     reference: int,
     settings: RegistrationSettings,
+    left_out: set[int],
 ) -> tuple[list[int], posegraph.Solution]:
-    """The graph of every usable fit solved once: (the usable fits' indices, the solution)."""
+    """The graph of every usable fit but those ``left_out`` solved once: (the usable fits'
+    indices, the solution)."""
     all_edges, _ = _edges(nodes, fits, reference, settings)
-    usable = [k for k, f in enumerate(fits) if _usable(f, all_edges[k], nodes, settings)]
+    usable = [k for k in _usable_fits(nodes, fits, reference, settings) if k not in left_out]
     edges = [all_edges[k] for k in usable] + all_edges[len(fits) :]
     tolerance = posegraph.Tolerance(settings.edge_tolerance_m, settings.edge_tolerance_deg)
     graph = {MAP_NODE: np.eye(4)} | nodes
@@ -167,6 +185,17 @@ def _consensus_guesses(
         if moved_m > settings.edge_tolerance_m or moved_deg > settings.edge_tolerance_deg:
             guesses[k] = guess
     return guesses
+
+
+def _usable_fits(
+    nodes: dict[int, Matrix4],
+    fits: list[PairFit],
+    reference: int,
+    settings: RegistrationSettings,
+) -> list[int]:
+    """Indices of the fits that may enter the graph (:func:`_usable`)."""
+    all_edges, _ = _edges(nodes, fits, reference, settings)
+    return [k for k, f in enumerate(fits) if _usable(f, all_edges[k], nodes, settings)]
 
 
 def _usable(
@@ -219,12 +248,13 @@ def _solve_plot(
     settings: RegistrationSettings,
     T_field_station_coarse: dict[int, Matrix4],
     first: posegraph.Solution | None = None,
+    left_out: frozenset[int] | set[int] = frozenset(),
 ) -> dict[int, StationRegistration]:
     """Solve the graph, then fix the station failing its guards worst at its coarse pose and
     solve again, until every free station passes. ``first``: the solution of the graph of
-    every usable fit, when already solved."""
+    every usable fit (but those ``left_out``), when already solved."""
     all_edges, priors = _edges(nodes, fits, reference, settings)
-    usable = [k for k, f in enumerate(fits) if _usable(f, all_edges[k], nodes, settings)]
+    usable = [k for k in _usable_fits(nodes, fits, reference, settings) if k not in left_out]
     tolerance = posegraph.Tolerance(settings.edge_tolerance_m, settings.edge_tolerance_deg)
     graph = {MAP_NODE: np.eye(4)} | nodes
     fixed: dict[int, str] = {}  # stations kept at their coarse pose, with the reason

@@ -5,7 +5,8 @@ Each session is two side-by-side stations (4 and 5, eight views each): one overl
 register, and both cameras see every sphere, so a misplaced station draws each sphere twice.
 About 14 s of CPU per sphere session and 10 s per soil session (rendering 16 frames and
 reconstructing them): the targets are end-to-end figures, there is no cheaper way to check
-them.
+them. One more bare-soil session of four stations (a 2 x 2 block, about 15-20 s) checks that
+pairs fitting in more than one place never leave a station silently wrong.
 """
 
 from __future__ import annotations
@@ -36,8 +37,8 @@ class Run:
     truth: dict[str, Any]
 
 
-def _run(folder: Path, scene: str, seed: int) -> Run:
-    options = ["--scene", scene, "--seed", str(seed), "--stations", "4,5"]
+def _run(folder: Path, scene: str, seed: int, stations: str = "4,5") -> Run:
+    options = ["--scene", scene, "--seed", str(seed), "--stations", stations]
     assert main(["simulate", "--out", str(folder), *options, "--arrival-error", "0.03,1.5"]) == 0
     result = run_reconstruction(load_session(folder), ReconstructionSettings())
     return Run(result, json.loads((folder / "truth.json").read_text()))
@@ -53,13 +54,21 @@ def soil(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactor
     return _run(tmp_path_factory.mktemp("soil") / "session", "soil", request.param)
 
 
-def _assert_stations_within_5_mm_and_0_2_degrees(run: Run) -> None:
+def _station_errors(run: Run) -> dict[int, tuple[float, float]]:
+    """Each station's pose relative to the reference against the truth: (m, deg)."""
     T = {int(s): np.array(m) for s, m in run.truth["T_field_camera"].items()}
     reference = run.result.reference
-    for station, registration in run.result.registrations.items():
-        translation_m, rotation_deg = pose_error(
+    return {
+        station: pose_error(
             run.result.T_reference_station(station), invert(T[reference]) @ T[station]
         )
+        for station in run.result.registrations
+    }
+
+
+def _assert_stations_within_5_mm_and_0_2_degrees(run: Run) -> None:
+    for station, (translation_m, rotation_deg) in _station_errors(run).items():
+        registration = run.result.registrations[station]
         assert translation_m < 0.005 and rotation_deg < 0.2, (station, translation_m)
         assert registration.verdict in ("refined", "reference"), registration.message
     assert not [w for w in run.result.warnings if "ground not found" in w]
@@ -83,3 +92,18 @@ def test_stations_of_a_sphere_plot_are_within_5_mm_and_0_2_degrees(spheres: Run)
 
 def test_stations_on_bare_soil_are_within_5_mm_and_0_2_degrees(soil: Run) -> None:
     _assert_stations_within_5_mm_and_0_2_degrees(soil)
+
+
+def test_a_block_of_bare_soil_is_never_silently_wrong(tmp_path: Path) -> None:
+    """Stations 4, 5, 7 and 8 of bare soil seed 1: three of the six pairs settle a clod
+    wavelength off (127-198 mm) and agree with each other; before the probes for a second
+    minimum they outvoted the two right pairs and stations 7 and 8 ended 128-138 mm off, yet
+    "refined". Now every station is within 5 mm and 0.2 degrees, or flagged unreliable.
+    About 12 s of CPU (rendering 32 frames and reconstructing them)."""
+    run = _run(tmp_path / "session", "soil", 1, "4,5,7,8")
+    verdicts = {s: r.verdict for s, r in run.result.registrations.items()}
+    for station, (translation_m, rotation_deg) in _station_errors(run).items():
+        assert verdicts[station] in ("refined", "reference", "unreliable"), verdicts
+        if verdicts[station] != "unreliable":
+            assert translation_m < 0.005 and rotation_deg < 0.2, (station, translation_m)
+    assert "refined" in verdicts.values()  # measured: all three refined, within 2.2 mm
