@@ -274,8 +274,33 @@ def _close_window(window: MainWindow) -> None:
         raise SmokeFailure("close", "the main window refused to close")
 
 
+def _import_before_threads() -> None:
+    """Import on this (the main) thread the modules both threads would otherwise import at
+    once. Python breaks an import cycle between two threads by handing one of them a partially
+    initialised module: pydantic's internals have such cycles, and the worker defining the
+    session and reconstruction models while the window defines the settings' failed the smoke
+    test now and then (``cannot import name 'import_string' from partially initialized module
+    'pydantic._internal._validators'``)."""
+    import importlib
+
+    for name in (
+        "fieldapp.settings",
+        "fieldapp.io.session",
+        "fieldapp.recon.settings",
+        "fieldapp.recon.pipeline",
+        "fieldapp.cli.simulate",
+        "fieldapp.evaluate.references",
+        "fieldapp.results.identity",
+        "devices.sim.world",
+        "devices.sim.scene",
+        "devices.sim.rig",
+    ):
+        importlib.import_module(name)
+
+
 def run_smoke_test(folder: Path, run: _Run) -> SmokeReport:
     """The steps of the module docstring in ``folder``; raises :class:`SmokeFailure`."""
+    _import_before_threads()
     recon = Background("smoke-reconstruction", lambda: reconstruct_and_check(folder / "session"))
     run.step("window")
     window = _open_window(folder)
