@@ -12,13 +12,12 @@ system, all threads); on a loaded machine it still grows a little (caches, hyper
 
 from __future__ import annotations
 
-import argparse
 import resource
 import statistics
-import tempfile
 from pathlib import Path
 
-from fieldapp.cli import main as fieldapp_main
+from sessions import main_on_a_session
+
 from fieldapp.io.session import load_session
 from fieldapp.recon.organ_traits import foot_m, measure_organs
 from fieldapp.recon.pipeline import run_reconstruction
@@ -55,19 +54,7 @@ def run(session: Path, repeats: int) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--session", type=Path, help="a simulated or real session folder")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the simulated plot")
-    parser.add_argument("--repeats", type=int, default=5)
-    args = parser.parse_args()
-    if args.session is not None:
-        run(args.session, args.repeats)
-        return
-    with tempfile.TemporaryDirectory() as folder:
-        session = Path(folder) / "plot"
-        if fieldapp_main(["simulate", "--out", str(session), "--seed", str(args.seed)]) != 0:
-            raise SystemExit("fieldapp simulate failed")
-        run(session, args.repeats)
+    main_on_a_session(__doc__.splitlines()[0], run)
 
 
 if __name__ == "__main__":

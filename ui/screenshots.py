@@ -15,8 +15,12 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from PySide6 import QtCore, QtWidgets
+
+if TYPE_CHECKING:
+    from ui.results import ResultsPanel
 
 log = logging.getLogger(__name__)
 
@@ -128,7 +132,9 @@ def failed_device(window: QtWidgets.QMainWindow, out: Path) -> None:
     save(window, out, "device-error")
 
 
-def main() -> int:
+def shoot_main(shoot: Callable[[Path], None]) -> int:
+    """A screenshot script's ``main``: ``shoot`` into the folder named on the command line
+    (default ``docs/images``)."""
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("docs/images")
     out.mkdir(parents=True, exist_ok=True)
@@ -136,6 +142,26 @@ def main() -> int:
     shoot(out)
     app.processEvents()
     return 0
+
+
+def results_panel(folder: Path, session: Path) -> ResultsPanel:
+    """A results panel on screen with ``session`` open, its database and results in
+    ``folder``."""
+    from fieldapp.settings import Settings
+    from ui.results import ResultsPanel
+
+    settings = Settings()
+    settings.paths.results_db = folder / "results.sqlite"
+    panel = ResultsPanel(settings)
+    panel.resize(*SIZE)
+    panel.show()
+    panel.open_session(session)
+    panel.results_dir.setText(str(folder / "results"))
+    return panel
+
+
+def main() -> int:
+    return shoot_main(shoot)
 
 
 if __name__ == "__main__":

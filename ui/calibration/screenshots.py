@@ -18,7 +18,7 @@ from pathlib import Path
 
 from PySide6 import QtWidgets
 
-from ui.screenshots import SIZE, pump, save
+from ui.screenshots import SIZE, pump, save, shoot_main
 
 log = logging.getLogger(__name__)
 
@@ -90,13 +90,7 @@ def finish(wizard: QtWidgets.QWizard) -> None:
 
 
 def main() -> int:
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("docs/images")
-    out.mkdir(parents=True, exist_ok=True)
-    app = QtWidgets.QApplication(sys.argv[:1])
-    shoot(out)
-    app.processEvents()
-    return 0
+    return shoot_main(shoot)
 
 
 if __name__ == "__main__":

@@ -23,27 +23,19 @@ from PySide6 import QtCore, QtWidgets
 from PySide6.QtTest import QTest
 
 from ui.results.scene import depth_m, pick_on_screen
-from ui.screenshots import SIZE, pump
+from ui.screenshots import pump, results_panel
 
 log = logging.getLogger(__name__)
 
 
 def shoot(out: Path, seed: int = 3) -> None:
     from fieldapp.cli import main
-    from fieldapp.settings import Settings
-    from ui.results import ResultsPanel
 
     with tempfile.TemporaryDirectory() as tmp:
         session = Path(tmp) / "plot"
         if main(["simulate", "--out", str(session), "--seed", str(seed)]) != 0:
             raise RuntimeError("simulate failed")
-        settings = Settings()
-        settings.paths.results_db = Path(tmp) / "results.sqlite"
-        panel = ResultsPanel(settings)
-        panel.resize(*SIZE)
-        panel.show()
-        panel.open_session(session)
-        panel.results_dir.setText(str(Path(tmp) / "results"))
+        panel = results_panel(Path(tmp), session)
         _reconstruct(panel)
         bar = panel.correction
         bar.author.setText("ana")

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from PySide6 import QtWidgets
 
-from ui.screenshots import SIZE, pump
+from ui.screenshots import pump, results_panel
 
 log = logging.getLogger(__name__)
 
@@ -25,21 +25,13 @@ log = logging.getLogger(__name__)
 def shoot(out: Path, session: Path | None = None, plant: int = 5, leaf_row: int = 2) -> None:
     """The screenshots into ``out``, of ``session`` (default: one simulated here)."""
     from fieldapp.cli import main
-    from fieldapp.settings import Settings
-    from ui.results import ResultsPanel
 
     with tempfile.TemporaryDirectory() as tmp:
         if session is None:
             session = Path(tmp) / "plot"
             if main(["simulate", "--out", str(session)]) != 0:
                 raise RuntimeError("simulate failed")
-        settings = Settings()
-        settings.paths.results_db = Path(tmp) / "results.sqlite"
-        panel = ResultsPanel(settings)
-        panel.resize(*SIZE)
-        panel.show()
-        panel.open_session(session)
-        panel.results_dir.setText(str(Path(tmp) / "results"))
+        panel = results_panel(Path(tmp), session)
         panel.reconstruct()
         pump(lambda: panel.results is not None, 300.0)
         panel.select_plant(plant)
