@@ -26,11 +26,10 @@ from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-import small_gicp
 from numpy.typing import NDArray
 
 from devices.geometry import Matrix4, invert, make_transform, transform_points
-from fieldapp.recon import guards, posegraph, se3
+from fieldapp.recon import guards, pairwise, posegraph, se3
 from fieldapp.recon.pairwise import Overlap, PairFit, score
 from fieldapp.recon.settings import RegistrationSettings
 
@@ -96,28 +95,12 @@ def probe(
     size's reach, as a pair registered again from a guess (:func:`pairwise.icp`), on points
     thinned to ``PROBE_THINNING`` times that size, prepared once for the four probes."""
     voxel_m = settings.voxel_sizes_m[-1]
-    target, tree = small_gicp.preprocess_points(
-        overlap.points_a_m, PROBE_THINNING * voxel_m, num_threads=1
-    )
-    source, _ = small_gicp.preprocess_points(
-        overlap.points_b_m, PROBE_THINNING * voxel_m, num_threads=1
-    )
+    target, tree = pairwise.thinned(overlap.points_a_m, PROBE_THINNING * voxel_m)
+    source, _ = pairwise.thinned(overlap.points_b_m, PROBE_THINNING * voxel_m)
     alternatives: list[Matrix4] = []
     spread, nearest_m = (0.0, 0.0), np.inf
     for shift in probe_starts_m(settings):
-        result = small_gicp.align(
-            target,
-            source,
-            tree,
-            init_T_target_source=shift @ fit.T_a_b,
-            registration_type=settings.method,
-            max_correspondence_distance=max(
-                settings.max_correspondence_m, settings.correspondence_factor * voxel_m
-            ),
-            num_threads=1,
-            max_iterations=settings.max_iterations,
-        )
-        T_a_b = np.asarray(result.T_target_source, dtype=np.float64)
+        T_a_b, converged = pairwise.gicp(target, source, tree, shift @ fit.T_a_b, settings, voxel_m)
         if not all(_distinct(T, T_a_b, node_b, settings) for T in (fit.T_a_b, *alternatives)):
             continue  # back to the fit, or to a minimum already found
         fitness, _ = score(
@@ -125,7 +108,7 @@ def probe(
             transform_points(T_a_b, overlap.points_b_m),
             settings.max_correspondence_m,
         )
-        if result.converged and fitness >= settings.min_fitness:
+        if converged and fitness >= settings.min_fitness:
             alternatives.append(T_a_b)
             apart = _apart(fit.T_a_b, T_a_b, node_b)
             spread = (max(spread[0], apart[0]), max(spread[1], apart[1]))

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -109,21 +110,36 @@ def align(
     for voxel_m in sizes:
         target, tree = preprocess(target_m, voxel_m, threads)
         source, _ = preprocess(source_m, voxel_m, threads)
-        result = small_gicp.align(
-            target,
-            source,
-            tree,
-            init_T_target_source=T,
-            registration_type=settings.method,
-            max_correspondence_distance=max(
-                settings.max_correspondence_m, settings.correspondence_factor * voxel_m
-            ),
-            num_threads=1,
-            max_iterations=settings.max_iterations,
-        )
-        T = np.asarray(result.T_target_source, dtype=np.float64)
-        converged = bool(result.converged)
+        T, converged = gicp(target, source, tree, T, settings, voxel_m)
     return T, converged
+
+
+def gicp(
+    target: Any, source: Any, tree: Any, T: Matrix4, settings: RegistrationSettings, voxel_m: float
+) -> tuple[Matrix4, bool]:
+    """One GICP run of prepared ``source`` onto ``target`` (and its ``tree``) from ``T`` with
+    the reach of voxel size ``voxel_m``, on one thread (see the module's docstring):
+    ``T_target_source`` and whether it converged."""
+    result = small_gicp.align(
+        target,
+        source,
+        tree,
+        init_T_target_source=T,
+        registration_type=settings.method,
+        max_correspondence_distance=max(
+            settings.max_correspondence_m, settings.correspondence_factor * voxel_m
+        ),
+        num_threads=1,
+        max_iterations=settings.max_iterations,
+    )
+    return np.asarray(result.T_target_source, dtype=np.float64), bool(result.converged)
+
+
+def thinned(points_m: NDArray[np.float64], voxel_m: float) -> tuple[Any, Any]:
+    """small_gicp's own preparation of ``points_m`` (N, 3) at ``voxel_m``, on one thread: the
+    cloud and its tree."""
+    cloud, tree = small_gicp.preprocess_points(points_m, voxel_m, num_threads=1)
+    return cloud, tree
 
 
 def icp(
