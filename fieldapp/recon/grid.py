@@ -104,6 +104,7 @@ def stems_at_empty_nodes(
     if len(points_m) == 0:
         return found
     tree = cKDTree(points_m[:, :2])
+    soil_tree = cKDTree(soil_m[:, :2]) if len(soil_m) else None  # once: a node asks twice
     for xy in grid.xy_m:
         if any(np.linalg.norm(stem.xy_m - xy) <= grid.snap_radius_m for stem in stems):
             continue
@@ -111,13 +112,13 @@ def stems_at_empty_nodes(
         local = points_m[near]
         if len(local) == 0:
             continue
-        heights = local[:, 2] - local_ground_z_m(soil_m, local[:, :2])
+        heights = local[:, 2] - local_ground_z_m(soil_m, local[:, :2], soil_tree=soil_tree)
         origin, cells, fractions = stem_columns(local, heights, weak)
         if len(cells) == 0:
             continue
         best = int(np.argmax(fractions))
         stem_xy = origin + (cells[best] + 0.5) * settings.cell_m
-        ground = float(local_ground_z_m(soil_m, stem_xy[None])[0])
+        ground = float(local_ground_z_m(soil_m, stem_xy[None], soil_tree=soil_tree)[0])
         found.append(Stem(stem_xy, ground, float(fractions[best])))
     return found
 

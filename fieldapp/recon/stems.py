@@ -38,11 +38,15 @@ class Stem:
 
 
 def local_ground_z_m(
-    soil_m: NDArray[np.float64], xy_m: NDArray[np.float64], fallback_z_m: float = 0.0
+    soil_m: NDArray[np.float64],
+    xy_m: NDArray[np.float64],
+    fallback_z_m: float = 0.0,
+    soil_tree: cKDTree | None = None,
 ) -> NDArray[np.float64]:
     """(N,) the median z of the :data:`GROUND_NEIGHBOURS` soil points (M, 3) nearest each
     ``xy_m`` (N, 2) in plan view (taken at the centre of its :data:`GROUND_CELL_M` cell);
-    ``fallback_z_m`` everywhere when there is no soil."""
+    ``fallback_z_m`` everywhere when there is no soil. ``soil_tree``: the plan-view tree over
+    ``soil_m[:, :2]`` when the caller asks many times (built here otherwise)."""
     if len(soil_m) == 0 or len(xy_m) == 0:
         return np.full(len(xy_m), fallback_z_m)
     cells = np.floor(xy_m / GROUND_CELL_M).astype(np.int64)
@@ -50,7 +54,8 @@ def local_ground_z_m(
     _, first, inverse = np.unique(packed, return_index=True, return_inverse=True)
     centres = (cells[first] + 0.5) * GROUND_CELL_M
     k = min(GROUND_NEIGHBOURS, len(soil_m))
-    _, index = cKDTree(soil_m[:, :2]).query(centres, k=k)
+    tree = cKDTree(soil_m[:, :2]) if soil_tree is None else soil_tree
+    _, index = tree.query(centres, k=k)
     index = np.asarray(index).reshape(len(centres), k)
     return np.median(soil_m[index, 2], axis=1)[inverse.ravel()]  # type: ignore[no-any-return]
 
