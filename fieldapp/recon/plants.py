@@ -22,14 +22,14 @@ from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.filters import voxel_keys
-from fieldapp.recon.geodesic import UNREACHED, assign_to_stems, voxel_graph
+from fieldapp.recon.geodesic import UNREACHED, Assignment, assign_to_stems, voxel_graph
 from fieldapp.recon.grid import (
     GridNodes,
     apply_grid_prior_nodes,
     prior_nodes,
     stems_at_empty_nodes,
 )
-from fieldapp.recon.settings import GridPrior, PlantSettings
+from fieldapp.recon.settings import GridPrior, PlantSettings, StemSettings
 from fieldapp.recon.stems import Stem, find_stems
 from fieldapp.recon.traits import PlantTraits, measure_plant
 
@@ -40,6 +40,24 @@ _HALF_NEIGHBOURHOOD = [
     for offset in itertools.product((-1, 0, 1), repeat=3)
     if offset > (0, 0, 0)  # 13 of the 26 neighbours: each pair is visited once
 ]
+
+
+def assign_by_settings(
+    points_m: NDArray[np.float64], stems_xy_m: NDArray[np.float64], s: StemSettings
+) -> Assignment:
+    """Every point of ``points_m`` (N, 3) to the stem at ``stems_xy_m`` (S, 2) it is nearest to
+    along the plant (:func:`fieldapp.recon.geodesic.assign_to_stems` over a voxel graph), with
+    the stem settings ``s``: one place for the reconstruction and manual splits alike."""
+    return assign_to_stems(
+        voxel_graph(points_m, s.graph_voxel_m),
+        stems_xy_m,
+        s.seed_radius_m,
+        s.seed_height_m,
+        s.reach_m,
+        s.ambiguity_margin_m,
+        s.inward_penalty,
+        s.bend_penalty_m,
+    )
 
 
 def _pack(cells: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -214,16 +232,7 @@ def _labels(
     ambiguous = np.zeros(len(points_m), dtype=bool)
     if stems:
         s = settings.stems
-        assignment = assign_to_stems(
-            voxel_graph(points_m, s.graph_voxel_m),
-            np.array([stem.xy_m for stem in stems]),
-            s.seed_radius_m,
-            s.seed_height_m,
-            s.reach_m,
-            s.ambiguity_margin_m,
-            s.inward_penalty,
-            s.bend_penalty_m,
-        )
+        assignment = assign_by_settings(points_m, np.array([stem.xy_m for stem in stems]), s)
         labels[:] = assignment.stem
         ambiguous = assignment.ambiguous
         _join_fragments(points_m, labels, settings.cluster_voxel_m, merges)

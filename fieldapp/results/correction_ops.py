@@ -10,7 +10,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from fieldapp.recon.geodesic import UNREACHED, assign_to_stems, voxel_graph
+from fieldapp.recon.geodesic import UNREACHED
+from fieldapp.recon.plants import assign_by_settings
 from fieldapp.recon.settings import ReconstructionSettings
 from fieldapp.results.correction_plot import PlotState, measure_again
 from fieldapp.results.corrections import Delete, Merge, PlantRef, Relabel, Split
@@ -140,17 +141,7 @@ def stem_parts(
     to along the plant (:func:`fieldapp.recon.geodesic.assign_to_stems`, the reconstruction's
     settings); a point no stem reaches goes with its nearest reached point. Raises
     :class:`Unmatched` when a stem ends up with no point."""
-    s = settings.plants.stems
-    assignment = assign_to_stems(
-        voxel_graph(points_m, s.graph_voxel_m),
-        stems_xy_m,
-        s.seed_radius_m,
-        s.seed_height_m,
-        s.reach_m,
-        s.ambiguity_margin_m,
-        s.inward_penalty,
-        s.bend_penalty_m,
-    )
+    assignment = assign_by_settings(points_m, stems_xy_m, settings.plants.stems)
     part = assignment.stem.copy()
     reached = part != UNREACHED
     if not reached.any():
