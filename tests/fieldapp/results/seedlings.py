@@ -85,3 +85,13 @@ def _row(plant: int, traits: PlantTraits, organs: PlantOrgans) -> PlantRow:
         leaf_count=organs.leaf_count,
         height_max_cm=100 * organs.height_max_m,
     )
+
+
+def apart_and_merged(base: Path) -> dict[str, Path]:
+    """Two automatic results of seed 0's plot in ``base``: ``apart`` (plants 1 and 2) and
+    ``merged`` (both seedlings as plant 1)."""
+    groups = seedlings(0)
+    return {
+        "apart": write_plot(base / "apart", groups, [1, 2]),
+        "merged": write_plot(base / "merged", [np.concatenate(groups)], [1]),
+    }

@@ -37,18 +37,13 @@ from fieldapp.results.db import ResultsDB
 from fieldapp.results.organ_tables import read_table
 from fieldapp.results.schema import connect, migrate
 
-from .seedlings import STEMS, seedlings, traits_of, write_plot
+from .seedlings import STEMS, apart_and_merged, seedlings, traits_of, write_plot
 
 
 @pytest.fixture(scope="module")
 def auto_plots(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """Two automatic results of the same plot: plants apart (1, 2) and both as one plant."""
-    base = tmp_path_factory.mktemp("corrections")
-    groups = seedlings(0)
-    return {
-        "apart": write_plot(base / "apart", groups, [1, 2]),
-        "merged": write_plot(base / "merged", [np.concatenate(groups)], [1]),
-    }
+    return apart_and_merged(tmp_path_factory.mktemp("corrections"))
 
 
 @pytest.fixture

@@ -20,16 +20,9 @@ def plot_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def plots(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """Two labelled seedling plots for the corrections: ``apart`` (plants 1 and 2) and
     ``merged`` (both seedlings as plant 1); copy one before changing it."""
-    import numpy as np
+    from ...fieldapp.results.seedlings import apart_and_merged
 
-    from ...fieldapp.results.seedlings import seedlings, write_plot
-
-    base = tmp_path_factory.mktemp("correction-ui")
-    groups = seedlings(0)
-    return {
-        "apart": write_plot(base / "apart", groups, [1, 2]),
-        "merged": write_plot(base / "merged", [np.concatenate(groups)], [1]),
-    }
+    return apart_and_merged(tmp_path_factory.mktemp("correction-ui"))
 
 
 @pytest.fixture
