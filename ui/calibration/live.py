@@ -25,6 +25,17 @@ FOUND_STYLE = "background:#2e7d32;color:white;padding:4px;font-weight:bold"
 MISSING_STYLE = "background:#c62828;color:white;padding:4px;font-weight:bold"
 
 
+def picture_label(text: str, min_width: int, min_height: int) -> QtWidgets.QLabel:
+    """A centred label for a picture, at least ``min_width`` x ``min_height``, whose pixmap is
+    scaled to the room the label has: it never grows the page (nor the window)."""
+    label = QtWidgets.QLabel(text)
+    label.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+    label.setMinimumSize(min_width, min_height)
+    ignored = QtWidgets.QSizePolicy.Policy.Ignored
+    label.setSizePolicy(ignored, ignored)
+    return label
+
+
 def detection_image(frame_ir: NDArray[Any] | None, color: NDArray[np.uint8]) -> NDArray[Any]:
     """The image boards are found in: IR when the camera gives it (the paper calibrates the
     depth camera from IR), else the colour image."""
@@ -60,12 +71,7 @@ class BoardPreview(QtWidgets.QWidget):
         self.corners: NDArray[np.float32] | None = None
         self._busy = False
         self._workers: set[Any] = set()
-        self.picture = QtWidgets.QLabel("no image yet")
-        self.picture.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
-        self.picture.setMinimumSize(320, 265)
-        # scaled to the room it has: its pixmap never grows the page (nor the window)
-        ignored = QtWidgets.QSizePolicy.Policy.Ignored
-        self.picture.setSizePolicy(ignored, ignored)
+        self.picture = picture_label("no image yet", 320, 265)
         self.state = QtWidgets.QLabel("")
         self.state.setObjectName("boardState")
         self.state.setWordWrap(True)  # the whole "BOARD NOT FOUND" advice, never cut off

@@ -25,7 +25,7 @@ from devices.geometry import Matrix4
 from fieldapp.calib.board import Board
 from fieldapp.calib.intrinsics import IntrinsicsResult
 from fieldapp.calib.stations import StationsResult
-from ui.calibration.live import drawn, to_pixmap
+from ui.calibration.live import drawn, picture_label, to_pixmap
 
 OFFSET_SCALE = 10.0
 """Reprojection offsets are drawn this many times longer than they are."""
@@ -110,12 +110,7 @@ class ReprojectionPicture(QtWidgets.QWidget):
         self.bars.addItem(self.rms_line)
         self.choice = QtWidgets.QComboBox()
         self.choice.currentIndexChanged.connect(self._show_choice)
-        self.picture = QtWidgets.QLabel("")
-        self.picture.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
-        self.picture.setMinimumSize(360, 260)
-        # scaled to the room it has: its pixmap never grows the page (nor the window)
-        ignored = QtWidgets.QSizePolicy.Policy.Ignored
-        self.picture.setSizePolicy(ignored, ignored)
+        self.picture = picture_label("", 360, 260)
         self.caption = QtWidgets.QLabel("")
         self.caption.setWordWrap(True)
         row = QtWidgets.QHBoxLayout()
