@@ -47,6 +47,8 @@ DBSCAN_EPS_M = 0.05
 """25 voxels: leaves of one plant join through their 2 mm voxels; neighbours stay apart
 (seedlings 80 cm apart leave gaps of 30 cm and more)."""
 DBSCAN_MIN_POINTS = 10
+ROR_VOXELS = 4
+"""The radius filter keeps points with 5 others within 4 voxels (8 mm at 2 mm)."""
 MIN_PLANT_SHARE = 0.1
 """A cluster is a plant when it has a tenth of the largest cluster's points: on seeds 0-4
 plants had 2,900-10,800 points and the fragments (leaf tips cut off by the outlier
@@ -127,7 +129,7 @@ def station_clouds(session: Session) -> dict[int, o3d.geometry.PointCloud]:
 
 
 def plants_of_station(
-    cloud: o3d.geometry.PointCloud,
+    cloud: o3d.geometry.PointCloud, voxel_m: float = VOXEL_M
 ) -> tuple[o3d.geometry.PointCloud, o3d.geometry.PointCloud]:
     """Pass-through above the station's RANSAC ground, ExG, voxel grid, SOR, ROR; the plants
     and the station's soil sample (the ground's inliers)."""
@@ -136,9 +138,9 @@ def plants_of_station(
     above = np.flatnonzero((height > PASS_THROUGH_M[0]) & (height < PASS_THROUGH_M[1]))
     crop = cloud.select_by_index(above)
     green = _excess_green_mask((np.asarray(crop.colors) * 255).astype(np.uint8))
-    plants = crop.select_by_index(np.flatnonzero(green)).voxel_down_sample(VOXEL_M)
+    plants = crop.select_by_index(np.flatnonzero(green)).voxel_down_sample(voxel_m)
     plants, _ = plants.remove_statistical_outlier(nb_neighbors=35, std_ratio=1.5)
-    plants, _ = plants.remove_radius_outlier(nb_points=5, radius=0.008)
+    plants, _ = plants.remove_radius_outlier(nb_points=5, radius=ROR_VOXELS * voxel_m)
     return plants, soil
 
 
@@ -226,15 +228,16 @@ def T_map_field(session: Session, reference: int) -> np.ndarray:
     return T
 
 
-def reconstruct(folder: Path, out: Path) -> dict[str, Any]:
-    """Run the reference on ``folder``; writes ``out/plants.csv``; returns the stage times."""
+def reconstruct(folder: Path, out: Path, voxel_m: float = VOXEL_M) -> dict[str, Any]:
+    """Run the reference on ``folder`` with plant voxels of ``voxel_m`` (the radius filter's
+    radius scales with it); writes ``out/plants.csv``; returns the stage times."""
     stages = Stages()
     session = load_session(folder)
     clouds = station_clouds(session)
     stages.done("views -> clouds (create_from_rgbd_image)")
     plants, soil = {}, {}
     for station, cloud in clouds.items():
-        plants[station], soil[station] = plants_of_station(cloud)
+        plants[station], soil[station] = plants_of_station(cloud, voxel_m)
     stages.done("per station: RANSAC, pass-through, ExG, voxel, SOR, ROR")
     stations = session.calibration.stations
     assert stations is not None
@@ -246,7 +249,7 @@ def reconstruct(folder: Path, out: Path) -> dict[str, Any]:
     for station, cloud in plants.items():
         merged += cloud
         ground += soil[station].transform(corrections[station])
-    rows = plant_traits(merged.voxel_down_sample(VOXEL_M), ground)
+    rows = plant_traits(merged.voxel_down_sample(voxel_m), ground)
     T = T_map_field(session, reference)
     for row in rows:  # plants.csv is in the map frame when the base reported its poses
         row["x_m"], row["y_m"] = T[:2, :2] @ (row["x_m"], row["y_m"]) + T[:2, 3]
