@@ -4,7 +4,8 @@
 Excess green is computed on the colour images, before any point exists: Otsu's threshold over
 all the station's measured pixels, then only the green pixels (and a sparse grid of the others,
 for the ground) are back-projected. A seedling plot is mostly soil, so this is where the cloud
-shrinks by an order of magnitude.
+shrinks by an order of magnitude. The pixels are tallied by colour key (:func:`exg_keys`), so
+the station's threshold is found from a few thousand distinct values, not 1.6 million floats.
 """
 
 from __future__ import annotations
@@ -31,7 +32,10 @@ from fieldapp.recon.filters import (
     BY_COLOUR,
     Separation,
     choose_separation,
-    excess_green,
+    exg_keys,
+    exg_of_keys,
+    exg_tally,
+    exg_values,
     keep_soil,
     otsu_threshold,
 )
@@ -94,27 +98,37 @@ def _skipped(station: int, capture: Capture, error: FormatError) -> str:
 
 @dataclass(frozen=True)
 class ReadFrame:
-    """One capture read: its images and the excess green of its measured pixels (finite depth).
+    """One capture read: its images and the colour keys of its measured pixels (finite depth).
 
-    ``images``: as read; ``measured``: (H, W) bool; ``exg``: (M,) float64, the excess green of
-    the measured pixels in row-major order (the rest is never used).
+    ``images``: as read; ``measured``: (H, W) bool; ``keys``: (M,) int32, the
+    :func:`~fieldapp.recon.filters.exg_keys` of the measured pixels in row-major order, and
+    ``tally``: (EXG_KEYS,) int64, how many have each key; both ``None`` for a depth-only
+    capture (no colour: its plants are told by geometry).
     """
 
     images: CaptureImages
     measured: NDArray[np.bool_]
-    exg: NDArray[np.float64]
+    keys: NDArray[np.int32] | None
+    tally: NDArray[np.int64] | None
 
     @property
     def capture(self) -> Capture:
         return self.images.capture
 
+    @property
+    def measured_pixels(self) -> int:
+        return int(np.count_nonzero(self.measured)) if self.keys is None else len(self.keys)
+
 
 def frame_of(images: CaptureImages) -> ReadFrame:
-    """A capture's images with the excess green of its measured pixels. Computed over the whole
-    frame, then picked: cheaper than gathering the measured pixels' colours first."""
+    """A capture's images with the colour keys of its measured pixels and their tally.
+    Computed over the whole frame, then picked: cheaper than gathering the measured pixels'
+    colours first."""
     measured = np.isfinite(images.depth_m)
-    exg = excess_green(images.color.reshape(-1, 3))[measured.reshape(-1)]
-    return ReadFrame(images, measured, exg)
+    if images.capture.color is None:
+        return ReadFrame(images, measured, None, None)
+    keys = exg_keys(images.color.reshape(-1, 3))[measured.reshape(-1)]
+    return ReadFrame(images, measured, keys, exg_tally(keys))
 
 
 class FrameWorkers:
@@ -191,8 +205,9 @@ def read_station(
             return None, warnings
         separation, threshold = _separation(frames, exg_threshold)
         grid = _soil_grid(frames[0].measured.shape, soil_pixel_stride)
+        green_key = exg_of_keys() > threshold  # which colour keys are green
         clouds = workers.map(
-            lambda frame: _green_and_soil(frame, separation, threshold, grid, rays, crop), frames
+            lambda frame: _green_and_soil(frame, separation, green_key, grid, rays, crop), frames
         )
     views = [frame.capture.view for frame in frames]
     scan = StationScan(
@@ -205,7 +220,7 @@ def read_station(
         ),
         sorted(views),
         threshold,
-        sum(len(frame.exg) for frame in frames),
+        sum(frame.measured_pixels for frame in frames),
         separation,
     )
     return scan, warnings
@@ -223,33 +238,41 @@ def _separation(
     frames: list[ReadFrame], exg_threshold: float | Literal["otsu"]
 ) -> tuple[Separation, float]:
     """How the station's plants are told from its soil, and the ExG threshold (infinite by
-    geometry), judged on every measured pixel of the station."""
-    measured_exg = np.concatenate([frame.exg for frame in frames])
-    has_colour = all(frame.capture.color is not None for frame in frames)
-    separation = choose_separation(measured_exg if has_colour else None)
-    threshold = _threshold(measured_exg, exg_threshold) if not separation.by_geometry else np.inf
-    separation = keep_soil(separation, measured_exg, threshold)
+    geometry), judged on every measured pixel of the station: from their tally by colour
+    key, the same threshold as of the pixels' values one by one, at a fraction of the cost."""
+    tallies = [frame.tally for frame in frames if frame.tally is not None]
+    if len(tallies) < len(frames):
+        return choose_separation(None), np.inf
+    station_tally = tallies[0].copy()
+    for tally in tallies[1:]:
+        station_tally += tally  # in place: np.sum over the list is 200 times slower
+    values, weights = exg_values(station_tally)
+    otsu = otsu_threshold(values, weights) if len(values) else 0.0
+    separation = choose_separation(values, weights, otsu)
+    threshold = otsu if exg_threshold == "otsu" else float(exg_threshold)
+    separation = keep_soil(separation, values, threshold, weights)
     return separation, np.inf if separation.by_geometry else threshold
 
 
 def _green_and_soil(
     frame: ReadFrame,
     separation: Separation,
-    threshold: float,
+    green_key: NDArray[np.bool_],
     grid: NDArray[np.bool_],
     rays: NDArray[np.float64],
     crop: CropSettings,
 ) -> tuple[Cloud, Cloud]:
-    """One frame's green points and its soil sample (the ``grid`` (H, W) pixels not green),
-    in its camera frame; by geometry every point is "green" and the soil the whole grid."""
+    """One frame's green points (``green_key`` (EXG_KEYS,): which colour keys are green) and
+    its soil sample (the ``grid`` (H, W) pixels not green), in its camera frame; by geometry
+    every point is "green" and the soil the whole grid."""
     if frame.measured.shape != rays.shape[:2]:
         raise ValueError(f"depth {frame.measured.shape} does not match the camera {rays.shape[:2]}")
     index = np.flatnonzero(frame.measured)
     on_grid = grid.reshape(-1)[index]
-    if separation.by_geometry:
+    if separation.by_geometry or frame.keys is None:
         green, soil = np.ones(len(index), dtype=bool), on_grid
     else:
-        green = frame.exg > threshold
+        green = green_key[frame.keys]
         soil = on_grid & ~green
 
     def cloud(picked: NDArray[np.bool_]) -> Cloud:
@@ -259,9 +282,3 @@ def _green_and_soil(
         return backproject_pixels(pixels, depth_m, colors, rays, crop.radius_m, crop.min_depth_m)
 
     return cloud(green), cloud(soil)
-
-
-def _threshold(exg: NDArray[np.float64], exg_threshold: float | Literal["otsu"]) -> float:
-    if exg_threshold == "otsu":
-        return otsu_threshold(exg) if len(exg) else 0.0
-    return float(exg_threshold)
