@@ -23,6 +23,8 @@ SUM_LEVELS = 3 * 255 + 1
 EXG_KEYS = 256 * SUM_LEVELS
 """Colour keys of excess green (:func:`exg_keys`): 2G - R - B over S = R + G + B is 3G / S - 1,
 a function of the green level G and the sum S alone, so 196 608 keys hold every value."""
+NO_KEY = EXG_KEYS
+"""The key of a pixel left out (no depth): one past the last, never tallied, never green."""
 OUTLIER_QUERY_BLOCK = 65_536  # points per neighbour query of the outlier filters: bounds its memory
 VALLEY_SMOOTHING_BINS = 5
 MIN_GREEN_CONTRAST = 0.1
@@ -163,9 +165,9 @@ def exg_of_keys() -> NDArray[np.float64]:
 
 
 def exg_tally(keys: NDArray[np.int32]) -> NDArray[np.int64]:
-    """(EXG_KEYS,) int64: how many of the pixels ``keys`` (N,) (see :func:`exg_keys`) have
-    each key."""
-    return np.bincount(keys, minlength=EXG_KEYS)
+    """(EXG_KEYS,) int64: how many of the pixels ``keys`` (N,) (see :func:`exg_keys`; those
+    of :data:`NO_KEY` left out) have each key."""
+    return np.bincount(keys, minlength=NO_KEY + 1)[:EXG_KEYS]
 
 
 def exg_values(tally: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:

@@ -30,6 +30,7 @@ from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.depth_only import read_scan_capture
 from fieldapp.recon.filters import (
     BY_COLOUR,
+    NO_KEY,
     Separation,
     choose_separation,
     exg_keys,
@@ -98,12 +99,13 @@ def _skipped(station: int, capture: Capture, error: FormatError) -> str:
 
 @dataclass(frozen=True)
 class ReadFrame:
-    """One capture read: its images and the colour keys of its measured pixels (finite depth).
+    """One capture read: its images, its measured pixels (finite depth) and their colour keys.
 
-    ``images``: as read; ``measured``: (H, W) bool; ``keys``: (M,) int32, the
-    :func:`~fieldapp.recon.filters.exg_keys` of the measured pixels in row-major order, and
-    ``tally``: (EXG_KEYS,) int64, how many have each key; both ``None`` for a depth-only
-    capture (no colour: its plants are told by geometry).
+    ``images``: as read; ``measured``: (H, W) bool; ``keys``: (H * W,) int32, the
+    :func:`~fieldapp.recon.filters.exg_keys` of every pixel in row-major order,
+    :data:`~fieldapp.recon.filters.NO_KEY` where none is measured, and ``tally``:
+    (EXG_KEYS,) int64, how many measured pixels have each key; both ``None`` for a
+    depth-only capture (no colour: its plants are told by geometry).
     """
 
     images: CaptureImages
@@ -115,19 +117,14 @@ class ReadFrame:
     def capture(self) -> Capture:
         return self.images.capture
 
-    @property
-    def measured_pixels(self) -> int:
-        return int(np.count_nonzero(self.measured)) if self.keys is None else len(self.keys)
-
 
 def frame_of(images: CaptureImages) -> ReadFrame:
-    """A capture's images with the colour keys of its measured pixels and their tally.
-    Computed over the whole frame, then picked: cheaper than gathering the measured pixels'
-    colours first."""
+    """A capture's images with the colour keys of its measured pixels and their tally."""
     measured = np.isfinite(images.depth_m)
     if images.capture.color is None:
         return ReadFrame(images, measured, None, None)
-    keys = exg_keys(images.color.reshape(-1, 3))[measured.reshape(-1)]
+    keys = exg_keys(images.color.reshape(-1, 3))
+    keys[~measured.reshape(-1)] = NO_KEY
     return ReadFrame(images, measured, keys, exg_tally(keys))
 
 
@@ -173,10 +170,11 @@ def _libc_version() -> str | None:
         return None
 
 
-def _soil_grid(shape: tuple[int, ...], stride: int) -> NDArray[np.bool_]:
-    grid = np.zeros(shape[:2], dtype=bool)
-    grid[::stride, ::stride] = True
-    return grid
+def _soil_grid(shape: tuple[int, ...], stride: int) -> NDArray[np.intp]:
+    """(M,) the flat indices, ascending, of every ``stride``-th pixel of every ``stride``-th
+    row of an (H, W) image."""
+    rows, columns = np.arange(0, shape[0], stride), np.arange(0, shape[1], stride)
+    return (rows[:, None] * shape[1] + columns[None, :]).reshape(-1)
 
 
 def read_station(
@@ -205,7 +203,7 @@ def read_station(
             return None, warnings
         separation, threshold = _separation(frames, exg_threshold)
         grid = _soil_grid(frames[0].measured.shape, soil_pixel_stride)
-        green_key = exg_of_keys() > threshold  # which colour keys are green
+        green_key = np.append(exg_of_keys() > threshold, False)  # which keys are green
         clouds = workers.map(
             lambda frame: _green_and_soil(frame, separation, green_key, grid, rays, crop), frames
         )
@@ -220,7 +218,7 @@ def read_station(
         ),
         sorted(views),
         threshold,
-        sum(frame.measured_pixels for frame in frames),
+        sum(int(np.count_nonzero(frame.measured)) for frame in frames),
         separation,
     )
     return scan, warnings
@@ -258,25 +256,24 @@ def _green_and_soil(
     frame: ReadFrame,
     separation: Separation,
     green_key: NDArray[np.bool_],
-    grid: NDArray[np.bool_],
+    grid: NDArray[np.intp],
     rays: NDArray[np.float64],
     crop: CropSettings,
 ) -> tuple[Cloud, Cloud]:
-    """One frame's green points (``green_key`` (EXG_KEYS,): which colour keys are green) and
-    its soil sample (the ``grid`` (H, W) pixels not green), in its camera frame; by geometry
-    every point is "green" and the soil the whole grid."""
+    """One frame's green points (``green_key`` (EXG_KEYS + 1,): which colour keys are green,
+    ``NO_KEY`` not) and its soil sample (the measured ``grid`` pixels (M,) not green), in its
+    camera frame; by geometry every measured point is "green" and the soil the whole grid."""
     if frame.measured.shape != rays.shape[:2]:
         raise ValueError(f"depth {frame.measured.shape} does not match the camera {rays.shape[:2]}")
-    index = np.flatnonzero(frame.measured)
-    on_grid = grid.reshape(-1)[index]
     if separation.by_geometry or frame.keys is None:
-        green, soil = np.ones(len(index), dtype=bool), on_grid
+        measured = frame.measured.reshape(-1)
+        green, soil = np.flatnonzero(measured), grid[measured[grid]]
     else:
-        green = green_key[frame.keys]
-        soil = on_grid & ~green
+        green = np.flatnonzero(green_key[frame.keys])
+        on_grid = frame.keys[grid]
+        soil = grid[(on_grid != NO_KEY) & ~green_key[on_grid]]
 
-    def cloud(picked: NDArray[np.bool_]) -> Cloud:
-        pixels = index[picked]
+    def cloud(pixels: NDArray[np.intp]) -> Cloud:
         depth_m = frame.images.depth_m.reshape(-1)[pixels]
         colors = frame.images.color.reshape(-1, 3)[pixels]
         return backproject_pixels(pixels, depth_m, colors, rays, crop.radius_m, crop.min_depth_m)
