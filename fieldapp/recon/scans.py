@@ -275,7 +275,7 @@ def _green_and_soil(
 
     def cloud(pixels: NDArray[np.intp]) -> Cloud:
         depth_m = frame.images.depth_m.reshape(-1)[pixels]
-        colors = frame.images.color.reshape(-1, 3)[pixels]
+        colors = np.take(frame.images.color.reshape(-1, 3), pixels, axis=0)
         return backproject_pixels(pixels, depth_m, colors, rays, crop.radius_m, crop.min_depth_m)
 
     return cloud(green), cloud(soil)
