@@ -144,12 +144,11 @@ def exg_keys(colors: NDArray[np.uint8]) -> NDArray[np.int32]:
     excess green (:func:`exg_of_keys`). Cheaper than the ExG itself, and a station's pixels
     are then tallied (``np.bincount``) over :data:`EXG_KEYS` values instead of histogrammed
     as floats."""
-    r, g, b = (colors[:, channel].astype(np.int32) for channel in range(3))
-    g_sum = g + r
-    g_sum += b
-    g *= SUM_LEVELS
-    g += g_sum
-    return g
+    keys = np.multiply(colors[:, 1], SUM_LEVELS, dtype=np.int32)
+    total = np.add(colors[:, 0], colors[:, 1], dtype=np.int32)
+    total += colors[:, 2]
+    keys += total
+    return keys
 
 
 @cache
