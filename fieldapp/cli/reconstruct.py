@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from collections.abc import Generator
+
+    from fieldapp.recon.progress import Progress
+    from fieldapp.recon.result import Reconstruction
 
 
 def register(subparsers: Any) -> None:
@@ -30,14 +36,11 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.progress import Progress as Bar
-
     from fieldapp.errors import FieldappError, FormatError
     from fieldapp.io.session import load_session
     from fieldapp.provenance import provenance_of
     from fieldapp.recon.outputs import existing_outputs, write_outputs
     from fieldapp.recon.pipeline import reconstruct
-    from fieldapp.recon.progress import Progress
     from fieldapp.settings import load_settings
 
     existing = existing_outputs(args.out) if args.out.is_dir() else []
@@ -59,18 +62,7 @@ def run(args: argparse.Namespace) -> int:
             f"{args.session}: not reconstructed ({len(error.problems)} problems)", file=sys.stderr
         )
         return 1
-    steps = reconstruct(session, settings)
-    with Bar(disable=args.quiet, transient=True) as bar:
-        task = bar.add_task("reconstructing", total=1.0)
-        while True:
-            try:
-                event: Progress = next(steps)
-            except StopIteration as done:
-                result = done.value
-                break
-            bar.update(
-                task, completed=event.fraction, description=f"{event.stage}: {event.message}"
-            )
+    result = _run_with_bar(reconstruct(session, settings), args.quiet)
     try:
         write_outputs(
             args.out,
@@ -91,3 +83,26 @@ def run(args: argparse.Namespace) -> int:
             print(line)
     print(f"{len(result.plants)} plants -> {args.out / 'plants.csv'}")
     return 0
+
+
+def _run_with_bar(steps: Generator[Progress, None, Reconstruction], quiet: bool) -> Reconstruction:
+    """Run the reconstruction's ``steps`` to their end, with a progress bar unless ``quiet``
+    (then rich, 0.07 s of imports, is not loaded)."""
+    if quiet:
+        while True:
+            try:
+                next(steps)
+            except StopIteration as done:
+                return done.value  # type: ignore[no-any-return]
+    from rich.progress import Progress as Bar
+
+    with Bar(transient=True) as bar:
+        task = bar.add_task("reconstructing", total=1.0)
+        while True:
+            try:
+                event = next(steps)
+            except StopIteration as done:
+                return done.value  # type: ignore[no-any-return]
+            bar.update(
+                task, completed=event.fraction, description=f"{event.stage}: {event.message}"
+            )

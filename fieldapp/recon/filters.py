@@ -7,6 +7,7 @@ searches (SOR, ROR) only see the few plant points left.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,6 +19,12 @@ from fieldapp.recon.geometry_split import plants_above_local_ground
 from fieldapp.recon.settings import FilterSettings
 
 OTSU_BINS = 256
+SUM_LEVELS = 3 * 255 + 1
+EXG_KEYS = 256 * SUM_LEVELS
+"""Colour keys of excess green (:func:`exg_keys`): 2G - R - B over S = R + G + B is 3G / S - 1,
+a function of the green level G and the sum S alone, so 196 608 keys hold every value."""
+NO_KEY = EXG_KEYS
+"""The key of a pixel left out (no depth): one past the last, never tallied, never green."""
 OUTLIER_QUERY_BLOCK = 65_536  # points per neighbour query of the outlier filters: bounds its memory
 VALLEY_SMOOTHING_BINS = 5
 MIN_GREEN_CONTRAST = 0.1
@@ -56,35 +63,63 @@ class Separation:
 BY_COLOUR = Separation("colour")
 
 
-def green_contrast(exg: NDArray[np.float64]) -> float:
-    """The difference of the mean ExG (N,) of the classes either side of Otsu's threshold; 0
-    for a constant image."""
+def green_contrast(
+    exg: NDArray[np.float64],
+    weights: NDArray[np.int64] | None = None,
+    threshold: float | None = None,
+) -> float:
+    """The difference of the mean ExG (N,) of the classes either side of Otsu's threshold
+    (``threshold`` when already known); 0 for a constant image. ``weights`` (N,): how many
+    pixels have each value (see :func:`otsu_threshold`)."""
     if len(exg) == 0:
         return 0.0
-    threshold = otsu_threshold(exg)
-    high, low = exg[exg > threshold], exg[exg <= threshold]
-    if len(high) == 0 or len(low) == 0:
+    high = exg > (otsu_threshold(exg, weights) if threshold is None else threshold)
+    if weights is None:
+        if high.all() or not high.any():
+            return 0.0
+        return float(exg[high].mean() - exg[~high].mean())
+    count_high = int(weights[high].sum())
+    if count_high == 0 or count_high == int(weights.sum()):
         return 0.0
-    return float(high.mean() - low.mean())
+    weighted = exg * weights
+    mean_high = weighted[high].sum() / count_high
+    mean_low = weighted[~high].sum() / (int(weights.sum()) - count_high)
+    return float(mean_high - mean_low)
 
 
-def choose_separation(exg: NDArray[np.float64] | None) -> Separation:
+def choose_separation(
+    exg: NDArray[np.float64] | None,
+    weights: NDArray[np.int64] | None = None,
+    otsu: float | None = None,
+) -> Separation:
     """Colour when every capture has a colour image (``exg`` (N,): the ExG of the measured
-    pixels) with green contrast, else geometry, saying why."""
+    pixels, or its distinct values and their ``weights``; ``otsu``: their Otsu threshold when
+    already known) with green contrast, else geometry, saying why."""
     if exg is None:
         return Separation("geometry", NO_COLOUR)
-    if green_contrast(exg) < MIN_GREEN_CONTRAST:
+    if green_contrast(exg, weights, otsu) < MIN_GREEN_CONTRAST:
         return Separation("geometry", NO_GREEN_CONTRAST)
     return BY_COLOUR
 
 
-def keep_soil(separation: Separation, exg: NDArray[np.float64], threshold: float) -> Separation:
+def keep_soil(
+    separation: Separation,
+    exg: NDArray[np.float64],
+    threshold: float,
+    weights: NDArray[np.int64] | None = None,
+) -> Separation:
     """``separation``, or geometry when the colour ``threshold`` calls (nearly) every measured
-    pixel (ExG (N,)) green: with no soil pixel the station has no ground to be levelled on and
-    registration only the points above an unlevelled ground."""
+    pixel (ExG (N,), or distinct values and their ``weights``) green: with no soil pixel the
+    station has no ground to be levelled on and registration only the points above an
+    unlevelled ground."""
     if separation.by_geometry or len(exg) == 0:
         return separation
-    if np.count_nonzero(exg <= threshold) < MIN_SOIL_SHARE * len(exg):
+    soil = exg <= threshold
+    if weights is None:
+        soil_pixels, pixels = int(np.count_nonzero(soil)), len(exg)
+    else:
+        soil_pixels, pixels = int(weights[soil].sum()), int(weights.sum())
+    if soil_pixels < MIN_SOIL_SHARE * pixels:
         return Separation("geometry", NO_SOIL_LEFT)
     return separation
 
@@ -104,8 +139,49 @@ def excess_green(colors: NDArray[np.uint8]) -> NDArray[np.float64]:
     return (2 * g - r - b) / total
 
 
-def otsu_threshold(values: NDArray[np.float64]) -> float:
+def exg_keys(colors: NDArray[np.uint8]) -> NDArray[np.int32]:
+    """(N,) int32: the key ``G * 766 + S`` of each colour (N, 3) uint8 RGB, which fixes its
+    excess green (:func:`exg_of_keys`). Cheaper than the ExG itself, and a station's pixels
+    are then tallied (``np.bincount``) over :data:`EXG_KEYS` values instead of histogrammed
+    as floats."""
+    keys = np.multiply(colors[:, 1], SUM_LEVELS, dtype=np.int32)
+    total = np.add(colors[:, 0], colors[:, 1], dtype=np.int32)
+    total += colors[:, 2]
+    keys += total
+    return keys
+
+
+@cache
+def exg_of_keys() -> NDArray[np.float64]:
+    """(EXG_KEYS,) float64: the excess green of each key of :func:`exg_keys`, bit for bit
+    :func:`excess_green`'s value for the colours of that key (read-only)."""
+    green, total = np.divmod(np.arange(EXG_KEYS, dtype=np.int64), SUM_LEVELS)
+    difference = 3 * green - total  # 2G - R - B
+    total[total == 0] = 1
+    table = difference / total
+    table.flags.writeable = False
+    return table
+
+
+def exg_tally(keys: NDArray[np.int32]) -> NDArray[np.int64]:
+    """(EXG_KEYS,) int64: how many of the pixels ``keys`` (N,) (see :func:`exg_keys`; those
+    of :data:`NO_KEY` left out) have each key."""
+    return np.bincount(keys, minlength=NO_KEY + 1)[:EXG_KEYS]
+
+
+def exg_values(tally: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The distinct excess-green values (M,) of a :func:`exg_tally` and how many pixels have
+    each (M,) int64, for :func:`otsu_threshold`, :func:`choose_separation` and
+    :func:`keep_soil`. Two keys may share a value (the same ratio): it is then listed twice,
+    which changes no histogram, count or mean."""
+    present = np.flatnonzero(tally)
+    return exg_of_keys()[present], tally[present]
+
+
+def otsu_threshold(values: NDArray[np.float64], weights: NDArray[np.int64] | None = None) -> float:
     """Otsu's threshold of ``values`` (N,), placed in the valley between the two classes.
+    With ``weights`` (N,) int64, positive, ``values[i]`` counts ``weights[i]`` times: the same
+    threshold, bit for bit, as of the values repeated (a station's pixels, tallied by colour).
 
     Otsu's cut maximises the between-class variance; its two class means bracket the valley of
     the histogram. The threshold returned is the middle of the first lowest run of bins between
@@ -118,7 +194,7 @@ def otsu_threshold(values: NDArray[np.float64]) -> float:
     low, high = float(values.min()), float(values.max())
     if high - low < 1e-12:
         return high
-    counts, edges = np.histogram(values, bins=OTSU_BINS, range=(low, high))
+    counts, edges = np.histogram(values, bins=OTSU_BINS, range=(low, high), weights=weights)
     centres = (edges[:-1] + edges[1:]) / 2.0
     weight_low = np.cumsum(counts)
     weight_high = weight_low[-1] - weight_low

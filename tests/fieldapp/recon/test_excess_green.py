@@ -4,8 +4,20 @@ the reconstruction's outputs did not change with it."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from fieldapp.recon.filters import excess_green
+from fieldapp.recon.filters import (
+    BY_COLOUR,
+    EXG_KEYS,
+    excess_green,
+    exg_keys,
+    exg_of_keys,
+    exg_tally,
+    exg_values,
+    green_contrast,
+    keep_soil,
+    otsu_threshold,
+)
 
 
 def _float64_formula(colors: np.ndarray) -> np.ndarray:
@@ -24,3 +36,36 @@ def test_integer_excess_green_equals_the_float64_formula_bit_for_bit() -> None:
     assert exg.dtype == np.float64
     np.testing.assert_array_equal(exg.view(np.int64), _float64_formula(colors).view(np.int64))
     assert exg[0] == 0.0 and exg.min() >= -1.0 and exg.max() <= 2.0
+
+
+def test_a_colour_key_fixes_the_excess_green_bit_for_bit() -> None:
+    """The stations' pixels are tallied by colour key (issue 22): the key's value must be the
+    pixel's ExG exactly, or the threshold and the green pixels would change."""
+    rng = np.random.default_rng(23)
+    levels = np.array([0, 1, 2, 127, 128, 254, 255], np.uint8)
+    corners = np.stack(np.meshgrid(levels, levels, levels), axis=-1).reshape(-1, 3)
+    colors = np.concatenate([corners, rng.integers(0, 256, (200_000, 3), dtype=np.uint8)])
+    keys = exg_keys(colors)
+    assert keys.dtype == np.int32 and keys.min() >= 0 and keys.max() < EXG_KEYS
+    by_key = exg_of_keys()[keys]
+    np.testing.assert_array_equal(by_key.view(np.int64), excess_green(colors).view(np.int64))
+    green, total = np.divmod(keys, 766)  # the key is G * 766 + R + G + B
+    np.testing.assert_array_equal(green, colors[:, 1])
+    np.testing.assert_array_equal(total, colors.astype(np.int64).sum(axis=1))
+
+
+def test_the_tallied_values_give_the_pixels_otsu_threshold_bit_for_bit() -> None:
+    rng = np.random.default_rng(24)
+    soil = rng.normal((120, 95, 70), 12, (60_000, 3))
+    leaves = rng.normal((60, 140, 40), 15, (3_000, 3))
+    colors = np.clip(np.concatenate([soil, leaves]), 0, 255).astype(np.uint8)
+    values, weights = exg_values(exg_tally(exg_keys(colors)))
+    assert weights.sum() == len(colors) and len(values) < len(colors) / 2
+    exg = excess_green(colors)
+    threshold = otsu_threshold(values, weights)
+    assert threshold == otsu_threshold(exg)
+    assert green_contrast(values, weights) == pytest.approx(green_contrast(exg), abs=1e-12)
+    assert green_contrast(values, weights) > 0.2
+    for cut in (threshold, -1.0, float(np.quantile(exg, 0.005))):
+        assert keep_soil(BY_COLOUR, values, cut, weights) == keep_soil(BY_COLOUR, exg, cut)
+    assert keep_soil(BY_COLOUR, values, -1.0, weights).by_geometry

@@ -12,6 +12,8 @@ import pytest
 from fieldapp.io.session import Capture, CaptureImages, Session, load_session
 from fieldapp.recon import scans
 from fieldapp.recon.backproject import ray_table
+from fieldapp.recon.depth_only import read_scan_capture
+from fieldapp.recon.filters import BY_COLOUR, excess_green, otsu_threshold
 from fieldapp.recon.scans import StationScan, captures_by_station, read_station
 from fieldapp.recon.settings import ReconstructionSettings
 
@@ -94,3 +96,18 @@ def test_the_frame_threads_give_back_the_memory_they_freed(
     _read(session, 4, 2)
     _read(session, 5, 2)
     assert calls == [1, 1]
+
+
+def test_the_station_threshold_is_otsus_over_its_measured_pixels_excess_green(
+    small_session: Path,
+) -> None:
+    """The threshold found from the tally of colour keys (issue 22) is, bit for bit, Otsu's
+    threshold over every measured pixel's ExG, as computed before the tally."""
+    session = load_session(small_session)
+    for station in (4, 5):
+        scan, _ = _read(session, station, 1)
+        assert scan is not None and scan.separation == BY_COLOUR
+        frames = [read_scan_capture(session, c) for c in captures_by_station(session)[station]]
+        exg = np.concatenate([excess_green(f.color[np.isfinite(f.depth_m)]) for f in frames])
+        assert scan.measured_pixels == len(exg)
+        assert scan.exg_threshold == otsu_threshold(exg)
