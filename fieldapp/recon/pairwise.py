@@ -10,8 +10,9 @@ Each overlap is registered coarse to fine by GICP (:func:`align`), and its infor
 matrix is the point-to-plane Hessian of the aligned overlap: flat soil constrains height and
 tilt, relief, stems and spheres the position and heading.
 
-The result never depends on the thread count: only the k-d trees and the point covariances
-(each point's its own) run on the ``threads`` OpenMP threads; voxel sampling (small_gicp's
+The result never depends on the thread count: only the k-d trees, the point covariances and
+normals (each point's its own) and the edge's nearest-neighbour queries (each its own) run on
+the ``threads`` OpenMP threads; voxel sampling (small_gicp's
 multi-threaded sampling varies from run to run) and the optimisation (its reduction sums in
 the threads' order) run on one. The OpenMP threads sleep between parallel regions
 (``OMP_WAIT_POLICY=PASSIVE``, unless set otherwise before small_gicp loads): spinning, two
