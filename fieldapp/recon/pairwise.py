@@ -4,8 +4,10 @@ Two stations overlap when their clouds, placed by the coarse poses, cover at lea
 ``min_overlap_m2`` of the same ground (cells of ``overlap_cell_m``): on the 1.6 m plan the
 side and diagonal neighbours (5.4-9 m2 on the simulated plots); stations two apart share a thin
 lens at the end of both cameras' range (1.7-3.2 m2) that registers unreliably. The points of
-an overlap are those in the shared cells and one cell around them (so a few cm or degrees of arrival
-error do not cut the overlap short): soil, plants, spheres, anything the two stations saw.
+an overlap are all the two stations saw there (soil, plants, spheres, anything): b's (the
+source) in the shared cells, a's (the target) in the shared cells and one cell around them, so
+a few cm or degrees of arrival error neither cut the overlap short nor leave source points
+with nothing to match (b's points beyond a's view pulled the fit towards a's edge).
 Each overlap is registered coarse to fine by GICP (:func:`align`), and its information
 matrix is the point-to-plane Hessian of the aligned overlap: flat soil constrains height and
 tilt, relief, stems and spheres the position and heading.
@@ -42,7 +44,8 @@ COVARIANCE_NEIGHBOURS = 10
 
 @dataclass(frozen=True)
 class Overlap:
-    """The points two stations share, field frame by their coarse poses: (N, 3) and (M, 3)."""
+    """The points two stations share, field frame by their coarse poses: a's (N, 3) in the
+    shared cells and one cell around them, b's (M, 3) in the shared cells."""
 
     a: int
     b: int
@@ -270,13 +273,12 @@ def find_overlaps(
             shared = np.intersect1d(cells[a], cells[b], assume_unique=True)
             if len(shared) * settings.overlap_cell_m**2 < settings.min_overlap_m2:
                 continue
-            around = _dilate(shared)
             overlaps.append(
                 Overlap(
                     a,
                     b,
-                    points_field_m[a][np.isin(keys[a], around)],
-                    points_field_m[b][np.isin(keys[b], around)],
+                    points_field_m[a][np.isin(keys[a], _dilate(shared))],
+                    points_field_m[b][np.isin(keys[b], shared)],
                 )
             )
     return overlaps
