@@ -95,3 +95,17 @@ def test_the_overlap_checks_take_a_sample_of_the_points(monkeypatch: pytest.Monk
     crop = pairwise.find_overlaps(points, settings)[0].points_b_m  # station 2's side
     expected = len(crop[:: guards.SAMPLE_STRIDE])
     assert queried == [expected, expected] and expected < len(crop) / 3  # coarse, corrected
+
+
+def test_a_pairs_source_is_its_shared_cells_and_its_target_has_a_margin() -> None:
+    """b's points beyond a's view have nothing to match: only the target keeps the one-cell
+    margin (for the arrival error)."""
+    rng = np.random.default_rng(1)
+    a = np.column_stack([rng.uniform(0.0, 2.0, (20_000, 2)), np.zeros(20_000)])
+    b = a + np.array([1.0, 0.0, 0.0])  # overlapping in x 1.0-2.0
+    settings = RegistrationSettings(min_overlap_m2=1.0)
+    overlap = pairwise.find_overlaps({1: a, 2: b}, settings)[0]
+    cell_m = settings.overlap_cell_m
+    assert overlap.points_b_m[:, 0].min() >= 1.0 and overlap.points_b_m[:, 0].max() < 2.0
+    assert overlap.points_a_m[:, 0].min() < 1.0 - 0.5 * cell_m  # the margin, a's side
+    assert overlap.points_a_m[:, 0].min() >= 1.0 - cell_m
