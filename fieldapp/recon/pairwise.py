@@ -4,14 +4,17 @@ Two stations overlap when their clouds, placed by the coarse poses, cover at lea
 ``min_overlap_m2`` of the same ground (cells of ``overlap_cell_m``): on the 1.6 m plan the
 side and diagonal neighbours (5.4-9 m2 on the simulated plots); stations two apart share a thin
 lens at the end of both cameras' range (1.7-3.2 m2) that registers unreliably. The points of
-an overlap are those in the shared cells and one cell around them (so a few cm or degrees of arrival
-error do not cut the overlap short): soil, plants, spheres, anything the two stations saw.
+an overlap are all the two stations saw there (soil, plants, spheres, anything): b's (the
+source) in the shared cells, a's (the target) in the shared cells and one cell around them, so
+a few cm or degrees of arrival error neither cut the overlap short nor leave source points
+with nothing to match (b's points beyond a's view pulled the fit towards a's edge).
 Each overlap is registered coarse to fine by GICP (:func:`align`), and its information
 matrix is the point-to-plane Hessian of the aligned overlap: flat soil constrains height and
 tilt, relief, stems and spheres the position and heading.
 
-The result never depends on the thread count: only the k-d trees and the point covariances
-(each point's its own) run on the ``threads`` OpenMP threads; voxel sampling (small_gicp's
+The result never depends on the thread count: only the k-d trees, the point covariances and
+normals (each point's its own) and the edge's nearest-neighbour queries (each its own) run on
+the ``threads`` OpenMP threads; voxel sampling (small_gicp's
 multi-threaded sampling varies from run to run) and the optimisation (its reduction sums in
 the threads' order) run on one. The OpenMP threads sleep between parallel regions
 (``OMP_WAIT_POLICY=PASSIVE``, unless set otherwise before small_gicp loads): spinning, two
@@ -29,14 +32,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from devices.geometry import Matrix4, invert, transform_points
+from devices.geometry import Matrix4, transform_points
 from fieldapp.recon.settings import RegistrationSettings
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # read once, when small_gicp's libgomp loads
 import small_gicp
-
-NORMAL_NEIGHBOURS = 12
-"""Target points whose covariance gives each correspondence's normal."""
 
 COVARIANCE_NEIGHBOURS = 10
 """Points whose covariance GICP gives each point (small_gicp's default)."""
@@ -44,7 +44,8 @@ COVARIANCE_NEIGHBOURS = 10
 
 @dataclass(frozen=True)
 class Overlap:
-    """The points two stations share, field frame by their coarse poses: (N, 3) and (M, 3)."""
+    """The points two stations share, field frame by their coarse poses: a's (N, 3) in the
+    shared cells and one cell around them, b's (M, 3) in the shared cells."""
 
     a: int
     b: int
@@ -81,12 +82,32 @@ def preprocess(
     points_m: NDArray[np.float64], voxel_m: float, threads: int = 1
 ) -> tuple[small_gicp.PointCloud, small_gicp.KdTree]:
     """``points_m`` (N, 3) as GICP takes them: one point (the mean) per voxel of ``voxel_m``,
-    each with the covariance of its ``COVARIANCE_NEIGHBOURS`` nearest, and their k-d tree;
-    the same for any ``threads`` (see the module's docstring)."""
+    each with the covariance and the normal of its ``COVARIANCE_NEIGHBOURS`` nearest (the
+    normal at no extra cost: the edge's information uses it), and their k-d tree; the same for
+    any ``threads`` (see the module's docstring)."""
     cloud = small_gicp.voxelgrid_sampling(points_m, voxel_m, num_threads=1)
     tree = small_gicp.KdTree(cloud, num_threads=threads)
-    small_gicp.estimate_covariances(cloud, tree, COVARIANCE_NEIGHBOURS, num_threads=threads)
+    small_gicp.estimate_normals_covariances(cloud, tree, COVARIANCE_NEIGHBOURS, num_threads=threads)
     return cloud, tree
+
+
+@dataclass(frozen=True)
+class Aligned:
+    """A ladder's result: ``T_target_source``, whether its last size converged, and the
+    finest size's prepared clouds (``target`` with its ``tree``, ``source``)."""
+
+    T_target_source: Matrix4
+    converged: bool
+    target: Any
+    tree: Any
+    source: Any
+
+
+def cloud_sizes_m(settings: RegistrationSettings) -> list[float]:
+    """The voxel size each of ``voxel_sizes_m`` is run on: its own, but the sizes at or
+    below ``shared_cloud_m`` all run on the finest size's cloud, each with its own reach."""
+    finest = settings.voxel_sizes_m[-1]
+    return [finest if v <= settings.shared_cloud_m else v for v in settings.voxel_sizes_m]
 
 
 def align(
@@ -97,21 +118,39 @@ def align(
     init_T_target_source: Matrix4 | None = None,
 ) -> tuple[Matrix4, bool]:
     """``T_target_source`` aligning ``source_m`` (N, 3) onto ``target_m`` (M, 3) coarse to
-    fine over the voxel sizes (small_gicp), and whether the last size converged. From
-    ``init_T_target_source`` (a guess that agrees with the plot's other pairs within
-    ``edge_tolerance_m`` / ``_deg``, so within the finest size's correspondence reach at the
-    cameras' range) only the finest size runs: the coarse sizes reach far enough to slide
-    into another minimum of smooth relief."""
+    fine over the voxel sizes (small_gicp), and whether the last size converged
+    (:func:`ladder`)."""
+    aligned = ladder(target_m, source_m, settings, threads, init_T_target_source)
+    return aligned.T_target_source, aligned.converged
+
+
+def ladder(
+    target_m: NDArray[np.float64],
+    source_m: NDArray[np.float64],
+    settings: RegistrationSettings,
+    threads: int = 1,
+    init_T_target_source: Matrix4 | None = None,
+) -> Aligned:
+    """GICP coarse to fine over ``voxel_sizes_m``, each size reaching
+    ``correspondence_factor`` times itself, on the clouds of :func:`cloud_sizes_m` (each
+    prepared once). From ``init_T_target_source`` (a guess that agrees with the plot's other
+    pairs within ``edge_tolerance_m`` / ``_deg``, so within the finest size's correspondence
+    reach at the cameras' range) only the finest size runs: the coarse sizes reach far enough
+    to slide into another minimum of smooth relief."""
     T = np.eye(4) if init_T_target_source is None else np.array(init_T_target_source)
-    sizes = settings.voxel_sizes_m
+    levels = list(zip(settings.voxel_sizes_m, cloud_sizes_m(settings), strict=True))
     if init_T_target_source is not None:
-        sizes = sizes[-1:]
-    converged = True
-    for voxel_m in sizes:
-        target, tree = preprocess(target_m, voxel_m, threads)
-        source, _ = preprocess(source_m, voxel_m, threads)
+        levels = levels[-1:]
+    converged, prepared_m = True, -1.0
+    for voxel_m, cloud_m in levels:
+        if cloud_m != prepared_m:
+            (target, tree), (source, _) = (
+                preprocess(target_m, cloud_m, threads),
+                preprocess(source_m, cloud_m, threads),
+            )
+            prepared_m = cloud_m
         T, converged = gicp(target, source, tree, T, settings, voxel_m)
-    return T, converged
+    return Aligned(T, converged, target, tree, source)
 
 
 def gicp(
@@ -234,13 +273,12 @@ def find_overlaps(
             shared = np.intersect1d(cells[a], cells[b], assume_unique=True)
             if len(shared) * settings.overlap_cell_m**2 < settings.min_overlap_m2:
                 continue
-            around = _dilate(shared)
             overlaps.append(
                 Overlap(
                     a,
                     b,
-                    points_field_m[a][np.isin(keys[a], around)],
-                    points_field_m[b][np.isin(keys[b], around)],
+                    points_field_m[a][np.isin(keys[a], _dilate(shared))],
+                    points_field_m[b][np.isin(keys[b], shared)],
                 )
             )
     return overlaps
@@ -254,48 +292,66 @@ def register_overlap(
     threads: int = 1,
 ) -> PairFit:
     """Align b's overlap points onto a's; ``centre_b_m`` (3,) is b's ground centre (field);
-    ``init_T_a_b``: a close guess (fine voxel sizes only, see :func:`align`), else identity.
-    The fit is scored and its information taken from one matching of all the points."""
+    ``init_T_a_b``: a close guess (fine voxel sizes only, see :func:`ladder`), else identity.
+    The fit is scored and its information taken from one matching of the finest size's
+    clouds, already prepared by GICP (:func:`edge`)."""
     target_m, source_m = overlap.points_a_m, overlap.points_b_m
-    T_a_b, converged = align(target_m, source_m, settings, threads, init_T_a_b)
-    aligned_m = transform_points(T_a_b, source_m)
     if len(target_m) == 0 or len(source_m) == 0:
-        fitness, rmse, information = 0.0, float("nan"), np.zeros((6, 6))
-    else:
-        matches = match(target_m, aligned_m, settings.max_correspondence_m)
-        fitness, rmse = fitness_rmse(matches)
-        information = point_to_plane_information(
-            target_m, aligned_m, matches, T_a_b, centre_b_m, settings, rmse
-        )
+        return PairFit(overlap.a, overlap.b, np.eye(4), np.zeros((6, 6)), False, 0.0, np.nan, 0)
+    aligned = ladder(target_m, source_m, settings, threads, init_T_a_b)
+    fitness, rmse, information = edge(aligned, centre_b_m, settings, threads)
     return PairFit(
-        overlap.a, overlap.b, T_a_b, information, converged, fitness, rmse, len(source_m)
+        overlap.a,
+        overlap.b,
+        aligned.T_target_source,
+        information,
+        aligned.converged,
+        fitness,
+        rmse,
+        len(source_m),
     )
 
 
+def edge(
+    aligned: Aligned, centre_b_m: NDArray[np.float64], settings: RegistrationSettings, threads: int
+) -> tuple[float, float, NDArray[np.float64]]:
+    """(fitness, RMSE in metres, (6, 6) information) of a fit: each point of the finest
+    source cloud, aligned, matched to its nearest target point (small_gicp's tree, each query
+    its own: the same on any thread count) within ``max_correspondence_m``; the share matched
+    and their RMS distance (Open3D's definitions), and :func:`point_to_plane_information` with
+    the normals GICP's preparation estimated."""
+    source_m = np.asarray(aligned.source.points()[:, :3])
+    nearest, squared = aligned.tree.batch_nearest_neighbor_search(
+        transform_points(aligned.T_target_source, source_m), num_threads=threads
+    )
+    nearest, squared = np.asarray(nearest), np.asarray(squared)
+    matched = squared <= settings.max_correspondence_m**2
+    if not matched.any():
+        return 0.0, float("nan"), np.zeros((6, 6))
+    rmse = float(np.sqrt(np.mean(squared[matched])))
+    normals_m = np.asarray(aligned.target.normals()[nearest[matched], :3])
+    information = point_to_plane_information(
+        source_m[matched] - centre_b_m,
+        normals_m @ aligned.T_target_source[:3, :3],
+        settings,
+        rmse,
+    )
+    return float(matched.mean()), rmse, information
+
+
 def point_to_plane_information(
-    target_m: NDArray[np.float64],
-    source_aligned_m: NDArray[np.float64],
-    matches: Matches,
-    T_a_b: Matrix4,
-    centre_b_m: NDArray[np.float64],
+    q_m: NDArray[np.float64],
+    normals: NDArray[np.float64],
     settings: RegistrationSettings,
     rmse_m: float,
 ) -> NDArray[np.float64]:
-    """(6, 6) information of the pair: the mean point-to-plane Hessian of the aligned pairs
-    (``matches`` of ``source_aligned_m`` on ``target_m``, within ``max_correspondence_m``),
-    times ``edge_effective_points`` / sigma^2 (sigma: the fit's RMSE, at least
-    ``edge_noise_m``). Jacobians are taken for a right perturbation of node b (its frame at
-    ``centre_b_m`` with field axes). Each matched target point's normal is computed once."""
-    matched = matches.matched
-    if matched.sum() < 6:
+    """(6, 6) information of the pair: the mean point-to-plane Hessian of its matched points
+    ``q_m`` (K, 3), relative to node b (its frame at b's ground centre with field axes), each
+    with its target's unit normal (K, 3) in b's axes, times ``edge_effective_points`` /
+    sigma^2 (sigma: the fit's RMSE, at least ``edge_noise_m``). Jacobians are taken for a
+    right perturbation of node b."""
+    if len(q_m) < 6:
         return np.zeros((6, 6))
-    targets, which = np.unique(matches.nearest[matched], return_inverse=True)
-    _, around = matches.tree.query(target_m[targets], k=min(NORMAL_NEIGHBOURS, len(target_m)))
-    neighbourhoods = target_m[around]  # (K, n, 3)
-    centred = neighbourhoods - neighbourhoods.mean(axis=1, keepdims=True)
-    _, vectors = np.linalg.eigh(np.einsum("kni,knj->kij", centred, centred))
-    normals: NDArray[np.float64] = (vectors[:, :, 0] @ T_a_b[:3, :3])[which]  # b's axes, rows
-    q = transform_points(invert(T_a_b), source_aligned_m[matched]) - centre_b_m
-    J = np.concatenate([np.cross(q, normals), normals], axis=1)  # (K, 6)
+    J = np.concatenate([np.cross(q_m, normals), normals], axis=1)  # (K, 6)
     sigma = max(rmse_m if np.isfinite(rmse_m) else 0.0, settings.edge_noise_m)
     return (J.T @ J) / len(J) * settings.edge_effective_points / sigma**2  # type: ignore[no-any-return]

@@ -357,7 +357,7 @@ class _Plot:
         for k in self.kept_fits(station):
             overlap = self.overlaps[k]
             side = 0 if overlap.a == station else 1
-            mine = (overlap.points_a_m, overlap.points_b_m)[side]
+            mine = (overlap.points_a_m, overlap.points_b_m)[side][:: guards.SAMPLE_STRIDE]
             theirs = self.tree(k, 1 - side)
             T_other_inverse = invert(self.correction((overlap.b, overlap.a)[side]))
             cap = self.settings.max_correspondence_m

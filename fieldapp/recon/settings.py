@@ -57,13 +57,15 @@ class RegistrationSettings(_Section):
     horizontal axis, and in yaw); ``level_sigma_*``: what levelling leaves of tilt and height.
     A correction beyond ``guard_sigmas`` of this expected error is rejected. Pairs sharing
     ``min_overlap_m2`` of ground (cells of ``overlap_cell_m``) are registered (GICP, coarse to
-    fine over ``voxel_sizes_m``); an edge disagreeing with the solution by more than
+    fine over ``voxel_sizes_m``, the sizes at or below ``shared_cloud_m`` on the finest
+    size's points, each with its own reach); an edge disagreeing with the solution by more than
     ``edge_tolerance_m``/``_deg`` is dropped. A station whose estimated uncertainty exceeds
     ``max_uncertainty_m``/``_deg`` is reported unreliable."""
 
     enabled: bool = True
     method: Literal["GICP", "PLANE_ICP"] = "GICP"
     voxel_sizes_m: tuple[float, ...] = (0.1, 0.05, 0.02, 0.008)
+    shared_cloud_m: float = Field(default=0.02, ge=0.0)
     correspondence_factor: float = Field(default=5.0, gt=0.0)
     max_correspondence_m: float = Field(default=0.02, gt=0.0)
     max_iterations: int = Field(default=50, ge=1)
