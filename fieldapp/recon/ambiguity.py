@@ -70,8 +70,14 @@ class Ambiguity:
         return (self.T_a_b, *self.alternatives)
 
 
-Mapper = Callable[[Callable[[int], "Ambiguity | None"], list[int]], Iterator["Ambiguity | None"]]
-"""``map`` or a pool's ``map``: runs the probes of each pair, results in order."""
+ProbeJob = tuple[int, Overlap, PairFit, Matrix4, RegistrationSettings]
+"""One pair's probe as plain data: ``(k, overlap, fit, b's node, settings)``."""
+
+Mapper = Callable[
+    [Callable[[ProbeJob], "Ambiguity | None"], list[ProbeJob]], Iterator["Ambiguity | None"]
+]
+"""``map`` or a pool's ``map``: runs the probes of each pair, results in order (the function
+and the jobs pickle, so a worker process can run them)."""
 
 
 def probe_starts_m(settings: RegistrationSettings) -> list[Matrix4]:
@@ -80,6 +86,11 @@ def probe_starts_m(settings: RegistrationSettings) -> list[Matrix4]:
     shift_m = PROBE_SIGMAS * np.sqrt(2.0) * settings.arrival_sigma_m
     steps = [(shift_m, 0.0), (-shift_m, 0.0), (0.0, shift_m), (0.0, -shift_m)]
     return [make_transform(np.eye(3), np.array([dx, dy, 0.0])) for dx, dy in steps]
+
+
+def probe_job(job: ProbeJob) -> Ambiguity | None:
+    """:func:`probe` of one job (module level, so a worker process can run it)."""
+    return probe(*job)
 
 
 def probe(
@@ -130,12 +141,10 @@ def ambiguous_pairs(
     (:func:`weakly_constrained`); yields (1.0, message) per pair probed, so the registration
     can be followed and closed meanwhile, and returns the ambiguous ones by index."""
 
-    def one(k: int) -> Ambiguity | None:
-        return probe(k, overlaps[k], fits[k], nodes[fits[k].b], settings)
-
     weak = [k for k in candidates if weakly_constrained(fits[k].information)]
+    jobs = [(k, overlaps[k], fits[k], nodes[fits[k].b], settings) for k in weak]
     found: dict[int, Ambiguity] = {}
-    for k, result in zip(weak, mapper(one, weak), strict=True):
+    for k, result in zip(weak, mapper(probe_job, jobs), strict=True):
         if result is not None:
             found[k] = result
         yield 1.0, f"stations {fits[k].a}-{fits[k].b} probed for a second minimum"

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Generator
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -23,6 +22,7 @@ from scipy.spatial import cKDTree
 
 from devices.geometry import Matrix4, invert, make_transform, transform_points
 from fieldapp.recon import ambiguity, guards, posegraph, se3
+from fieldapp.recon.pairpool import PairRunner
 from fieldapp.recon.pairwise import Overlap, PairFit, find_overlaps, register_overlap
 from fieldapp.recon.settings import RegistrationSettings
 
@@ -90,12 +90,13 @@ def register_stations(
     }
     overlaps = find_overlaps(field_points, settings)
     fits: list[PairFit] = []
-    # pairs on ``threads`` Python threads, each pair's k-d trees and covariances on as many
-    # OpenMP threads: the same fits for any count (pairwise's docstring)
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        # closing this generator closes map's iterator, which cancels the pairs not started
-        for fit in pool.map(
-            lambda o: register_overlap(o, nodes[o.b][:3, 3], settings, threads=threads), overlaps
+    # pairs shared by this process and a forked worker (GICP holds the GIL: threads would
+    # take turns); the same fits wherever a pair runs (pairpool's docstring)
+    with PairRunner(threads) as runner:
+        each = runner.worker_threads
+        # closing this generator closes map's iterator, which drops the pairs not started
+        for fit in runner.map(
+            _register_pair, [(o, nodes[o.b][:3, 3], settings, None, each) for o in overlaps]
         ):
             fits.append(fit)
             yield len(fits) / len(overlaps), f"stations {fit.a}-{fit.b} registered"
@@ -105,16 +106,17 @@ def register_stations(
             _usable_fits(nodes, fits, reference, settings),
             nodes,
             settings,
-            pool.map,
+            runner.map,
         )
         first = _first_solution(nodes, fits, reference, settings, set(doubtful))
         guesses = _consensus_guesses(nodes, fits, first, settings)
         guesses |= ambiguity.settled(doubtful, first[1], nodes, settings)
-        again = pool.map(
-            lambda k: register_overlap(
-                overlaps[k], nodes[overlaps[k].b][:3, 3], settings, guesses[k], threads
-            ),
-            sorted(guesses),
+        again = runner.map(
+            _register_pair,
+            [
+                (overlaps[k], nodes[overlaps[k].b][:3, 3], settings, guesses[k], each)
+                for k in sorted(guesses)
+            ],
         )
         for k, fit in zip(sorted(guesses), again, strict=True):
             fits[k] = fit
@@ -135,6 +137,14 @@ def register_stations(
             message = f"{registrations[station].message}; {note}"
             registrations[station] = replace(registrations[station], message=message)
     return registrations
+
+
+def _register_pair(
+    job: tuple[Overlap, NDArray[np.float64], RegistrationSettings, Matrix4 | None, int],
+) -> PairFit:
+    """:func:`register_overlap` of one ``(overlap, b's centre, settings, guess, threads)``: a
+    module-level function of plain data, so a worker process can run it."""
+    return register_overlap(*job)
 
 
 def _first_solution(
