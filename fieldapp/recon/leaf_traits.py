@@ -221,9 +221,13 @@ class LeafGraph:
         means, inverse = voxel_means(points_m, groups=leaf)
         voxel_leaf = np.zeros(len(means), dtype=np.intp)
         voxel_leaf[inverse] = leaf
-        pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
-        if voxel_leaf[-1] > 0:
-            pairs = pairs[voxel_leaf[pairs[:, 0]] == voxel_leaf[pairs[:, 1]]]
+        starts = np.searchsorted(voxel_leaf, np.arange(voxel_leaf[-1] + 2))
+        pairs = np.concatenate(  # a tree per leaf: a leaf's voxels are one slice of them
+            [
+                cKDTree(means[a:b]).query_pairs(LINK_M, output_type="ndarray") + a
+                for a, b in itertools.pairwise(starts)
+            ]
+        )
         links = pair_graph(pairs, len(means), pair_lengths(means, pairs) + 1e-9)
         return cls(means, inverse, voxel_leaf, links)
 
@@ -284,9 +288,11 @@ def section_widths_m(
     chosen = np.flatnonzero((norms >= 1e-9) & (counts >= 5))
     if len(chosen) == 0:
         return widths
-    section = np.repeat(np.arange(len(counts)), counts)
-    kept = np.isin(section, chosen)
-    group = np.searchsorted(chosen, section[kept])
+    rank = np.full(len(counts), -1)
+    rank[chosen] = np.arange(len(chosen))
+    group = np.repeat(rank, counts)
+    kept = group >= 0
+    group = group[kept]
     size = counts[chosen]
     q = points_m[kept] - (_sums(group, points_m[kept], len(chosen)) / size[:, None])[group]
     t = (tangents[chosen] / norms[chosen, None])[group]
@@ -302,7 +308,10 @@ def section_widths_m(
     spans = (ordered[first + size - 1 - edge] - ordered[first + edge]) / (
         1.0 - 2.0 * edge / (size - 1)
     )
-    powers = across[:, None] ** np.arange(5)
+    squared = across * across
+    powers = np.stack(
+        [np.ones_like(across), across, squared, squared * across, squared * squared], 1
+    )
     moments = _sums(group, powers, len(chosen))
     normal = moments[:, [0, 1, 2, 1, 2, 3, 2, 3, 4]].reshape(-1, 3, 3) + 1e-12 * np.eye(3)
     rhs = _sums(group, powers[:, :3] * height[:, None], len(chosen))
