@@ -7,6 +7,7 @@ searches (SOR, ROR) only see the few plant points left.
 from __future__ import annotations
 
 import ctypes
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -331,7 +332,9 @@ class _Neighbours:
     same order), for two thirds of its CPU with the outlier filters' 36 neighbours."""
 
     def __init__(self, points: NDArray[np.float64], workers: int) -> None:
-        # Imported here: its OpenMP reads OMP_WAIT_POLICY (set by pairwise) when it loads.
+        # Its OpenMP reads OMP_WAIT_POLICY when it loads: threads that sleep when idle (as
+        # pairwise.py sets it for small_gicp), also in a process that registers nothing.
+        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
         from pykdtree.kdtree import KDTree
 
         _openmp_threads(workers)
