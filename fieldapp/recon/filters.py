@@ -6,8 +6,11 @@ searches (SOR, ROR) only see the few plant points left.
 
 from __future__ import annotations
 
+import ctypes
+import os
 from dataclasses import dataclass
 from functools import cache
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,7 +28,11 @@ EXG_KEYS = 256 * SUM_LEVELS
 a function of the green level G and the sum S alone, so 196 608 keys hold every value."""
 NO_KEY = EXG_KEYS
 """The key of a pixel left out (no depth): one past the last, never tallied, never green."""
-OUTLIER_QUERY_BLOCK = 65_536  # points per neighbour query of the outlier filters: bounds its memory
+OUTLIER_QUERY_BLOCK = 16_384
+"""Points per neighbour query of the outlier filters: bounds its memory, and keeps each
+block's arrays (5 MB) small: with 65 536 the first query's fresh 20-40 MB arrays, which numpy
+asks the kernel to back with huge pages, cost 0.3-0.4 s of system time in page faults
+(compaction), as much as the rest of the stage."""
 VALLEY_SMOOTHING_BINS = 5
 MIN_GREEN_CONTRAST = 0.1
 """Least difference of the mean ExG of Otsu's two classes for colour to separate plants: green
@@ -365,7 +372,7 @@ def outlier_inliers(
     n = len(points)
     if n == 0:
         return np.ones(0, dtype=bool), np.ones(0, dtype=bool)
-    tree = cKDTree(points)
+    tree = _Neighbours(points, workers)
     k = min(neighbors + 1, n)
     # The query in blocks, keeping of each block only what the filters need: the mean
     # distance, and the neighbours within the radius as int32 (-1 beyond it, and for the
@@ -376,8 +383,7 @@ def outlier_inliers(
     full = np.empty(n, dtype=bool)  # every one of the k within the radius: count unsure
     for start in range(0, n, OUTLIER_QUERY_BLOCK):
         block = slice(start, min(start + OUTLIER_QUERY_BLOCK, n))
-        distances, index = tree.query(points[block], k=k, workers=workers)
-        distances, index = distances.reshape(-1, k), index.reshape(-1, k)
+        distances, index = tree.query(points[block], k)
         mean_distance[block] = distances[:, 1:].mean(axis=1) if k > 1 else 0.0
         itself = index == np.arange(block.start, block.stop)[:, None]
         near_index[block] = np.where((distances <= radius_m) & ~itself, index, -1)
@@ -394,3 +400,37 @@ def outlier_inliers(
         inliers = cKDTree(points[statistical])
         count[unsure] = inliers.query_ball_point(points[unsure], radius_m, return_length=True) - 1
     return statistical, statistical & (count >= min_points)
+
+
+class _Neighbours:
+    """The nearest of ``points`` (N, 3) float64 to query points, through pykdtree on
+    ``workers`` OpenMP threads: the same distances as scipy's cKDTree (sums of squares in the
+    same order), for two thirds of its CPU with the outlier filters' 36 neighbours."""
+
+    def __init__(self, points: NDArray[np.float64], workers: int) -> None:
+        # Its OpenMP reads OMP_WAIT_POLICY when it loads: threads that sleep when idle (as
+        # pairwise.py sets it for small_gicp), also in a process that registers nothing.
+        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+        from pykdtree.kdtree import KDTree
+
+        _openmp_threads(workers)
+        self.tree = KDTree(np.ascontiguousarray(points, dtype=np.float64))
+
+    def query(
+        self, queries: NDArray[np.float64], k: int
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """(Q, k) distances of the ``k`` nearest points, nearest first, and (Q, k) their
+        indices, for each query point (Q, 3)."""
+        distances, index = self.tree.query(np.ascontiguousarray(queries), k=k)
+        return distances.reshape(-1, k), index.reshape(-1, k).astype(np.int64)
+
+
+def _openmp_threads(threads: int) -> None:
+    """pykdtree's queries on ``threads`` threads. Its wheel brings its own libgomp, which reads
+    ``OMP_NUM_THREADS`` once when it loads; its ``omp_set_num_threads`` sets the count for the
+    calling thread's next queries. A pykdtree built against the system's OpenMP keeps that
+    one's count (the results are the same on any count)."""
+    import pykdtree
+
+    for library in (Path(pykdtree.__file__).parent.parent / "pykdtree.libs").glob("libgomp*"):
+        ctypes.CDLL(str(library)).omp_set_num_threads(threads)

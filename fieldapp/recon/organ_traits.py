@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import ConvexHull, QhullError
 
-from fieldapp.recon.leaf_traits import LeafTraits, measure_leaf, stem_diameter_m
+from fieldapp.recon.leaf_traits import LeafTraits, measure_leaves, stem_diameter_m
 from fieldapp.recon.organs import ORGAN_STEM, ORGAN_WHORL, Organs, segment_organs
 from fieldapp.recon.traits import PlantTraits
 
@@ -59,10 +59,9 @@ def measure_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -
         raise ValueError("a plant without points has no organs")
     organs = segment_organs(points_m, foot_m)
     axis = organs.axis
-    leaves = [
-        measure_leaf(points_m[index], axis, organs.stem_radius_m, number)
-        for number, index in enumerate(organs.leaves, start=1)
-    ]
+    leaves = (
+        measure_leaves(points_m, organs.leaves, axis, organs.stem_radius_m) if organs.leaves else []
+    )
     lowest = min((leaf.insertion_height_m for leaf in leaves), default=None)
     along, _ = axis.split(points_m)
     top = lowest if lowest is not None else float(along.max())

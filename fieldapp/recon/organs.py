@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
@@ -155,10 +155,12 @@ def _stem_like(points_m: NDArray[np.float64]) -> NDArray[np.bool_]:
     if n < 6:
         return np.zeros(n, dtype=bool)
     pairs = cKDTree(points_m).query_pairs(SHAPE_RADIUS_M, output_type="ndarray")
-    rows = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(n)])
-    cols = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(n)])
-    neighbours = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)).tocsr()
-    count = np.asarray(neighbours.sum(axis=1)).ravel()
+    itself = np.arange(n)
+    both_ways = np.stack(
+        [np.r_[pairs[:, 0], pairs[:, 1], itself], np.r_[pairs[:, 1], pairs[:, 0], itself]], 1
+    )
+    neighbours = pair_graph(both_ways, n)
+    count = np.bincount(both_ways[:, 0], minlength=n).astype(np.float64)
     x, y, z = points_m.T
     sums = neighbours @ np.stack([x, y, z, x * x, y * y, z * z, x * y, x * z, y * z], axis=1)
     sums /= count[:, None]
@@ -221,11 +223,10 @@ def _grow_into_shell(
         return leaves
     region_points = points_m[region]
     pairs = cKDTree(region_points).query_pairs(SHELL_LINK_M, output_type="ndarray")
-    length = np.linalg.norm(region_points[pairs[:, 0]] - region_points[pairs[:, 1]], axis=1)
-    graph = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(region),) * 2)
+    graph = pair_graph(pairs, len(region), pair_lengths(region_points, pairs) + 1e-9)
     starts = np.flatnonzero(owner >= 0)
     distance, _, source = dijkstra(
-        graph.tocsr(), directed=False, indices=starts, min_only=True, return_predecessors=True
+        graph, directed=False, indices=starts, min_only=True, return_predecessors=True
     )
     grown = list(leaves)
     in_shell = np.arange(len(region)) >= len(region) - len(shell)
@@ -237,18 +238,43 @@ def _grow_into_shell(
 
 
 def voxel_means(
-    points_m: NDArray[np.float64], voxel_m: float = GRAPH_VOXEL_M
+    points_m: NDArray[np.float64],
+    voxel_m: float = GRAPH_VOXEL_M,
+    groups: NDArray[np.intp] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
     """The mean point (V, 3) of every occupied ``voxel_m`` voxel and each point's voxel (N,):
-    the graphs are built on these, a few per square centimetre of leaf."""
+    the graphs are built on these, a few per square centimetre of leaf. With ``groups`` (N,)
+    (non-negative) each group's points have voxels of their own, the groups' one after the
+    other: a group's voxels and means are those of its points alone."""
     cells = np.floor(points_m / voxel_m).astype(np.int64)
     cells -= cells.min(axis=0)
     span = cells.max(axis=0) + 1
     keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+    if groups is not None:
+        keys += groups.astype(np.int64) * int(np.prod(span))
     _, inverse = np.unique(keys, return_inverse=True)
     count = np.bincount(inverse).astype(np.float64)
     means = np.stack([np.bincount(inverse, points_m[:, i]) for i in range(3)], 1) / count[:, None]
     return means, inverse.astype(np.intp)
+
+
+def pair_graph(
+    pairs: NDArray[np.intp], size: int, weights: NDArray[np.float64] | None = None
+) -> csr_matrix:
+    """(size, size) sparse graph of the links ``pairs`` (P, 2) (each pair once, as
+    ``cKDTree.query_pairs`` gives them) weighted by ``weights`` (P,) (default 1). Its rows'
+    columns are left in the pairs' order: the graph searches do not need them sorted, and
+    sorting them cost more than the searches."""
+    data = np.ones(len(pairs)) if weights is None else weights
+    links = coo_matrix((data, (pairs[:, 0], pairs[:, 1])), shape=(size, size))
+    links.has_canonical_format = True  # no pair twice: nothing to sum
+    return links.tocsr()
+
+
+def pair_lengths(points_m: NDArray[np.float64], pairs: NDArray[np.intp]) -> NDArray[np.float64]:
+    """(P,) the distance between the points (N, 3) of each pair (P, 2)."""
+    step = points_m[pairs[:, 0]] - points_m[pairs[:, 1]]
+    return np.sqrt(np.sum(step * step, axis=1))  # type: ignore[no-any-return]
 
 
 def _components(points_m: NDArray[np.float64]) -> NDArray[np.intp]:
@@ -258,8 +284,7 @@ def _components(points_m: NDArray[np.float64]) -> NDArray[np.intp]:
         return np.zeros(0, dtype=np.intp)
     means, inverse = voxel_means(points_m)
     pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(means),) * 2)
-    labels = connected_components(graph, directed=False)[1]
+    labels = connected_components(pair_graph(pairs, len(means)), directed=False)[1]
     return labels[inverse].astype(np.intp)  # type: ignore[no-any-return]
 
 
@@ -279,13 +304,12 @@ def _split_at_bases(
         return [members]
     means, inverse = voxel_means(points_m[members])
     pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
-    length = np.linalg.norm(means[pairs[:, 0]] - means[pairs[:, 1]], axis=1)
-    graph = coo_matrix((length + 1e-9, (pairs[:, 0], pairs[:, 1])), shape=(len(means),) * 2)
+    graph = pair_graph(pairs, len(means), pair_lengths(means, pairs) + 1e-9)
     position = {int(v): i for i, v in enumerate(members)}
     distances = []
     for group in kept:
         starts = np.unique(inverse[[position[int(v)] for v in base[groups == group]]])
-        distances.append(dijkstra(graph.tocsr(), directed=False, indices=starts, min_only=True))
+        distances.append(dijkstra(graph, directed=False, indices=starts, min_only=True))
     owner = np.argmin(np.stack(distances), axis=0)[inverse]
     return [members[owner == k] for k in range(len(kept)) if np.any(owner == k)]
 
@@ -293,9 +317,7 @@ def _split_at_bases(
 def _components_linked(points_m: NDArray[np.float64], link_m: float) -> NDArray[np.intp]:
     """(N,) component of every point, points closer than ``link_m`` linked."""
     pairs = cKDTree(points_m).query_pairs(link_m, output_type="ndarray")
-    graph = coo_matrix(
-        (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points_m),) * 2
-    )
+    graph = pair_graph(pairs, len(points_m))
     return connected_components(graph, directed=False)[1].astype(np.intp)  # type: ignore[no-any-return]
 
 
@@ -322,10 +344,14 @@ def _leaves_from_components(
             pieces.append(members)
     if not leaves:
         return leaves
-    trees = [cKDTree(points_m[leaf]) for leaf in leaves]
-    for piece in pieces:
-        gaps = [float(tree.query(points_m[piece], k=1)[0].min()) for tree in trees]
-        nearest = int(np.argmin(gaps))
-        if gaps[nearest] <= FRAGMENT_JOIN_M:
-            leaves[nearest] = np.concatenate([leaves[nearest], piece])
+    if not pieces:
+        return leaves
+    leaf_of = np.repeat(np.arange(len(leaves)), [len(leaf) for leaf in leaves])
+    gap, nearest = cKDTree(points_m[np.concatenate(leaves)]).query(points_m[np.concatenate(pieces)])
+    starts = np.cumsum([0] + [len(piece) for piece in pieces[:-1]])
+    closest = starts + np.array([np.argmin(g) for g in np.split(gap, starts[1:])])
+    for piece, at in zip(pieces, closest, strict=True):
+        if gap[at] <= FRAGMENT_JOIN_M:
+            leaf = leaf_of[nearest[at]]
+            leaves[leaf] = np.concatenate([leaves[leaf], piece])
     return leaves

@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -166,3 +168,23 @@ def test_a_threshold_that_leaves_no_soil_separates_by_geometry() -> None:
     everything = keep_soil(BY_COLOUR, exg, -1.0)
     assert everything.by_geometry and everything.reason == NO_SOIL_LEFT
     assert keep_soil(BY_COLOUR, exg, float(np.quantile(exg, 0.02))) == BY_COLOUR
+
+
+def test_the_neighbour_search_runs_on_the_threads_asked_with_the_same_masks() -> None:
+    """pykdtree's own OpenMP takes the thread count (its libgomp, not the system's); one
+    thread or two, the masks are the same."""
+    import ctypes
+
+    import pykdtree
+
+    libraries = list((Path(pykdtree.__file__).parent.parent / "pykdtree.libs").glob("libgomp*"))
+    rng = np.random.default_rng(4)
+    points = np.concatenate([ground_patch(rng, 0.05, 4000), rng.uniform(-0.3, 0.3, (30, 3))])
+    masks = []
+    for threads in (1, 2):
+        masks.append(outlier_inliers(points, 35, 1.5, 0.008, 1, threads))
+        for library in libraries:
+            assert ctypes.CDLL(str(library)).omp_get_max_threads() == threads
+    np.testing.assert_array_equal(masks[0][0], masks[1][0])
+    np.testing.assert_array_equal(masks[0][1], masks[1][1])
+    assert 0 < masks[0][1].sum() < len(points)

@@ -3,6 +3,8 @@ against the simulator's organ truth; and the simulator's organ truth on a plant 
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from numpy.typing import NDArray
@@ -10,8 +12,9 @@ from numpy.typing import NDArray
 from devices.sim.organ_truth import organ_truth
 from devices.sim.plants import STEM_PART, PlantMesh, make_plant
 from fieldapp.evaluate.organs import azimuth_difference_deg, pair_leaves
+from fieldapp.recon.leaf_traits import measure_leaf, measure_leaves, section_widths_m
 from fieldapp.recon.organ_traits import measure_organs, projected_area_m2
-from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_STEM, ORGAN_WHORL
+from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_STEM, ORGAN_WHORL, StemAxis
 
 SEEDS = range(12)
 
@@ -203,3 +206,52 @@ def test_projected_area_counts_the_occupied_cells_seen_from_above() -> None:
     assert projected_area_m2(points) == pytest.approx(len(cells) * 1e-4)
     assert projected_area_m2(points, cell_m=1.0) == pytest.approx(3.0)  # (-1, 0) (0, 0) (0, -1)
     assert projected_area_m2(np.zeros((0, 3))) == 0.0
+
+
+def _strip(length_m: float, z_m: float, angle_deg: float) -> NDArray[np.float64]:
+    """A flat leaf 3 cm wide from 1.5 cm off a vertical stem at the origin, ``length_m`` long
+    at height ``z_m`` towards ``angle_deg``, sampled every 3 mm."""
+    along, across = np.meshgrid(np.arange(0.015, length_m, 0.003), np.arange(-0.015, 0.016, 0.003))
+    a = np.radians(angle_deg)
+    x = along * np.cos(a) - across * np.sin(a)
+    y = along * np.sin(a) + across * np.cos(a)
+    return np.c_[x.ravel(), y.ravel(), np.full(x.size, z_m)]
+
+
+def test_leaves_measured_together_are_measured_as_each_alone() -> None:
+    """One graph and one set of cross-sections for all of a plant's leaves (each its own
+    component) give every leaf the traits it has measured alone: also two leaves lying 6 mm
+    apart, closer than the graph's links, and the leaves of a simulated plant."""
+    axis = StemAxis(np.zeros(3), np.array([0.0, 0.0, 1.0]))
+    strips = [_strip(0.2, 0.1, 0.0), _strip(0.12, 0.106, 10.0), _strip(0.15, 0.2, 180.0)]
+    points = np.concatenate(strips)
+    ends = np.cumsum([0] + [len(strip) for strip in strips])
+    cases = [(points, [np.arange(a, b) for a, b in itertools.pairwise(ends)], axis, 0.005)]
+    mesh = make_plant(5, 0, (1.5, -0.2), 0.05)
+    plant, _ = sampled(mesh, 5)
+    organs = measure_organs(plant, mesh.base_m).organs
+    cases.append((plant, organs.leaves, organs.axis, organs.stem_radius_m))
+    for points_m, leaves, stem_axis, radius_m in cases:
+        together = measure_leaves(points_m, leaves, stem_axis, radius_m)
+        assert len(together) == len(leaves) >= 3
+        for number, (index, leaf) in enumerate(zip(leaves, together, strict=True), 1):
+            alone = measure_leaf(points_m[index], stem_axis, radius_m, number)
+            assert leaf.leaf_id == alone.leaf_id == number
+            for name in ("length_m", "max_width_m", "area_m2", "angle_from_stem_deg"):
+                assert getattr(leaf, name) == pytest.approx(getattr(alone, name), abs=1e-12)
+            np.testing.assert_allclose(leaf.midrib_m, alone.midrib_m, atol=1e-12)
+
+
+def test_cross_sections_are_measured_all_at_once() -> None:
+    """Flat sections 4 cm across (41 points), seen along y: 4 cm wide each, whatever else is
+    measured with them; fewer than 5 points or no tangent: 0."""
+    across = np.linspace(-0.02, 0.02, 41)
+    flat = [np.c_[across, np.full(41, y), np.full(41, 0.1)] for y in (0.0, 0.01, 0.02)]
+    few = np.array([[0.0, 0.03, 0.1], [0.01, 0.03, 0.1], [0.02, 0.03, 0.1]])
+    points = np.concatenate([*flat, few, flat[0]])
+    counts = np.array([41, 41, 41, 3, 41])
+    tangents = np.array([[0.0, 1.0, 0.0]] * 4 + [[0.0, 0.0, 0.0]])
+    widths = section_widths_m(points, counts, tangents)
+    np.testing.assert_allclose(widths, [0.04, 0.04, 0.04, 0.0, 0.0], atol=1e-9)
+    alone = section_widths_m(points[41:82], counts[1:2], tangents[1:2])
+    assert alone[0] == pytest.approx(widths[1], abs=1e-15)
