@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import resource
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -36,19 +37,24 @@ def progress(stage: str, done: float, message: str) -> Progress:
 
 @dataclass
 class StageTimer:
-    """Wall time and CPU time (all threads of the process) per stage in seconds, accumulated
-    over every call of :meth:`stage`. On a shared machine the CPU time is the steadier figure."""
+    """Wall time and CPU time (all threads of the process, and of the child processes a stage
+    started and waited for: registration's worker) per stage in seconds, accumulated over
+    every call of :meth:`stage`. On a shared machine the CPU time is the steadier figure."""
 
     seconds: dict[str, float] = field(default_factory=dict)
     cpu_seconds: dict[str, float] = field(default_factory=dict)
 
     @contextmanager
     def stage(self, name: str) -> Iterator[None]:
-        start, start_cpu = time.perf_counter(), time.process_time()
+        start, start_cpu = time.perf_counter(), cpu_seconds()
         try:
             yield
         finally:
             self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - start
-            self.cpu_seconds[name] = (
-                self.cpu_seconds.get(name, 0.0) + time.process_time() - start_cpu
-            )
+            self.cpu_seconds[name] = self.cpu_seconds.get(name, 0.0) + cpu_seconds() - start_cpu
+
+
+def cpu_seconds() -> float:
+    """CPU seconds of this process and of its children that ended and were waited for."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
