@@ -18,9 +18,11 @@ last :data:`FIT_M` of its midrib, its width following the taper fitted there; ea
 the points inside it (across the ribbon within its half width, off its plane within
 :data:`PLANE_TOLERANCE_M`) and is re-centred on them, so a leaf is followed as far as it runs
 on. A leaf that really ends there (narrow, tapering) finds next to nothing. A neighbour's point
-that a continued ribbon runs through changes hands, unless it lies on the traced part of one of
-the neighbour's own leaves; a point two ribbons run through goes to the one that reached it
-nearer to where its leaf was seen whole.
+that a continued ribbon runs through changes hands, unless it lies on one of the neighbour's
+own leaves where that leaf is held (traced, more than :data:`FIT_M` before its trace's end: a
+trace ends a little past where the contact begins when the contact builds up gradually, a
+leaf tip lying on it) and is not ambiguous; a point two ribbons run through goes to the one
+that reached it nearer to where its leaf was seen whole.
 """
 
 from __future__ import annotations
@@ -107,8 +109,9 @@ def trace_leaf(
 ) -> tuple[Ribbon, NDArray[np.bool_]] | None:
     """The ribbon of a leaf's points (M, 3) from its base (the points nearest the stem at
     ``axis_xy_m`` (2,), plan view) up to where it meets another plant (``touching`` (M,): near
-    another plant's points or ambiguous) or narrows abruptly, and (M,) which points lie on that
-    traced part; ``None`` for a leaf too short or too wide to trace."""
+    another plant's points or ambiguous) or narrows abruptly, and (M,) which points the leaf
+    holds: those of its traced part more than :data:`FIT_M` before its end; ``None`` for a
+    leaf too short or too wide to trace."""
     radial = np.linalg.norm(points_m[:, :2] - axis_xy_m, axis=1)
     distance = LeafGraph.of(points_m).geodesic_m(np.flatnonzero(radial <= radial.min() + LEVEL_M))
     levels = np.floor(distance / LEVEL_M).astype(np.intp)
@@ -139,8 +142,9 @@ def trace_leaf(
     end = np.concatenate(parts[max(first - 5, 0) : first])
     spread = end - end.mean(axis=0)
     normal = np.linalg.eigh(spread.T @ spread)[1][:, 0]
-    whole = levels < (kept[first][2] if first < len(kept) else levels.max() + 1)
-    return Ribbon(centres, arc, widths, normal), whole
+    end_level = kept[first][2] if first < len(kept) else levels.max() + 1
+    held = levels < end_level - round(FIT_M / LEVEL_M)
+    return Ribbon(centres, arc, widths, normal), held
 
 
 def _first_contact(widths_m: NDArray[np.float64], touching_share: NDArray[np.float64]) -> int:
@@ -250,10 +254,10 @@ def _trace_plants(
     flagged: NDArray[np.intp],
     tree: cKDTree,
 ) -> tuple[list[tuple[int, Ribbon]], NDArray[np.bool_]]:
-    """The ribbons of the ``flagged`` stems' leaves (with their stem) and (N,) the points on
-    their traced parts."""
+    """The ribbons of the ``flagged`` stems' leaves (with their stem) and (N,) the points their
+    leaves hold (:func:`trace_leaf`)."""
     ribbons: list[tuple[int, Ribbon]] = []
-    traced = np.zeros(len(points_m), dtype=bool)
+    held = np.zeros(len(points_m), dtype=bool)
     on_stems = (labels >= 0) & (labels < len(feet_m))
     touching = ambiguous.copy()
     order = np.argsort(labels, kind="stable")
@@ -267,8 +271,8 @@ def _trace_plants(
             found = trace_leaf(points_m[chosen], touching[chosen], organs.axis.foot_m[:2])
             if found is not None:
                 ribbons.append((int(stem), found[0]))
-                traced[chosen[found[1]]] = True
-    return ribbons, traced
+                held[chosen[found[1]]] = True
+    return ribbons, held
 
 
 def follow_leaves(
@@ -291,11 +295,11 @@ def follow_leaves(
     if len(flagged) == 0:
         return 0
     tree = cKDTree(points_m)
-    ribbons, traced = _trace_plants(points_m, labels, ambiguous, feet_m, flagged, tree)
+    ribbons, held = _trace_plants(points_m, labels, ambiguous, feet_m, flagged, tree)
     claimer = np.full(len(points_m), -1, dtype=np.intp)
     nearest = np.full(len(points_m), np.inf)
     for stem, ribbon in ribbons:
-        claimable = on_stems & (labels != stem) & (~traced | ambiguous)
+        claimable = on_stems & (labels != stem) & (~held | ambiguous)
         taken, past = follow(ribbon, points_m, tree, claimable)
         better = past < nearest[taken]
         claimer[taken[better]] = stem
