@@ -43,7 +43,7 @@ many points)."""
 MIN_CLEAN_M = 0.05
 CONTACT_M = 0.015
 CONTACT_SHARE = 0.25
-NARROWING = 0.6
+NARROWING = 0.7
 """A leaf is traced (from :data:`MIN_CLEAN_M` on) up to its first section with more than
 :data:`CONTACT_SHARE` of its points within :data:`CONTACT_M` of another plant's or ambiguous,
 or narrower than :data:`NARROWING` times the median of the four before it."""
