@@ -12,17 +12,17 @@ For each plant with ambiguous points (the plants step's flag) every leaf
 (:func:`fieldapp.recon.organs.segment_organs`) is traced (:func:`trace_leaf`): its midrib, the
 centres of the 1 cm level sets of the geodesic distance from its base, and the width of each
 section, up to where the leaf meets another plant (its sections touch another plant's points or
-are ambiguous) or narrows abruptly (the neighbour holds one side of it). From there the ribbon
-is continued in 1 cm steps (:func:`follow`) along the parabola fitted (in arc length) to the
-last :data:`FIT_M` of its midrib, its width following the taper fitted there; each step takes
-the points inside it (across the ribbon within its half width, off its plane within
-:data:`PLANE_TOLERANCE_M`) and is re-centred on them, so a leaf is followed as far as it runs
-on. A leaf that really ends there (narrow, tapering) finds next to nothing. A neighbour's point
-that a continued ribbon runs through changes hands, unless it lies on one of the neighbour's
-own leaves where that leaf is held (traced, more than :data:`FIT_M` before its trace's end: a
-trace ends a little past where the contact begins when the contact builds up gradually, a
-leaf tip lying on it) and is not ambiguous; a point two ribbons run through goes to the one
-that reached it nearer to where its leaf was seen whole.
+are ambiguous) or its width jumps (the neighbour holds one side of it, or another leaf joins).
+From there the ribbon is continued in 1 cm steps (:func:`follow`) along the parabola fitted (in
+arc length) to the last :data:`FIT_M` of its midrib, its width following the taper fitted there;
+each step takes the points inside it (across the ribbon within its half width, off its plane
+within :data:`PLANE_TOLERANCE_M`) and is re-centred on them, so a leaf is followed as far as it
+runs on. A leaf that really ends there (narrow, tapering) finds next to nothing. A neighbour's
+point that a continued ribbon runs through changes hands, unless it lies on one of the
+neighbour's own leaves where that leaf is held (traced, more than :data:`FIT_M` before its
+trace's end: a trace ends a little past where the contact begins when the contact builds up
+gradually, a leaf tip lying on it) and is not ambiguous; a point two ribbons run through goes to
+the one that reached it nearer to where its leaf was seen whole.
 """
 
 from __future__ import annotations
@@ -46,7 +46,8 @@ CONTACT_SHARE = 0.25
 NARROWING = 0.7
 """A leaf is traced (from :data:`MIN_CLEAN_M` on) up to its first section with more than
 :data:`CONTACT_SHARE` of its points within :data:`CONTACT_M` of another plant's or ambiguous,
-or narrower than :data:`NARROWING` times the median of the four before it."""
+or narrower than :data:`NARROWING` times (wider than its inverse times) the median of the four
+before it: the neighbour holds one side of the leaf from there, or another leaf joins it."""
 MAX_WIDTH_M = 0.15
 """Wider than this at its end a "leaf" is not one blade (leaves joined at the whorl)."""
 FIT_M = 0.12
@@ -109,7 +110,7 @@ def trace_leaf(
 ) -> tuple[Ribbon, NDArray[np.bool_]] | None:
     """The ribbon of a leaf's points (M, 3) from its base (the points nearest the stem at
     ``axis_xy_m`` (2,), plan view) up to where it meets another plant (``touching`` (M,): near
-    another plant's points or ambiguous) or narrows abruptly, and (M,) which points the leaf
+    another plant's points or ambiguous) or its width jumps, and (M,) which points the leaf
     holds: those of its traced part more than :data:`FIT_M` before its end; ``None`` for a
     leaf too short or too wide to trace."""
     radial = np.linalg.norm(points_m[:, :2] - axis_xy_m, axis=1)
@@ -149,7 +150,7 @@ def trace_leaf(
 
 def _first_contact(widths_m: NDArray[np.float64], touching_share: NDArray[np.float64]) -> int:
     """Index of the first section (from :data:`MIN_CLEAN_M` on) that meets another plant or
-    narrows abruptly (:data:`NARROWING`); the number of sections when none does."""
+    narrows or widens abruptly (:data:`NARROWING`); the number of sections when none does."""
     for i in range(round(MIN_CLEAN_M / LEVEL_M), len(widths_m)):
         before = float(np.median(widths_m[max(i - 4, 0) : i]))
         abrupt = not NARROWING * before <= widths_m[i] <= before / NARROWING
