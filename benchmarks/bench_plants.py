@@ -5,7 +5,10 @@ Synthetic plots of ``n x n`` maize-like plants 0.8 m apart (a stem and 5-8 archi
 soil sample of 2 cm spacing. Prints the CPU and wall time of ``search_plants`` per plot size and
 per plant; run by hand on a quiet machine:
 
-    .venv/bin/python benchmarks/bench_plants.py [--sizes 4,6,8,10,12] [--repeats 3]
+    .venv/bin/python benchmarks/bench_plants.py [--sizes 4,6,8,10,12] [--repeats 3] [--no-ribbons]
+
+``--no-ribbons``: without following the flagged plants' leaves across contacts
+(``plants.stems.follow_leaves``), to see what the ribbons cost.
 """
 
 from __future__ import annotations
@@ -59,14 +62,17 @@ def main() -> None:
     parser.add_argument("--sizes", default="4,6,8,10,12", help="plot sides (plants per row)")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-ribbons", action="store_true", help="leaves not followed")
     args = parser.parse_args()
+    settings = PlantSettings()
+    settings.stems = settings.stems.model_copy(update={"follow_leaves": not args.no_ribbons})
     print("plants  points    found  cpu_s (min)  wall_s (min)  cpu ms per plant")
     for n in (int(s) for s in args.sizes.split(",")):
         cloud, soil = plot(n, args.seed)
         cpu, wall, found = [], [], 0
         for _ in range(args.repeats):
             c0, w0 = time.process_time(), time.perf_counter()
-            found = len(search_plants(cloud, soil, PlantSettings(), 0.15).plants)
+            found = len(search_plants(cloud, soil, settings, 0.15).plants)
             cpu.append(time.process_time() - c0)
             wall.append(time.perf_counter() - w0)
         print(

@@ -29,6 +29,7 @@ from fieldapp.recon.grid import (
     prior_nodes,
     stems_at_empty_nodes,
 )
+from fieldapp.recon.ribbons import follow_leaves
 from fieldapp.recon.settings import GridPrior, PlantSettings, StemSettings
 from fieldapp.recon.stems import Stem, find_stems
 from fieldapp.recon.traits import PlantTraits, measure_plant
@@ -236,6 +237,11 @@ def _labels(
         labels[:] = assignment.stem
         ambiguous = assignment.ambiguous
         _join_fragments(points_m, labels, settings.cluster_voxel_m, merges)
+        if s.follow_leaves:
+            feet = np.array([[*stem.xy_m, stem.ground_z_m] for stem in stems])
+            moved = follow_leaves(points_m, labels, ambiguous, feet, s.flag_ambiguous_share)
+            if moved:
+                merges.append(f"{moved} points given to the leaf that runs on through them")
     rest = np.flatnonzero(labels == UNREACHED)
     if len(rest):
         clusters = drop_small(

@@ -46,9 +46,11 @@ def test_leaves_reaching_across_stay_with_the_stem_they_grow_from(seed: int) -> 
 
 def test_without_the_outward_cost_the_crossing_leaf_follows_the_neighbour() -> None:
     """The reason for the outward cost: by path length alone A's leaf tip, which lies past B's
-    stem's leaf crossing, is nearer to B."""
+    stem's leaf crossing, is nearer to B (with the ribbons off: they follow A's leaf on across
+    the crossing, test_plants_ribbons.py)."""
     a, b = crossing_pair(np.random.default_rng(0))
-    settings = PlantSettings(stems=StemSettings(inward_penalty=0.0, bend_penalty_m=0.0))
+    stems = StemSettings(inward_penalty=0.0, bend_penalty_m=0.0, follow_leaves=False)
+    settings = PlantSettings(stems=stems)
     search = search_plants(colored(np.concatenate([a, b]), LEAF_RGB), NO_SOIL, settings, 0.15)
     assert search.plants[0].traits.width_m < width_m(a) - 0.1
 

@@ -52,3 +52,46 @@ def crossing_pair(rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArra
     a = plant(rng, (0.0, 0.0), [(0.0, 0.12, 0.70, 0.20), (180.0, 0.18, 0.45, 0.15)])
     b = plant(rng, (0.8, 0.0), [(180.0, 0.15, 0.70, 0.12), (0.0, 0.22, 0.40, 0.15)])
     return a, b
+
+
+def level_leaf(
+    rng: np.random.Generator,
+    foot_xy: tuple[float, float],
+    azimuth_deg: float,
+    node_z_m: float,
+    length_m: float,
+    level_z_m: float,
+    n: int,
+) -> NDArray[np.float64]:
+    """(n, 3) points on a ribbon leaf from the stem at ``node_z_m`` that rises over its first
+    15 cm to ``level_z_m`` and runs level from there, tapering from 7 cm wide to 2.8 cm at its
+    tip."""
+    u = rng.uniform(0.0, 1.0, n)
+    across = rng.uniform(-0.5, 0.5, n) * 0.07 * (1.0 - 0.6 * u)
+    a = np.radians(azimuth_deg)
+    along = np.array([np.cos(a), np.sin(a)])
+    side = np.array([-np.sin(a), np.cos(a)])
+    xy = np.asarray(foot_xy) + (u * length_m)[:, None] * along + across[:, None] * side
+    ramp = np.minimum(u * length_m / 0.15, 1.0)
+    z = node_z_m + (level_z_m - node_z_m) * (1.0 - (1.0 - ramp) ** 2)
+    return np.column_stack([xy, z])
+
+
+def lying_pair(
+    rng: np.random.Generator, gap_m: float = 0.008
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two plants whose leaves touch tangentially: A's long level leaf (along +x from (0, 0))
+    lies ``gap_m`` over B's level leaf (B at (0.55, 0.35), its leaf along -y), across it in
+    plan view, both surfaces horizontal there (the same normal). B reaches the contact along
+    35 cm of leaf, A along 55 cm, and A's outer 20 cm lies beyond the contact, outwards from
+    both stems."""
+    a = np.concatenate(
+        [plant(rng, (0.0, 0.0), []), level_leaf(rng, (0.0, 0.0), 0.0, 0.15, 0.75, 0.30, 6000)]
+    )
+    b = np.concatenate(
+        [
+            plant(rng, (0.55, 0.35), []),
+            level_leaf(rng, (0.55, 0.35), 270.0, 0.12, 0.55, 0.30 - gap_m, 5000),
+        ]
+    )
+    return a, b

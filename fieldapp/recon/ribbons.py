@@ -1,0 +1,310 @@
+"""Leaves followed across contacts: the leaves of a plant whose canopy touches a neighbour's
+are traced from their base as ribbons and continued where the neighbour took their outer part.
+
+The geodesic assignment (:mod:`fieldapp.recon.geodesic`) gives a point to the stem it is
+nearest to along the plant. Where a leaf's outer part lies *on* a neighbour's leaf with the
+same slope (two sheets touching tangentially, within the sensor's noise) the neighbour reaches
+that part sooner, and no local cost sees the contact: the normals agree across it. What differs
+is the leaf itself: a ribbon (a smooth midrib whose direction and curvature continue, a width
+that tapers) that runs on through the contact while the neighbour's leaf runs off at an angle.
+
+For each plant with ambiguous points (the plants step's flag) every leaf
+(:func:`fieldapp.recon.organs.segment_organs`) is traced (:func:`trace_leaf`): its midrib, the
+centres of the 1 cm level sets of the geodesic distance from its base, and the width of each
+section, up to where the leaf meets another plant (its sections touch another plant's points or
+are ambiguous) or its width jumps (the neighbour holds one side of it, or another leaf joins).
+From there the ribbon is continued in 1 cm steps (:func:`follow`) along the parabola fitted (in
+arc length) to the last :data:`FIT_M` of its midrib, its width following the taper fitted there;
+each step takes the points inside it (across the ribbon within its half width, off its plane
+within :data:`PLANE_TOLERANCE_M`) and is re-centred on them, so a leaf is followed as far as it
+runs on. A leaf that really ends there (narrow, tapering) finds next to nothing. A neighbour's
+point that a continued ribbon runs through changes hands, unless it lies on one of the
+neighbour's own leaves where that leaf is held (traced, more than :data:`FIT_M` before its
+trace's end: a trace ends a little past where the contact begins when the contact builds up
+gradually, a leaf tip lying on it) and is not ambiguous; a point two ribbons run through goes to
+the one that reached it nearer to where its leaf was seen whole.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from fieldapp.recon.leaf_traits import LeafGraph, section_widths_m
+from fieldapp.recon.organs import segment_organs
+
+LEVEL_M = 0.01
+MIN_SECTION_POINTS = 5
+"""The midrib: the centres of the level sets of this spacing along the leaf (of at least this
+many points)."""
+MIN_CLEAN_M = 0.05
+CONTACT_M = 0.015
+CONTACT_SHARE = 0.25
+NARROWING = 0.7
+"""A leaf is traced (from :data:`MIN_CLEAN_M` on) up to its first section with more than
+:data:`CONTACT_SHARE` of its points within :data:`CONTACT_M` of another plant's or ambiguous,
+or narrower than :data:`NARROWING` times (wider than its inverse times) the median of the four
+before it: the neighbour holds one side of the leaf from there, or another leaf joins it."""
+MAX_WIDTH_M = 0.15
+"""Wider than this at its end a "leaf" is not one blade (leaves joined at the whorl)."""
+FIT_M = 0.12
+"""The ribbon's course and taper: fitted to the last this of its midrib."""
+STEP_M = 0.01
+PLANE_TOLERANCE_M = 0.01
+EDGE_MARGIN_M = 0.005
+MIN_STEP_POINTS = 5
+"""A step holds the points within ``STEP_M / 2`` along the ribbon, its half width plus
+:data:`EDGE_MARGIN_M` across and :data:`PLANE_TOLERANCE_M` off its plane; fewer than
+:data:`MIN_STEP_POINTS` is a gap."""
+FILL = 0.6
+MAX_PATCHY_M = 0.2
+"""A step whose points span :data:`FILL` of the ribbon's width is the leaf's; a patchy stretch
+(at most :data:`MAX_PATCHY_M`) only when a filled step follows it."""
+MAX_SHIFT = 0.25
+"""A step moves the ribbon across by at most this share of its half width."""
+MAX_GAP_M = 0.03
+MIN_WIDTH_M = 0.01
+MAX_REACH_M = 0.5
+"""A ribbon stops after this long without points, below this width, or this far on."""
+
+
+@dataclass
+class Ribbon:
+    """A leaf's course so far: ``centres_m`` (K, 3) its midrib, ``arc_m`` (K,) along it,
+    ``widths_m`` (K,) its width there, ``normal`` (3,) its surface's normal at the end."""
+
+    centres_m: NDArray[np.float64]
+    arc_m: NDArray[np.float64]
+    widths_m: NDArray[np.float64]
+    normal: NDArray[np.float64]
+
+    def predict(self, ahead_m: float) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+        """The centre (3,), unit direction (3,) and width ``ahead_m`` past the end: the
+        parabola (a line with fewer than 6 centres) fitted to the last :data:`FIT_M`, and the
+        taper (never a widening) fitted there, continued."""
+        chosen = self.arc_m >= self.arc_m[-1] - FIT_M
+        chosen[-2:] = True
+        t = self.arc_m[chosen] - self.arc_m[-1]
+        poly = np.polynomial.polynomial
+        fit = poly.polyfit(t, self.centres_m[chosen], 2 if len(t) >= 6 else 1)
+        centre = np.asarray(poly.polyval(ahead_m, fit), dtype=np.float64)
+        slope = np.asarray(poly.polyval(ahead_m, poly.polyder(fit)), dtype=np.float64)
+        taper = poly.polyfit(t, self.widths_m[chosen], 1)
+        width = float(taper[0]) + min(float(taper[1]), 0.0) * ahead_m
+        norm = float(np.linalg.norm(slope))
+        return centre, slope / max(norm, 1e-12), max(width, 0.0)
+
+    def extend(self, centre_m: NDArray[np.float64], width_m: float) -> None:
+        """One more centre (3,) of the midrib, with its width."""
+        step = float(np.linalg.norm(centre_m - self.centres_m[-1]))
+        self.centres_m = np.vstack([self.centres_m, centre_m])
+        self.arc_m = np.append(self.arc_m, self.arc_m[-1] + step)
+        self.widths_m = np.append(self.widths_m, width_m)
+
+
+def trace_leaf(
+    points_m: NDArray[np.float64], touching: NDArray[np.bool_], axis_xy_m: NDArray[np.float64]
+) -> tuple[Ribbon, NDArray[np.bool_]] | None:
+    """The ribbon of a leaf's points (M, 3) from its base (the points nearest the stem at
+    ``axis_xy_m`` (2,), plan view) up to where it meets another plant (``touching`` (M,): near
+    another plant's points or ambiguous) or its width jumps, and (M,) which points the leaf
+    holds: those of its traced part more than :data:`FIT_M` before its end; ``None`` for a
+    leaf too short or too wide to trace."""
+    radial = np.linalg.norm(points_m[:, :2] - axis_xy_m, axis=1)
+    distance = LeafGraph.of(points_m).geodesic_m(np.flatnonzero(radial <= radial.min() + LEVEL_M))
+    levels = np.floor(distance / LEVEL_M).astype(np.intp)
+    order = np.argsort(levels, kind="stable")
+    _, starts = np.unique(levels[order], return_index=True)
+    kept = [
+        (part, share, level)
+        for part, share, level in zip(
+            np.split(points_m[order], starts[1:]),
+            [float(t.mean()) for t in np.split(touching[order], starts[1:])],
+            levels[order][starts],
+            strict=True,
+        )
+        if len(part) >= MIN_SECTION_POINTS
+    ]
+    parts = [part for part, _, _ in kept]
+    if len(parts) < 4:
+        return None
+    centres = np.array([part.mean(axis=0) for part in parts])
+    tangents = centres[np.minimum(np.arange(len(parts)) + 1, len(parts) - 1)]
+    tangents = tangents - centres[np.maximum(np.arange(len(parts)) - 1, 0)]
+    widths = section_widths_m(parts, tangents)
+    first = _first_contact(widths, np.array([share for _, share, _ in kept]))
+    if first < 4 or float(np.median(widths[first - 4 : first])) > MAX_WIDTH_M:
+        return None
+    centres, widths = centres[:first], widths[:first]
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(centres, axis=0), axis=1))])
+    end = np.concatenate(parts[max(first - 5, 0) : first])
+    spread = end - end.mean(axis=0)
+    normal = np.linalg.eigh(spread.T @ spread)[1][:, 0]
+    end_level = kept[first][2] if first < len(kept) else levels.max() + 1
+    held = levels < end_level - round(FIT_M / LEVEL_M)
+    return Ribbon(centres, arc, widths, normal), held
+
+
+def _first_contact(widths_m: NDArray[np.float64], touching_share: NDArray[np.float64]) -> int:
+    """Index of the first section (from :data:`MIN_CLEAN_M` on) that meets another plant or
+    narrows or widens abruptly (:data:`NARROWING`); the number of sections when none does."""
+    for i in range(round(MIN_CLEAN_M / LEVEL_M), len(widths_m)):
+        before = float(np.median(widths_m[max(i - 4, 0) : i]))
+        abrupt = not NARROWING * before <= widths_m[i] <= before / NARROWING
+        if touching_share[i] > CONTACT_SHARE or abrupt:
+            return i
+    return len(widths_m)
+
+
+def follow(
+    ribbon: Ribbon,
+    points_m: NDArray[np.float64],
+    tree: cKDTree,
+    claimable: NDArray[np.bool_],
+) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """The points (indices into ``points_m`` (N, 3), those ``claimable`` (N,)) that the
+    ribbon's continuation runs through, step by step from its end, and (K,) how far past the
+    end each was reached. ``tree``: the k-d tree of ``points_m``."""
+    claimed: list[tuple[NDArray[np.intp], float]] = []
+    pending: list[tuple[NDArray[np.intp], float]] = []
+    start = float(ribbon.arc_m[-1])
+    gap = patchy = 0.0
+    ahead = STEP_M
+    while gap < MAX_GAP_M and patchy <= MAX_PATCHY_M:
+        past = float(ribbon.arc_m[-1]) - start + ahead
+        centre, direction, width = ribbon.predict(ahead)
+        if past > MAX_REACH_M or width < MIN_WIDTH_M:
+            break
+        step = _step(ribbon, centre, direction, width, points_m, tree)
+        if step is None:
+            gap, ahead = gap + STEP_M, ahead + STEP_M
+            continue
+        taken, filled, moved = step
+        gap, ahead = 0.0, STEP_M
+        pending.append((taken[claimable[taken]], past))
+        if filled:
+            claimed, pending, patchy = claimed + pending, [], 0.0
+        else:
+            patchy += STEP_M
+        ribbon.extend(moved if filled else centre, width)
+    if not claimed:
+        return np.zeros(0, dtype=np.intp), np.zeros(0)
+    index = np.concatenate([c for c, _ in claimed])
+    return index, np.concatenate([np.full(len(c), d) for c, d in claimed])
+
+
+def _step(
+    ribbon: Ribbon,
+    centre: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    width: float,
+    points_m: NDArray[np.float64],
+    tree: cKDTree,
+) -> tuple[NDArray[np.intp], bool, NDArray[np.float64]] | None:
+    """The points inside the ribbon's step at ``centre`` (3,) heading ``direction`` (3,),
+    whether they fill its width (:data:`FILL`), and the centre moved onto them; ``None`` when
+    the step holds fewer than :data:`MIN_STEP_POINTS`."""
+    normal = ribbon.normal - (ribbon.normal @ direction) * direction
+    normal /= max(float(np.linalg.norm(normal)), 1e-12)
+    across_dir = np.cross(normal, direction)
+    half = width / 2.0 + EDGE_MARGIN_M
+    radius = float(np.sqrt(half**2 + STEP_M**2 + PLANE_TOLERANCE_M**2))
+    near = np.asarray(tree.query_ball_point(centre, radius), dtype=np.intp)
+    offset = points_m[near] - centre
+    along, across, off = offset @ direction, offset @ across_dir, offset @ normal
+    inside = (np.abs(along) <= STEP_M / 2) & (np.abs(off) <= PLANE_TOLERANCE_M)
+    inside &= np.abs(across) <= half
+    if inside.sum() < MIN_STEP_POINTS:
+        return None
+    low, high = np.percentile(across[inside], [5.0, 95.0])
+    shift = float(np.clip(0.5 * (low + high), -MAX_SHIFT * half, MAX_SHIFT * half))
+    on_plane = inside & (np.abs(off) <= PLANE_TOLERANCE_M / 2)  # not a sheet it lies on
+    lift = float(np.median(off[on_plane])) if on_plane.any() else 0.0
+    moved = centre + shift * across_dir + lift * normal
+    return near[inside], bool(high - low >= FILL * width), moved
+
+
+def _touching(
+    points_m: NDArray[np.float64],
+    tree: cKDTree,
+    members: NDArray[np.intp],
+    others: NDArray[np.bool_],
+) -> NDArray[np.bool_]:
+    """(len(members),) whether each of a plant's points (``members``, indices into
+    ``points_m``, whose k-d tree is ``tree``) lies within :data:`CONTACT_M` of a point of
+    another plant (``others`` (N,)); only the points around the plant are looked at."""
+    own = points_m[members]
+    low, high = own.min(axis=0), own.max(axis=0)
+    reach = float(np.linalg.norm(high - low)) / 2.0 + CONTACT_M
+    around = np.asarray(tree.query_ball_point((low + high) / 2.0, reach), dtype=np.intp)
+    near = around[others[around]]
+    if len(near) == 0:
+        return np.zeros(len(members), dtype=bool)
+    distance, _ = cKDTree(points_m[near]).query(own, distance_upper_bound=CONTACT_M)
+    return np.isfinite(distance)  # type: ignore[no-any-return]
+
+
+def _trace_plants(
+    points_m: NDArray[np.float64],
+    labels: NDArray[np.intp],
+    ambiguous: NDArray[np.bool_],
+    feet_m: NDArray[np.float64],
+    flagged: NDArray[np.intp],
+    tree: cKDTree,
+) -> tuple[list[tuple[int, Ribbon]], NDArray[np.bool_]]:
+    """The ribbons of the ``flagged`` stems' leaves (with their stem) and (N,) the points their
+    leaves hold (:func:`trace_leaf`)."""
+    ribbons: list[tuple[int, Ribbon]] = []
+    held = np.zeros(len(points_m), dtype=bool)
+    on_stems = (labels >= 0) & (labels < len(feet_m))
+    touching = ambiguous.copy()
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], [flagged, flagged + 1])
+    for stem, start, stop in zip(flagged, *bounds, strict=True):
+        members = order[start:stop]
+        organs = segment_organs(points_m[members], feet_m[stem])
+        touching[members] |= _touching(points_m, tree, members, on_stems & (labels != stem))
+        for leaf in organs.leaves:
+            chosen = members[leaf]
+            found = trace_leaf(points_m[chosen], touching[chosen], organs.axis.foot_m[:2])
+            if found is not None:
+                ribbons.append((int(stem), found[0]))
+                held[chosen[found[1]]] = True
+    return ribbons, held
+
+
+def follow_leaves(
+    points_m: NDArray[np.float64],
+    labels: NDArray[np.intp],
+    ambiguous: NDArray[np.bool_],
+    feet_m: NDArray[np.float64],
+    flag_share: float,
+) -> int:
+    """The leaves of the plants with more than ``flag_share`` of their points ``ambiguous``
+    (N,) followed across their contacts: ``labels`` (N,) (the stem of each point, 0..S-1 for
+    the stems whose feet are ``feet_m`` (S, 3); other labels are left alone) are changed in
+    place where a leaf's ribbon runs on through a neighbour's points. Returns how many points
+    changed hands."""
+    stems = len(feet_m)
+    on_stems = (labels >= 0) & (labels < stems)
+    counts = np.bincount(labels[on_stems], minlength=stems)
+    shared = np.bincount(labels[on_stems & ambiguous], minlength=stems)
+    flagged = np.flatnonzero(shared > flag_share * np.maximum(counts, 1))
+    if len(flagged) == 0:
+        return 0
+    tree = cKDTree(points_m)
+    ribbons, held = _trace_plants(points_m, labels, ambiguous, feet_m, flagged, tree)
+    claimer = np.full(len(points_m), -1, dtype=np.intp)
+    nearest = np.full(len(points_m), np.inf)
+    for stem, ribbon in ribbons:
+        claimable = on_stems & (labels != stem) & (~held | ambiguous)
+        taken, past = follow(ribbon, points_m, tree, claimable)
+        better = past < nearest[taken]
+        claimer[taken[better]] = stem
+        nearest[taken[better]] = past[better]
+    won = np.flatnonzero(claimer >= 0)
+    labels[won] = claimer[won]
+    return len(won)
