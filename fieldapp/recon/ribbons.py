@@ -134,7 +134,8 @@ def trace_leaf(
     centres = np.array([part.mean(axis=0) for part in parts])
     tangents = centres[np.minimum(np.arange(len(parts)) + 1, len(parts) - 1)]
     tangents = tangents - centres[np.maximum(np.arange(len(parts)) - 1, 0)]
-    widths = section_widths_m(parts, tangents)
+    counts = np.array([len(part) for part in parts], dtype=np.intp)
+    widths = section_widths_m(np.concatenate(parts), counts, tangents)
     first = _first_contact(widths, np.array([share for _, share, _ in kept]))
     if first < 4 or float(np.median(widths[first - 4 : first])) > MAX_WIDTH_M:
         return None
