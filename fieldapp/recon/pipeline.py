@@ -75,7 +75,7 @@ def reconstruct(
         found = stages.find_plants(placed, settings.plants, ground_radius_m, grid.value.nodes)
     # Beyond the paper: each plant's organs (stem, whorl, each leaf) and their traits.
     with timer.stage("organs"):
-        organs = stages.organs(found.value.plants)
+        organs = stages.organs(found.value.plants, settings.threads)
     yield progress("traits", 1.0, f"{len(found.value.plants)} plants")
     warnings = [
         *stages.missing_captures(session.missing()),

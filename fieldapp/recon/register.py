@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 
 from devices.geometry import Matrix4, invert, make_transform, transform_points
 from fieldapp.recon import ambiguity, guards, posegraph, se3
-from fieldapp.recon.pairpool import PairRunner
+from fieldapp.recon.forkmap import ForkedMap
 from fieldapp.recon.pairwise import Overlap, PairFit, find_overlaps, register_overlap
 from fieldapp.recon.settings import RegistrationSettings
 
@@ -91,8 +91,8 @@ def register_stations(
     overlaps = find_overlaps(field_points, settings)
     fits: list[PairFit] = []
     # pairs shared by this process and a forked worker (GICP holds the GIL: threads would
-    # take turns); the same fits wherever a pair runs (pairpool's docstring)
-    with PairRunner(threads) as runner:
+    # take turns); the same fits wherever a pair runs (forkmap's docstring)
+    with ForkedMap(threads) as runner:
         each = runner.worker_threads
         # closing this generator closes map's iterator, which drops the pairs not started
         for fit in runner.map(

@@ -21,6 +21,7 @@ from fieldapp.io.calibration import Calibration, ViewStep
 from fieldapp.io.session import Capture, Session
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
+from fieldapp.recon.forkmap import ForkedMap
 from fieldapp.recon.grid import GridNodes
 from fieldapp.recon.guards import COARSE_KEPT, UNRELIABLE
 from fieldapp.recon.levelling import T_field_reference_initial, level_stations
@@ -341,6 +342,15 @@ def find_plants(
     return Staged(search, (*warnings, *(() if search.plants else ("no plant found",))))
 
 
-def organs(plants: list[Plant]) -> dict[int, PlantOrgans]:
-    """Beyond the paper: each plant's organs (stem, whorl, each leaf) and their traits."""
-    return {p.id: measure_organs(p.cloud.points, foot_m(p.traits)) for p in plants}
+def organs(plants: list[Plant], threads: int = 1) -> dict[int, PlantOrgans]:
+    """Beyond the paper: each plant's organs (stem, whorl, each leaf) and their traits; the
+    plants shared by this process and a forked worker (:mod:`forkmap`) with ``threads`` >= 2."""
+    jobs = [(p.cloud.points, foot_m(p.traits)) for p in plants]
+    with ForkedMap(threads) as runner:
+        measured = list(runner.map(_measure_organs, jobs))
+    return {p.id: organs for p, organs in zip(plants, measured, strict=True)}
+
+
+def _measure_organs(job: tuple[NDArray[np.float64], NDArray[np.float64]]) -> PlantOrgans:
+    """:func:`measure_organs` of one plant's ``(points, foot)``, module level for a worker."""
+    return measure_organs(*job)

@@ -1,19 +1,21 @@
-"""Registering the plot's pairs on two cores: this process and one forked worker share them.
+"""Work that holds Python's GIL on two cores: this process and one forked worker share it.
 
-GICP (small_gicp) holds Python's GIL for the whole of a call, so pairs on Python threads run
-one after the other whatever the thread count; only a second process registers a second pair
-at the same time. With ``threads`` of 2 or more, :class:`PairRunner` forks one worker process
-when registration starts: the modules are already imported, so it is ready in milliseconds and
-costs no start-up CPU. :meth:`PairRunner.map` gives the worker the pairs from the front of the
-list and registers them here from the back, until the two meet; every pair is the same function
-of the same inputs wherever it runs (one OpenMP thread each: the fits do not depend on the
-thread count, see :mod:`pairwise`), so the results, in order, are those of one process.
+GICP (small_gicp) holds the GIL for the whole of a call, and much of the organ step is short
+numpy and SciPy calls, so pairs or plants on Python threads run one after the other whatever the
+thread count; only a second process runs a second one at the same time. With ``threads`` of 2
+or more, :class:`ForkedMap` forks one worker process when a stage starts: the modules are
+already imported, so it is ready in milliseconds and costs no start-up CPU. :meth:`ForkedMap.map`
+gives the worker the items from the front of the list and runs them here from the back, until
+the two meet; every item is the same function of the same inputs wherever it runs (one OpenMP
+thread each: registration's fits do not depend on the thread count, see :mod:`pairwise`), so
+the results, in order, are those of one process.
 
-Where no worker can be started, the pairs run in this process on ``threads`` Python threads
+Where no worker can be started, the items run in this process on ``threads`` Python threads
 (only their numpy parts overlap): a daemonic process may not have children (the GUI's
 reconstruction process, a Dask worker), and a system without POSIX semaphores or ``fork``
 cannot build the pool. Nothing else changes. Forking is safe here because the worker only runs
-numpy and small_gicp on the data it is sent, and leaves by ``os._exit`` (multiprocessing's
+numpy, SciPy and small_gicp on the data it is sent (never an OpenMP library the parent may have
+used on several threads, such as pykdtree's), and leaves by ``os._exit`` (multiprocessing's
 fork children do), never through this process's exit handlers.
 """
 
@@ -41,10 +43,10 @@ def can_fork_a_worker() -> bool:
     return not daemon and "fork" in multiprocessing.get_all_start_methods()
 
 
-class PairRunner:
-    """Runs a function over pairs, results in order, on this process and (``threads`` >= 2)
+class ForkedMap:
+    """Runs a function over items, results in order, on this process and (``threads`` >= 2)
     one forked worker. Use as a context manager; :attr:`worker_threads` is the OpenMP thread
-    count each pair should use (1 when two processes share the cores)."""
+    count each item should use (1 when two processes share the cores)."""
 
     def __init__(self, threads: int, fork: Callable[[], bool] = can_fork_a_worker) -> None:
         self._threads = threads
@@ -72,7 +74,7 @@ class PairRunner:
         """OpenMP threads per pair: 1 beside a worker process, else ``threads``."""
         return 1 if self._worker is not None else self._threads
 
-    def __enter__(self) -> PairRunner:
+    def __enter__(self) -> ForkedMap:
         return self
 
     def __exit__(
@@ -116,7 +118,7 @@ def _forked_worker() -> ProcessPoolExecutor | None:
             )
             pool.submit(int).result()  # fork now, not in the middle of the first pair
     except Exception as error:  # no semaphores (/dev/shm), no fork, a resource limit
-        log.info("pairs registered in one process: no worker could be started (%s)", error)
+        log.info("work of a stage kept in one process: no worker could be started (%s)", error)
         return None
     return pool
 
@@ -129,7 +131,7 @@ def _shared(worker: ProcessPoolExecutor, function: Callable[[T], R], items: list
     try:
         futures: list[Future[R]] = [worker.submit(function, item) for item in items]
     except BrokenProcessPool:  # the worker had died before these pairs
-        log.warning("the registration worker process had ended: pairs go on here")
+        log.warning("the worker process had ended: its items go on here")
         yield from map(function, items)
         return
     here: dict[int, R] = {}
@@ -148,7 +150,7 @@ def _shared(worker: ProcessPoolExecutor, function: Callable[[T], R], items: list
                 try:
                     result = future.result()
                 except BrokenProcessPool:  # the worker died (killed, out of memory): go on here
-                    log.warning("the registration worker process ended: pairs go on here")
+                    log.warning("the worker process ended: its items go on here")
                     result = function(items[i])
                 yield result
     finally:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import signal
 
-from fieldapp.recon.pairpool import PairRunner
+from fieldapp.recon.forkmap import ForkedMap
 
 
 def _square_and_pid(x: int) -> tuple[int, int]:
@@ -14,7 +14,7 @@ def _square_and_pid(x: int) -> tuple[int, int]:
 
 
 def test_results_come_in_order_from_this_process_and_the_worker() -> None:
-    with PairRunner(2) as runner:
+    with ForkedMap(2) as runner:
         assert runner.forked and runner.worker_threads == 1
         worker = runner.worker_pid
         results = list(runner.map(_square_and_pid, range(40)))
@@ -23,7 +23,7 @@ def test_results_come_in_order_from_this_process_and_the_worker() -> None:
 
 
 def test_one_thread_runs_every_pair_here() -> None:
-    with PairRunner(1) as runner:
+    with ForkedMap(1) as runner:
         assert not runner.forked and runner.worker_threads == 1
         results = list(runner.map(_square_and_pid, range(5)))
     assert results == [(x * x, os.getpid()) for x in range(5)]
@@ -32,14 +32,14 @@ def test_one_thread_runs_every_pair_here() -> None:
 def test_a_process_that_may_not_fork_uses_its_threads() -> None:
     """A daemonic process (the GUI's reconstruction process, a Dask worker) has no worker:
     the pairs run here, each with the thread count asked for."""
-    with PairRunner(2, fork=lambda: False) as runner:
+    with ForkedMap(2, fork=lambda: False) as runner:
         assert not runner.forked and runner.worker_threads == 2
         results = list(runner.map(_square_and_pid, range(5)))
     assert results == [(x * x, os.getpid()) for x in range(5)]
 
 
 def test_the_pairs_go_on_here_when_the_worker_dies() -> None:
-    with PairRunner(2) as runner:
+    with ForkedMap(2) as runner:
         pid = runner.worker_pid
         assert pid is not None
         os.kill(pid, signal.SIGKILL)
@@ -48,7 +48,7 @@ def test_the_pairs_go_on_here_when_the_worker_dies() -> None:
 
 
 def test_closing_the_results_early_drops_the_pairs_not_started() -> None:
-    with PairRunner(2) as runner:
+    with ForkedMap(2) as runner:
         results = runner.map(_square_and_pid, range(30))
         assert next(results)[0] == 0
         results.close()
