@@ -17,23 +17,36 @@ cannot build the pool. Nothing else changes. Forking is safe here because the wo
 numpy, SciPy and small_gicp on the data it is sent (never an OpenMP library the parent may have
 used on several threads, such as pykdtree's), and leaves by ``os._exit`` (multiprocessing's
 fork children do), never through this process's exit handlers.
+
+The worker is a plain process on a pipe, one item at a time, not a ``ProcessPoolExecutor``:
+that pool's manager thread fails on Python 3.11 when a worker dies while an item it had queued
+was taken back (``InvalidStateError`` on a cancelled future), and could leave the other items
+never finished. Here a worker that dies (killed, out of memory) is noticed on the pipe and its
+item runs in this process like the rest.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
+import traceback
 import warnings
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
+from concurrent.futures import Executor, ThreadPoolExecutor
+from multiprocessing.connection import Connection
 from types import TracebackType
-from typing import TypeVar
+from typing import Any, TypeVar
 
 log = logging.getLogger(__name__)
 
 T = TypeVar("T")
 R = TypeVar("R")
+
+POLL_S = 0.05
+"""How often the wait for the worker's last item checks that the worker is alive."""
+STOP_WAIT_S = 5.0
+"""How long closing waits for the worker to finish its item before terminating it."""
 
 
 def can_fork_a_worker() -> bool:
@@ -50,28 +63,26 @@ class ForkedMap:
 
     def __init__(self, threads: int, fork: Callable[[], bool] = can_fork_a_worker) -> None:
         self._threads = threads
-        self._worker: ProcessPoolExecutor | None = None
+        self._worker: _Worker | None = None
         self._local: Executor | None = None
         if threads >= 2 and fork():
-            self._worker = _forked_worker()
+            self._worker = _Worker.start()
         if self._worker is None and threads >= 2:
-            self._local = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="pairs")
+            self._local = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="forkmap")
 
     @property
     def forked(self) -> bool:
-        """Whether a worker process shares the pairs."""
+        """Whether a worker process shares the items."""
         return self._worker is not None
 
     @property
     def worker_pid(self) -> int | None:
         """The worker process's id, when there is one."""
-        if self._worker is None:
-            return None
-        return next(iter(self._worker._processes))  # the pool's one process, started at once
+        return None if self._worker is None else self._worker.pid
 
     @property
     def worker_threads(self) -> int:
-        """OpenMP threads per pair: 1 beside a worker process, else ``threads``."""
+        """OpenMP threads per item: 1 beside a worker process, else ``threads``."""
         return 1 if self._worker is not None else self._threads
 
     def __enter__(self) -> ForkedMap:
@@ -86,9 +97,9 @@ class ForkedMap:
         self.close()
 
     def close(self) -> None:
-        """Stop the worker (pairs not started are dropped) and the threads."""
+        """Stop the worker (after its item, or terminated) and the threads."""
         if self._worker is not None:
-            self._worker.shutdown(wait=True, cancel_futures=True)
+            self._worker.stop()
             self._worker = None
         if self._local is not None:
             self._local.shutdown(wait=True, cancel_futures=True)
@@ -96,63 +107,138 @@ class ForkedMap:
 
     def map(self, function: Callable[[T], R], items: Iterable[T]) -> Iterator[R]:
         """``function`` of each item, in order. With a worker, ``function`` and the items must
-        pickle (a module-level function, plain data). Closing the iterator early drops the
-        items not started."""
+        pickle (a module-level function, plain data). Closing the iterator early leaves the
+        items not started undone."""
         items = list(items)
-        if self._worker is None or len(items) < 2:
-            mapped = self._local.map(function, items) if self._local else map(function, items)
-            yield from mapped
+        if self._worker is not None and len(items) >= 2:
+            yield from self._shared(function, items)
             return
-        yield from _shared(self._worker, function, items)
+        yield from (self._local.map(function, items) if self._local else map(function, items))
+
+    def _shared(self, function: Callable[[T], R], items: list[T]) -> Iterator[R]:
+        """The worker takes items from the front, this process from the back, one at a time,
+        until they meet; results are yielded in order as soon as they are known."""
+        worker = self._worker
+        assert worker is not None
+        done: dict[int, R] = {}
+        front, back = 0, len(items) - 1
+        busy: int | None = None  # the item the worker holds
+        for i in range(len(items)):
+            while i not in done:
+                if busy is None and worker.alive and front <= back:
+                    busy, front = front, front + 1
+                    worker.send(function, items[busy])
+                if busy is not None and (front > back or worker.ready()):
+                    outcome = worker.receive(POLL_S if front > back else 0.0)
+                    if outcome is _PENDING:
+                        continue
+                    if outcome is _DIED:
+                        log.warning("the worker process ended: its items go on here")
+                        done[busy] = function(items[busy])
+                    else:
+                        done[busy] = outcome
+                    busy = None
+                elif front <= back:
+                    done[back], back = function(items[back]), back - 1
+            yield done.pop(i)
 
 
-def _forked_worker() -> ProcessPoolExecutor | None:
-    """A one-process pool forked now, or ``None`` (logged) where the system refuses one."""
-    try:
-        with warnings.catch_warnings():
-            # Python 3.12+ warns that forking a multi-threaded process may deadlock the child
-            # in a lock another thread held; the worker takes no such lock (module docstring)
-            warnings.simplefilter("ignore", DeprecationWarning)
-            pool = ProcessPoolExecutor(
-                max_workers=1, mp_context=multiprocessing.get_context("fork")
-            )
-            pool.submit(int).result()  # fork now, not in the middle of the first pair
-    except Exception as error:  # no semaphores (/dev/shm), no fork, a resource limit
-        log.info("work of a stage kept in one process: no worker could be started (%s)", error)
-        return None
-    return pool
+_PENDING = object()
+_DIED = object()
 
 
-def _shared(worker: ProcessPoolExecutor, function: Callable[[T], R], items: list[T]) -> Iterator[R]:
-    """The worker takes items from the front (its queue), this process from the back: an item
-    still queued for the worker when this process reaches it is taken back (cancelled) and run
-    here. Results are yielded in order as they are known. Should the worker die, what it had
-    not returned runs here."""
-    try:
-        futures: list[Future[R]] = [worker.submit(function, item) for item in items]
-    except BrokenProcessPool:  # the worker had died before these pairs
-        log.warning("the worker process had ended: its items go on here")
-        yield from map(function, items)
-        return
-    here: dict[int, R] = {}
-    back = len(items) - 1
-    try:
-        for i, future in enumerate(futures):
-            while back > i and not future.done():
-                if futures[back].cancel():
-                    here[back] = function(items[back])
-                back -= 1
-            if i in here:
-                yield here.pop(i)
-            elif future.cancel():
-                yield function(items[i])
-            else:
-                try:
-                    result = future.result()
-                except BrokenProcessPool:  # the worker died (killed, out of memory): go on here
-                    log.warning("the worker process ended: its items go on here")
-                    result = function(items[i])
-                yield result
-    finally:
-        for future in futures:
-            future.cancel()
+class _Worker:
+    """A forked process running one ``function(item)`` at a time for this process: sent as
+    ``(token, function, item)``, answered ``(token, "ok", result)`` or ``(token, "error",
+    exception)``. The token tells the answer of the item sent last from that of an item whose
+    results were no longer wanted (a map closed early), which is dropped."""
+
+    def __init__(self, process: Any, connection: Connection) -> None:
+        self._process = process
+        self._connection = connection
+        self._token = 0
+        self.alive = True
+
+    @classmethod
+    def start(cls) -> _Worker | None:
+        """A worker forked now, or ``None`` (logged) where the system refuses one."""
+        try:
+            context = multiprocessing.get_context("fork")
+            here, there = context.Pipe(duplex=True)
+            process = context.Process(target=_serve, args=(there,), name="forkmap", daemon=True)
+            with warnings.catch_warnings():
+                # Python 3.12+ warns that forking a multi-threaded process may deadlock the
+                # child in a lock another thread held; the worker takes none (module docstring)
+                warnings.simplefilter("ignore", DeprecationWarning)
+                process.start()
+            there.close()
+        except Exception as error:  # no fork, no semaphores, a process limit
+            log.info("a stage's work kept in one process: no worker could be started (%s)", error)
+            return None
+        return cls(process, here)
+
+    @property
+    def pid(self) -> int:
+        return int(self._process.pid)
+
+    def send(self, function: Callable[[Any], Any], item: Any) -> None:
+        self._token += 1
+        with contextlib.suppress(OSError, EOFError):  # the worker has gone: receive() says so
+            self._connection.send((self._token, function, item))
+
+    def ready(self) -> bool:
+        """Whether an answer (or the end of the pipe) is waiting."""
+        try:
+            return bool(self._connection.poll(0))
+        except (OSError, EOFError):
+            return True
+
+    def receive(self, wait_s: float) -> Any:
+        """The result of the item sent, ``_PENDING`` if none came within ``wait_s``, or
+        ``_DIED`` when the worker ended; raises the item's own exception."""
+        try:
+            while True:
+                if not self._connection.poll(wait_s):
+                    if self._process.is_alive():
+                        return _PENDING
+                    raise EOFError
+                token, kind, payload = self._connection.recv()
+                if token == self._token:
+                    break
+        except (OSError, EOFError):
+            self.alive = False
+            return _DIED
+        if kind == "error":
+            raise payload
+        return payload
+
+    def stop(self) -> None:
+        with contextlib.suppress(OSError, EOFError):
+            self._connection.send(None)
+        self._process.join(STOP_WAIT_S)
+        if self._process.is_alive():
+            self._process.terminate()
+            self._process.join(STOP_WAIT_S)
+        self._connection.close()
+
+
+def _serve(connection: Connection) -> None:
+    """The worker's loop: run each ``(function, item)`` received until ``None``."""
+    while True:
+        try:
+            job = connection.recv()
+        except EOFError:
+            return
+        if job is None:
+            return
+        token, function, item = job
+        try:
+            answer: tuple[int, str, Any] = (token, "ok", function(item))
+        except Exception as error:
+            answer = (token, "error", error)
+        try:
+            connection.send(answer)
+        except Exception:  # an answer that does not pickle
+            text = "".join(traceback.format_exception(answer[2])) if answer[1] == "error" else ""
+            problem = RuntimeError(f"the worker's answer did not pickle {text}")
+            connection.send((token, "error", problem))

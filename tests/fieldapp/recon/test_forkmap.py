@@ -1,4 +1,4 @@
-"""The pairs shared by this process and a forked worker: results in order, the same as one
+"""Items shared by this process and a forked worker: results in order, the same as one
 process's, and the work goes on here when no worker can be started or the worker dies."""
 
 from __future__ import annotations
@@ -6,11 +6,19 @@ from __future__ import annotations
 import os
 import signal
 
-from fieldapp.recon.forkmap import ForkedMap
+import pytest
+
+from fieldapp.recon.forkmap import ForkedMap, _Worker
 
 
 def _square_and_pid(x: int) -> tuple[int, int]:
     return x * x, os.getpid()
+
+
+def _refuse_zero(x: int) -> int:
+    if x == 0:
+        raise ValueError(f"zero refused in process {os.getpid()}")
+    return x
 
 
 def test_results_come_in_order_from_this_process_and_the_worker() -> None:
@@ -19,6 +27,7 @@ def test_results_come_in_order_from_this_process_and_the_worker() -> None:
         worker = runner.worker_pid
         results = list(runner.map(_square_and_pid, range(40)))
     assert [value for value, _ in results] == [x * x for x in range(40)]
+    assert results[0][1] == worker  # the worker takes the first item before anything else
     assert {pid for _, pid in results} <= {os.getpid(), worker}
 
 
@@ -53,3 +62,24 @@ def test_closing_the_results_early_drops_the_pairs_not_started() -> None:
         assert next(results)[0] == 0
         results.close()
         assert list(runner.map(_square_and_pid, range(3)))[2][0] == 4  # still usable
+
+
+def test_an_error_in_the_worker_is_raised_here() -> None:
+    with ForkedMap(2) as runner:
+        worker = runner.worker_pid
+        with pytest.raises(ValueError, match=f"zero refused in process {worker}"):
+            list(runner.map(_refuse_zero, range(5)))
+        assert list(runner.map(_refuse_zero, range(1, 4))) == [1, 2, 3]  # still usable
+
+
+def test_an_answer_no_longer_wanted_is_dropped() -> None:
+    """A map closed while the worker held an item leaves its answer in the pipe: the next
+    item's answer is the one received."""
+    worker = _Worker.start()
+    assert worker is not None
+    try:
+        worker.send(_square_and_pid, 3)
+        worker.send(_square_and_pid, 4)
+        assert worker.receive(60.0)[0] == 16
+    finally:
+        worker.stop()
