@@ -10,13 +10,14 @@ the two meet; every item is the same function of the same inputs wherever it run
 thread each: registration's fits do not depend on the thread count, see :mod:`pairwise`), so
 the results, in order, are those of one process.
 
-Where no worker can be started, the items run in this process on ``threads`` Python threads
-(only their numpy parts overlap): a daemonic process may not have children (the GUI's
-reconstruction process, a Dask worker), and a system without POSIX semaphores or ``fork``
-cannot build the pool. Nothing else changes. Forking is safe here because the worker only runs
-numpy, SciPy and small_gicp on the data it is sent (never an OpenMP library the parent may have
-used on several threads, such as pykdtree's), and leaves by ``os._exit`` (multiprocessing's
-fork children do), never through this process's exit handlers.
+Where no worker can be started (a system without ``fork``, a process limit), the items run in
+this process on ``threads`` Python threads (only their numpy parts overlap). Nothing else
+changes. The worker is forked with ``os.fork``, not as a ``multiprocessing.Process``, so the
+GUI's reconstruction process (a daemonic ``multiprocessing`` child, which that module forbids
+children) gets one too; it never outlives this process for long: it ends when its pipe closes.
+Forking is safe here because the worker only runs numpy, SciPy and small_gicp on the data it is
+sent (never an OpenMP library the parent may have used on several threads, such as pykdtree's),
+and leaves by ``os._exit``, never through this process's exit handlers.
 
 The worker is a plain process on a pipe, one item at a time, not a ``ProcessPoolExecutor``:
 that pool's manager thread fails on Python 3.11 when a worker dies while an item it had queued
@@ -30,6 +31,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import multiprocessing
+import os
+import signal
+import time
 import traceback
 import warnings
 from collections.abc import Callable, Iterable, Iterator
@@ -46,14 +50,12 @@ R = TypeVar("R")
 POLL_S = 0.05
 """How often the wait for the worker's last item checks that the worker is alive."""
 STOP_WAIT_S = 5.0
-"""How long closing waits for the worker to finish its item before terminating it."""
+"""How long closing waits for the worker to finish its item before killing it."""
 
 
 def can_fork_a_worker() -> bool:
-    """Whether this process may start a forked worker: not a daemonic process (whose children
-    multiprocessing refuses) and a platform with the ``fork`` start method."""
-    daemon = bool(multiprocessing.current_process().daemon)
-    return not daemon and "fork" in multiprocessing.get_all_start_methods()
+    """Whether this platform can fork (POSIX)."""
+    return hasattr(os, "fork")
 
 
 class ForkedMap:
@@ -153,33 +155,51 @@ class _Worker:
     exception)``. The token tells the answer of the item sent last from that of an item whose
     results were no longer wanted (a map closed early), which is dropped."""
 
-    def __init__(self, process: Any, connection: Connection) -> None:
-        self._process = process
+    def __init__(self, pid: int, connection: Connection) -> None:
+        self._pid = pid
         self._connection = connection
         self._token = 0
+        self._ended = False
         self.alive = True
 
     @classmethod
     def start(cls) -> _Worker | None:
         """A worker forked now, or ``None`` (logged) where the system refuses one."""
         try:
-            context = multiprocessing.get_context("fork")
-            here, there = context.Pipe(duplex=True)
-            process = context.Process(target=_serve, args=(there,), name="forkmap", daemon=True)
+            here, there = multiprocessing.Pipe(duplex=True)
             with warnings.catch_warnings():
                 # Python 3.12+ warns that forking a multi-threaded process may deadlock the
                 # child in a lock another thread held; the worker takes none (module docstring)
                 warnings.simplefilter("ignore", DeprecationWarning)
-                process.start()
-            there.close()
-        except Exception as error:  # no fork, no semaphores, a process limit
+                pid = os.fork()
+        except Exception as error:  # no fork, a process limit, no file descriptors
             log.info("a stage's work kept in one process: no worker could be started (%s)", error)
             return None
-        return cls(process, here)
+        if pid == 0:  # the worker: serve, then leave without this process's exit handlers
+            code = 1
+            try:
+                here.close()
+                _serve(there)
+                code = 0
+            finally:
+                os._exit(code)
+        there.close()
+        return cls(pid, here)
 
     @property
     def pid(self) -> int:
-        return int(self._process.pid)
+        return self._pid
+
+    def _is_alive(self) -> bool:
+        """Whether the worker runs (reaping it when it has ended)."""
+        if self._ended:
+            return False
+        try:
+            pid, _ = os.waitpid(self._pid, os.WNOHANG)
+        except ChildProcessError:
+            pid = self._pid
+        self._ended = pid == self._pid
+        return not self._ended
 
     def send(self, function: Callable[[Any], Any], item: Any) -> None:
         self._token += 1
@@ -199,7 +219,7 @@ class _Worker:
         try:
             while True:
                 if not self._connection.poll(wait_s):
-                    if self._process.is_alive():
+                    if self._is_alive():
                         return _PENDING
                     raise EOFError
                 token, kind, payload = self._connection.recv()
@@ -213,13 +233,20 @@ class _Worker:
         return payload
 
     def stop(self) -> None:
+        """Ask the worker to end after its item; kill it if it has not within
+        :data:`STOP_WAIT_S` (it holds nothing to clean up); reap it either way."""
         with contextlib.suppress(OSError, EOFError):
             self._connection.send(None)
-        self._process.join(STOP_WAIT_S)
-        if self._process.is_alive():
-            self._process.terminate()
-            self._process.join(STOP_WAIT_S)
         self._connection.close()
+        deadline = time.monotonic() + STOP_WAIT_S
+        while self._is_alive() and time.monotonic() < deadline:
+            time.sleep(POLL_S)
+        if self._is_alive():
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self._pid, signal.SIGKILL)
+            with contextlib.suppress(ChildProcessError):
+                os.waitpid(self._pid, 0)
+            self._ended = True
 
 
 def _serve(connection: Connection) -> None:

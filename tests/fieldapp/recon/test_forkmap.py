@@ -3,8 +3,10 @@ process's, and the work goes on here when no worker can be started or the worker
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
+from typing import Any
 
 import pytest
 
@@ -38,9 +40,30 @@ def test_one_thread_runs_every_pair_here() -> None:
     assert results == [(x * x, os.getpid()) for x in range(5)]
 
 
-def test_a_process_that_may_not_fork_uses_its_threads() -> None:
-    """A daemonic process (the GUI's reconstruction process, a Dask worker) has no worker:
-    the pairs run here, each with the thread count asked for."""
+def _forked_in(queue: Any) -> None:
+    with ForkedMap(2) as runner:
+        results = list(runner.map(_square_and_pid, range(6)))
+        queue.put((runner.forked, [value for value, _ in results]))
+
+
+def test_a_daemonic_process_gets_a_worker_too() -> None:
+    """The GUI reconstructs in a daemonic multiprocessing child, which that module forbids
+    children: the worker is forked without it."""
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_forked_in, args=(queue,), daemon=True)
+    child.start()
+    try:
+        forked, values = queue.get(timeout=120)  # a hang guard, not a speed check
+    finally:
+        child.join(60)
+    assert forked and values == [x * x for x in range(6)]
+    assert child.exitcode == 0
+
+
+def test_a_process_that_cannot_fork_uses_its_threads() -> None:
+    """Where no worker can be forked the items run here, each with the thread count asked
+    for."""
     with ForkedMap(2, fork=lambda: False) as runner:
         assert not runner.forked and runner.worker_threads == 2
         results = list(runner.map(_square_and_pid, range(5)))
