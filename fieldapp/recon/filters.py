@@ -77,21 +77,16 @@ def green_contrast(
 ) -> float:
     """The difference of the mean ExG (N,) of the classes either side of Otsu's threshold
     (``threshold`` when already known); 0 for a constant image. ``weights`` (N,): how many
-    pixels have each value (see :func:`otsu_threshold`)."""
+    pixels have each value (see :func:`otsu_threshold`; default one each)."""
     if len(exg) == 0:
         return 0.0
+    weights = np.ones(len(exg), dtype=np.int64) if weights is None else weights
     high = exg > (otsu_threshold(exg, weights) if threshold is None else threshold)
-    if weights is None:
-        if high.all() or not high.any():
-            return 0.0
-        return float(exg[high].mean() - exg[~high].mean())
-    count_high = int(weights[high].sum())
-    if count_high == 0 or count_high == int(weights.sum()):
+    count_high, count = int(weights[high].sum()), int(weights.sum())
+    if count_high == 0 or count_high == count:
         return 0.0
     weighted = exg * weights
-    mean_high = weighted[high].sum() / count_high
-    mean_low = weighted[~high].sum() / (int(weights.sum()) - count_high)
-    return float(mean_high - mean_low)
+    return float(weighted[high].sum() / count_high - weighted[~high].sum() / (count - count_high))
 
 
 def choose_separation(
@@ -121,12 +116,8 @@ def keep_soil(
     unlevelled ground."""
     if separation.by_geometry or len(exg) == 0:
         return separation
-    soil = exg <= threshold
-    if weights is None:
-        soil_pixels, pixels = int(np.count_nonzero(soil)), len(exg)
-    else:
-        soil_pixels, pixels = int(weights[soil].sum()), int(weights.sum())
-    if soil_pixels < MIN_SOIL_SHARE * pixels:
+    weights = np.ones(len(exg), dtype=np.int64) if weights is None else weights
+    if int(weights[exg <= threshold].sum()) < MIN_SOIL_SHARE * int(weights.sum()):
         return Separation("geometry", NO_SOIL_LEFT)
     return separation
 
@@ -430,7 +421,15 @@ def _openmp_threads(threads: int) -> None:
     ``OMP_NUM_THREADS`` once when it loads; its ``omp_set_num_threads`` sets the count for the
     calling thread's next queries. A pykdtree built against the system's OpenMP keeps that
     one's count (the results are the same on any count)."""
+    for library in _pykdtree_openmp():
+        library.omp_set_num_threads(threads)
+
+
+@cache
+def _pykdtree_openmp() -> tuple[ctypes.CDLL, ...]:
+    """The OpenMP libraries pykdtree's wheel brings (none when built against the system's),
+    found once per process."""
     import pykdtree
 
-    for library in (Path(pykdtree.__file__).parent.parent / "pykdtree.libs").glob("libgomp*"):
-        ctypes.CDLL(str(library)).omp_set_num_threads(threads)
+    folder = Path(pykdtree.__file__).parent.parent / "pykdtree.libs"
+    return tuple(ctypes.CDLL(str(library)) for library in sorted(folder.glob("libgomp*")))

@@ -99,7 +99,7 @@ class ForkedMap:
         self.close()
 
     def close(self) -> None:
-        """Stop the worker (after its item, or terminated) and the threads."""
+        """Stop the worker (after its item, or killed) and the threads."""
         if self._worker is not None:
             self._worker.stop()
             self._worker = None

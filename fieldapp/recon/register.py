@@ -103,7 +103,7 @@ def register_stations(
         doubtful = yield from ambiguity.ambiguous_pairs(
             overlaps,
             fits,
-            _usable_fits(nodes, fits, reference, settings),
+            _usable_fits(_edges(nodes, fits, reference, settings)[0], fits, nodes, settings),
             nodes,
             settings,
             runner.map,
@@ -157,7 +157,7 @@ def _first_solution(
     """The graph of every usable fit but those ``left_out`` solved once: (the usable fits'
     indices, the solution)."""
     all_edges, _ = _edges(nodes, fits, reference, settings)
-    usable = [k for k in _usable_fits(nodes, fits, reference, settings) if k not in left_out]
+    usable = [k for k in _usable_fits(all_edges, fits, nodes, settings) if k not in left_out]
     edges = [all_edges[k] for k in usable] + all_edges[len(fits) :]
     tolerance = posegraph.Tolerance(settings.edge_tolerance_m, settings.edge_tolerance_deg)
     graph = {MAP_NODE: np.eye(4)} | nodes
@@ -198,13 +198,13 @@ def _consensus_guesses(
 
 
 def _usable_fits(
-    nodes: dict[int, Matrix4],
+    all_edges: list[posegraph.Edge],
     fits: list[PairFit],
-    reference: int,
+    nodes: dict[int, Matrix4],
     settings: RegistrationSettings,
 ) -> list[int]:
-    """Indices of the fits that may enter the graph (:func:`_usable`)."""
-    all_edges, _ = _edges(nodes, fits, reference, settings)
+    """Indices of the fits that may enter the graph (:func:`_usable`), ``all_edges`` those of
+    :func:`_edges`."""
     return [k for k, f in enumerate(fits) if _usable(f, all_edges[k], nodes, settings)]
 
 
@@ -264,7 +264,7 @@ def _solve_plot(
     solve again, until every free station passes. ``first``: the solution of the graph of
     every usable fit (but those ``left_out``), when already solved."""
     all_edges, priors = _edges(nodes, fits, reference, settings)
-    usable = [k for k in _usable_fits(nodes, fits, reference, settings) if k not in left_out]
+    usable = [k for k in _usable_fits(all_edges, fits, nodes, settings) if k not in left_out]
     tolerance = posegraph.Tolerance(settings.edge_tolerance_m, settings.edge_tolerance_deg)
     graph = {MAP_NODE: np.eye(4)} | nodes
     fixed: dict[int, str] = {}  # stations kept at their coarse pose, with the reason
