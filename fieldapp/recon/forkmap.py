@@ -51,6 +51,8 @@ POLL_S = 0.05
 """How often the wait for the worker's last item checks that the worker is alive."""
 STOP_WAIT_S = 5.0
 """How long closing waits for the worker to finish its item before killing it."""
+EXIT_POLL_S = 0.001
+"""How often closing checks that a worker whose pipe has closed has been reaped."""
 
 
 def can_fork_a_worker() -> bool:
@@ -232,15 +234,22 @@ class _Worker:
             raise payload
         return payload
 
-    def stop(self) -> None:
-        """Ask the worker to end after its item; kill it if it has not within
-        :data:`STOP_WAIT_S` (it holds nothing to clean up); reap it either way."""
+    def stop(self, wait_s: float = STOP_WAIT_S) -> None:
+        """Ask the worker to end after its item; kill it if it has not within ``wait_s`` (it
+        holds nothing to clean up); reap it either way. The wait ends when the worker's end of
+        the pipe closes (it has exited), not at the next tick of a clock: a stage's last
+        milliseconds are everybody's wall time."""
         with contextlib.suppress(OSError, EOFError):
             self._connection.send(None)
+        deadline = time.monotonic() + wait_s
+        try:  # an answer no longer wanted may come first; EOFError once the worker has exited
+            while self._connection.poll(max(deadline - time.monotonic(), 0.0)):
+                self._connection.recv()
+        except (OSError, EOFError):
+            pass
         self._connection.close()
-        deadline = time.monotonic() + STOP_WAIT_S
-        while self._is_alive() and time.monotonic() < deadline:
-            time.sleep(POLL_S)
+        while self._is_alive() and time.monotonic() < deadline:  # closed its pipe: exiting
+            time.sleep(EXIT_POLL_S)
         if self._is_alive():
             with contextlib.suppress(ProcessLookupError):
                 os.kill(self._pid, signal.SIGKILL)

@@ -106,3 +106,40 @@ def test_an_answer_no_longer_wanted_is_dropped() -> None:
         assert worker.receive(60.0)[0] == 16
     finally:
         worker.stop()
+
+
+def _sleep(seconds: float) -> float:
+    import time
+
+    time.sleep(seconds)
+    return seconds
+
+
+def test_closing_waits_for_the_worker_to_exit_not_for_a_clock_tick(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An idle worker is reaped as soon as it has exited: closing wakes on its pipe's end, and
+    sleeps (if at all) in steps far shorter than the old 50 ms tick it used to wait out twice
+    per reconstruction."""
+    import fieldapp.recon.forkmap as forkmap
+
+    slept: list[float] = []
+    real_sleep = forkmap.time.sleep
+    monkeypatch.setattr(forkmap.time, "sleep", lambda s: (slept.append(s), real_sleep(s)))
+    worker = _Worker.start()
+    assert worker is not None
+    worker.send(_square_and_pid, 2)
+    assert worker.receive(60.0)[0] == 4
+    worker.stop()
+    assert not worker._is_alive()
+    assert all(s <= forkmap.EXIT_POLL_S for s in slept)
+
+
+def test_a_worker_that_will_not_stop_is_killed_and_reaped() -> None:
+    worker = _Worker.start()
+    assert worker is not None
+    worker.send(_sleep, 120.0)  # busy far beyond the wait
+    worker.stop(wait_s=0.2)
+    assert not worker._is_alive()
+    with pytest.raises(ChildProcessError):  # reaped: no zombie left behind
+        os.waitpid(worker.pid, os.WNOHANG)
