@@ -17,8 +17,8 @@ when it already holds them), then:
 Prints wall and CPU time of both (the batch's CPU includes its worker processes), the
 workers' peak memory, the load average around each run (the machine may be shared: rerun when
 it is quiet), and how the plants.csv files agree. The one-by-one run uses two threads, the
-batch one per task: with two, ICP's parallel sums vary in their last bits from run to run, so
-now and then a point lands in another voxel (a point count off by one).
+batch one per task; both give the same files (every pair and plant runs on one OpenMP thread
+wherever it runs, ``fieldapp/recon/forkmap.py``).
 """
 
 from __future__ import annotations
