@@ -78,7 +78,10 @@ def _grid_observation(T_camera_board: np.ndarray, board: Board) -> Observation:
 
 
 STANDING = make_transform(rotation_x(-10.0), np.array([-0.15, -0.1, 1.2]))
-LYING = make_transform(rotation_x(-100.0), np.array([-0.15, 0.6, 1.5]))
+LYING = make_transform(rotation_x(-95.0), np.array([-0.15, 0.6, 1.5]))
+# 5 degrees from flat: the two corner orders tilt the camera's vertical 0 and 10 degrees, well
+# inside SYMMETRIC_MARGIN_DEG (20). The board used to lie 10 degrees from flat, a difference of
+# exactly the margin, which rounding decided (20.000000000000046 on one machine: "told").
 
 
 @pytest.mark.parametrize("pose", [STANDING, LYING], ids=["standing", "lying"])
@@ -97,7 +100,8 @@ def test_order_chosen_by_the_tables_step(pose, flip):
 
 def test_without_prior_an_upright_camera_tells_a_standing_board_only():
     T_a_b = make_transform(rotation_y(30.0), np.array([1.5, 0.0, 0.2]))
-    for pose, told in ((STANDING, True), (LYING, False)):
+    sloping = make_transform(rotation_x(-115.0), np.array([-0.15, 0.6, 1.5]))  # 25 from flat: 50
+    for pose, told in ((STANDING, True), (sloping, True), (LYING, False)):
         a = _grid_observation(pose, STATION_BOARD)
         b = _grid_observation(invert(T_a_b) @ pose, STATION_BOARD)
         aligned = align_by_rig(a, b.reversed(), None)
