@@ -6,7 +6,7 @@
 #   packaging/build.sh [PYTHON]      PYTHON: the venv's python with PyInstaller (.venv/bin/python)
 #
 # FIELDAPP_BUNDLE_TRIM=0 keeps open3d's plotly viewer stack (see fieldapp.spec).
-# FIELDAPP_BUNDLE_SMOKE=0 skips the smoke test of the built bundle.
+# FIELDAPP_BUNDLE_SMOKE=0 skips the checks of the built bundle (smoke test, check_bundle.sh).
 set -eu
 
 PYTHON=${1:-.venv/bin/python}
@@ -49,6 +49,11 @@ if [ "${FIELDAPP_BUNDLE_SMOKE:-1}" != 0 ]; then
     env -u DISPLAY -u WAYLAND_DISPLAY QT_QPA_PLATFORM=offscreen "$APP/fieldapp" --smoke-test ||
         fail "the built bundle failed its smoke test (see above)"
     echo "bundle: smoke test passed in $(( $(now) - smoke_started )) s (start-up included)"
+    echo "bundle: the command line of the built bundle: simulate, reconstruct, evaluate..."
+    check_started=$(now)
+    sh packaging/check_bundle.sh "$APP" "$PYTHON" ||
+        fail "the built bundle failed its command-line check (see above)"
+    echo "bundle: command-line check passed in $(( $(now) - check_started )) s"
 fi
 
 echo "bundle: packing $(basename "$ARCHIVE")..."

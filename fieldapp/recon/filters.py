@@ -7,6 +7,7 @@ searches (SOR, ROR) only see the few plant points left.
 from __future__ import annotations
 
 import ctypes
+import logging
 import os
 from dataclasses import dataclass
 from functools import cache
@@ -20,6 +21,8 @@ from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.geometry_split import LOW_M as LOCAL_SOIL_M
 from fieldapp.recon.geometry_split import plants_above_local_ground
 from fieldapp.recon.settings import FilterSettings
+
+log = logging.getLogger(__name__)
 
 OTSU_BINS = 256
 SUM_LEVELS = 3 * 255 + 1
@@ -421,8 +424,13 @@ def _openmp_threads(threads: int) -> None:
     ``OMP_NUM_THREADS`` once when it loads; its ``omp_set_num_threads`` sets the count for the
     calling thread's next queries. A pykdtree built against the system's OpenMP keeps that
     one's count (the results are the same on any count)."""
-    for library in _pykdtree_openmp():
+    libraries = _pykdtree_openmp()
+    for library in libraries:
         library.omp_set_num_threads(threads)
+    if log.isEnabledFor(logging.DEBUG):  # `fieldapp -v`: the count read back, so it took effect
+        for library in libraries:
+            name = Path(library._name).name
+            log.debug("pykdtree's OpenMP: %s on %d threads", name, library.omp_get_max_threads())
 
 
 @cache
@@ -432,4 +440,7 @@ def _pykdtree_openmp() -> tuple[ctypes.CDLL, ...]:
     import pykdtree
 
     folder = Path(pykdtree.__file__).parent.parent / "pykdtree.libs"
-    return tuple(ctypes.CDLL(str(library)) for library in sorted(folder.glob("libgomp*")))
+    libraries = tuple(ctypes.CDLL(str(library)) for library in sorted(folder.glob("libgomp*")))
+    if not libraries:  # said: a bundle that lost pykdtree's libgomp would look just like this
+        log.debug("pykdtree's OpenMP: no libgomp in %s, OMP_NUM_THREADS sets its threads", folder)
+    return libraries

@@ -188,3 +188,31 @@ def test_the_neighbour_search_runs_on_the_threads_asked_with_the_same_masks() ->
     np.testing.assert_array_equal(masks[0][0], masks[1][0])
     np.testing.assert_array_equal(masks[0][1], masks[1][1])
     assert 0 < masks[0][1].sum() < len(points)
+
+
+def test_the_openmp_lookup_says_what_it_found(
+    caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Under ``fieldapp -v`` each libgomp of pykdtree's is named with its thread count read
+    back, and a pykdtree without one names the folder looked in: the built bundle's check
+    (packaging/check_bundle.sh) reads these lines to catch a silent fallback."""
+    import pykdtree
+
+    def messages(threads: int) -> list[str]:
+        caplog.clear()
+        filters._pykdtree_openmp.cache_clear()  # looked up again, so the lookup logs too
+        try:
+            filters._openmp_threads(threads)
+        finally:
+            filters._pykdtree_openmp.cache_clear()
+        return [record.getMessage() for record in caplog.records]
+
+    caplog.set_level("DEBUG", logger="fieldapp.recon.filters")
+    folder = Path(pykdtree.__file__).parent.parent / "pykdtree.libs"
+    own = sorted(folder.glob("libgomp*"))
+    none = "pykdtree's OpenMP: no libgomp in {}, OMP_NUM_THREADS sets its threads"
+    for threads in (1, 2):
+        expected = [f"pykdtree's OpenMP: {library.name} on {threads} threads" for library in own]
+        assert messages(threads) == (expected or [none.format(folder)])
+    monkeypatch.setattr(pykdtree, "__file__", "/nowhere/pykdtree/__init__.py")
+    assert messages(2) == [none.format(Path("/nowhere/pykdtree.libs"))]
