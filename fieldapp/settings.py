@@ -34,6 +34,17 @@ log = logging.getLogger(__name__)
 
 ENV_PREFIX = "FIELDAPP_"
 SETTINGS_FILE_ENV = "FIELDAPP_SETTINGS"
+NOT_SETTINGS = frozenset(
+    {
+        SETTINGS_FILE_ENV,
+        "FIELDAPP_STARTUP_PROBE",  # ui/app.py: the start-up benchmark's probe file
+        "FIELDAPP_SMOKE_TEST",  # packaging/entry.py: the bundle's smoke test
+        "FIELDAPP_BUNDLE_SMOKE",  # packaging/build.sh: skip the built bundle's checks
+        "FIELDAPP_BUNDLE_TRIM",  # packaging/build.sh and fieldapp.spec: the trimmed bundle
+    }
+)
+"""``FIELDAPP_*`` variables that fieldapp's own tools read and that are not settings: never
+taken for one (each used to be reported as an unknown setting, in the GUI as a notice)."""
 
 
 class Section(BaseModel):
@@ -131,7 +142,7 @@ def environment_overrides(environ: Mapping[str, str]) -> dict[str, Any]:
     """Nested values from ``FIELDAPP_SECTION__FIELD`` variables (names lower-cased)."""
     values: dict[str, Any] = {}
     for name, value in environ.items():
-        if not name.startswith(ENV_PREFIX) or name == SETTINGS_FILE_ENV:
+        if not name.startswith(ENV_PREFIX) or name in NOT_SETTINGS:
             continue
         keys = name[len(ENV_PREFIX) :].lower().split("__")
         node = values

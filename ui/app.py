@@ -18,6 +18,7 @@ from ui.devices.hub import DeviceHub, RigOpener, default_opener
 from ui.main_window import MainWindow
 from ui.notifications import Level, Notice, Notifier
 from ui.pages import PageSpec, default_pages
+from ui.quit_signals import QuitSignals
 from ui.state import UiState
 
 log = logging.getLogger(__name__)
@@ -100,7 +101,11 @@ def run_gui(settings_path: Path | None = None, connect: bool = True) -> int:
         QtCore.QTimer.singleShot(0, lambda: _window_shown(Path(probe), window))
     elif connect:  # once the window is up: opening the rig loads the simulators (Open3D)
         QtCore.QTimer.singleShot(0, lambda: window.context.hub.connect_devices(settings.devices))
-    return int(app.exec())
+    quitting = QuitSignals(window.close_without_asking)  # kill, Ctrl-C, logout: devices stopped
+    try:
+        return int(app.exec())
+    finally:
+        quitting.restore()
 
 
 def _window_shown(path: Path, window: QtWidgets.QWidget) -> None:

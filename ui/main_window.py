@@ -41,6 +41,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.context = context
         self.setWindowTitle("fieldapp: maize seedling phenotyping")
         self.pages: dict[str, QtWidgets.QWidget] = {}
+        self._asking_on_close = True  # False once the process is being ended (a signal)
         self._build(pages)
         self._wire()
         self._restore()
@@ -287,10 +288,18 @@ class MainWindow(QtWidgets.QMainWindow):
         state.set_value("window/page", self.current_page_key())
         state.sync()
 
+    def close_without_asking(self, reason: str) -> None:
+        """Close as the user would, but ask nothing (the process is being ended: ``reason``,
+        e.g. "SIGTERM"): a running mission or move is stopped, the devices shut down, the
+        layout saved."""
+        log.warning("%s: closing the window, stopping the devices", reason)
+        self._asking_on_close = False
+        self.close()
+
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
         for page in self.pages.values():
             confirm = getattr(page, "confirm_close", None)
-            if callable(confirm) and not confirm(self):
+            if self._asking_on_close and callable(confirm) and not confirm(self):
                 event.ignore()
                 return
         self._save_state()

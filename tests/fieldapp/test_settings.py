@@ -68,6 +68,18 @@ def test_environment_parsing():
     assert values == {"paths": {"results_db": "/data/r.sqlite"}}
 
 
+def test_the_tools_own_variables_are_not_taken_for_settings(tmp_path, caplog):
+    """The start-up probe, the smoke test and the bundle's build switches start with
+    FIELDAPP_ too; each was reported as an unknown setting (in the GUI, a notice)."""
+    own = {f"FIELDAPP_{name}": "1" for name in ("STARTUP_PROBE", "SMOKE_TEST", "BUNDLE_SMOKE")}
+    with caplog.at_level(logging.WARNING):
+        settings = load_settings(tmp_path / "none.yaml", {**own, "FIELDAPP_BUNDLE_TRIM": "0"})
+    assert settings == Settings() and caplog.text == ""
+    with caplog.at_level(logging.WARNING):  # a typo is still said
+        load_settings(tmp_path / "none.yaml", {"FIELDAPP_STARTUP_PROBES": "x"})
+    assert "startup_probes" in caplog.text
+
+
 def test_save_and_load_round_trip(tmp_path):
     settings = Settings()
     settings.devices.base_endpoint = "tcp://10.0.0.2:5555"

@@ -23,6 +23,12 @@ def entry() -> ModuleType:
     return module
 
 
+def test_the_smoke_test_switch_is_not_taken_for_a_setting(entry: ModuleType) -> None:
+    from fieldapp.settings import NOT_SETTINGS
+
+    assert entry.SMOKE_ENV in NOT_SETTINGS
+
+
 def test_no_arguments_open_the_gui(entry: ModuleType) -> None:
     assert entry.cli_arguments([]) == ["gui"]
     assert entry.cli_arguments(["simulate", "--out", "x"]) == ["simulate", "--out", "x"]
