@@ -14,6 +14,7 @@ import datetime as dt
 import hashlib
 import logging
 import subprocess
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
@@ -192,15 +193,32 @@ def _file_sha256(path: Path) -> str | None:
 @lru_cache(maxsize=1)
 def software() -> dict[str, Any]:
     """``{"name": "fieldapp", "version": ..., "commit": ..., "modified": ...}``; the commit
-    (and whether the checkout has uncommitted changes) only when running from a git checkout
-    with git installed, else ``None``."""
+    (and whether the checkout had uncommitted changes) from the git checkout it runs from (with
+    git installed) or, in the bundle, from its ``BUILD-INFO``; else ``None``."""
     root = Path(__file__).resolve().parents[1]
     commit, modified = None, None
-    if (root / ".git").exists():
+    if getattr(sys, "frozen", False):  # the bundle: its build wrote the commit beside it
+        commit, modified = bundle_commit(Path(sys.executable).parent / "BUILD-INFO")
+    elif (root / ".git").exists():
         commit = _git(root, "rev-parse", "--short=12", "HEAD")
         if commit is not None:
             modified = _git(root, "status", "--porcelain", "--untracked-files=no") not in ("", None)
     return {"name": "fieldapp", "version": __version__, "commit": commit, "modified": modified}
+
+
+def bundle_commit(build_info: Path) -> tuple[str | None, bool | None]:
+    """(commit, modified) from a bundle's ``BUILD-INFO`` (``packaging/build.sh`` writes a line
+    ``commit <hash>``, then `` modified`` when the tree had uncommitted changes); ``(None,
+    None)`` when the file or the line is missing or says ``unknown``."""
+    try:
+        lines = build_info.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return None, None
+    for line in lines:
+        words = line.split()
+        if len(words) >= 2 and words[0] == "commit" and words[1] != "unknown":
+            return words[1], "modified" in words[2:]
+    return None, None
 
 
 def _git(root: Path, *args: str) -> str | None:

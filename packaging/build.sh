@@ -38,7 +38,9 @@ cp -R packaging/icons packaging/udev "$APP/"
 echo "$VERSION" > "$APP/VERSION"
 {
     echo "fieldapp $VERSION, built $(date -u +%Y-%m-%dT%H:%M:%SZ) on $(uname -sm)"
-    echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
+    # read back by fieldapp/provenance.py: each result's provenance names the bundle's commit
+    echo "commit $(git rev-parse --short=12 HEAD 2>/dev/null || echo unknown)$(
+        git status --porcelain --untracked-files=no 2>/dev/null | grep -q . && echo ' modified')"
     "$PYTHON" -c 'from importlib.util import find_spec as f; print("camera backends: sim, replay" + "".join(", " + b for m, b in (("pylibfreenect2", "kinect2"), ("pyrealsense2", "realsense")) if f(m)))'
 } > "$APP/BUILD-INFO"
 chmod 755 "$APP/install.sh" "$APP/fieldapp"

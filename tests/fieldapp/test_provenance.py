@@ -9,6 +9,7 @@ import hashlib
 import json
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -171,6 +172,31 @@ def test_no_git_no_commit_and_no_failure(monkeypatch):
     finally:
         provenance.software.cache_clear()
     assert found == {"name": "fieldapp", "version": __version__, "commit": None, "modified": None}
+
+
+@pytest.mark.parametrize(
+    ("line", "commit", "modified"),
+    [
+        ("commit 0123456789ab", "0123456789ab", False),
+        ("commit 0123456789ab modified", "0123456789ab", True),
+        ("commit unknown", None, None),
+    ],
+)
+def test_the_bundle_names_the_commit_it_was_built_from(
+    monkeypatch, tmp_path, line, commit, modified
+):
+    """A bundle has no git checkout beside it; packaging/build.sh writes the commit into
+    BUILD-INFO beside the executable, and each result's provenance names it."""
+    (tmp_path / "BUILD-INFO").write_text(f"fieldapp 0.1.0, built today on Linux x86_64\n{line}\n")
+    monkeypatch.setattr(sys, "frozen", True, raising=False)
+    monkeypatch.setattr(sys, "executable", str(tmp_path / "fieldapp"))
+    provenance.software.cache_clear()
+    try:
+        found = provenance.software()
+    finally:
+        provenance.software.cache_clear()
+    assert (found["commit"], found["modified"]) == (commit, modified)
+    assert provenance.bundle_commit(tmp_path / "absent") == (None, None)
 
 
 def test_reconstruct_refuses_to_overwrite_results(small_session, tmp_path, capsys):
