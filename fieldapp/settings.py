@@ -41,6 +41,9 @@ NOT_SETTINGS = frozenset(
         "FIELDAPP_SMOKE_TEST",  # packaging/entry.py: the bundle's smoke test
         "FIELDAPP_BUNDLE_SMOKE",  # packaging/build.sh: skip the built bundle's checks
         "FIELDAPP_BUNDLE_TRIM",  # packaging/build.sh and fieldapp.spec: the trimmed bundle
+        "FIELDAPP_SHARED_DATA",  # the tests: where ../shared/data is
+        "FIELDAPP_FUZZ_SEED",  # the tests: the file fuzzer's seed
+        "FIELDAPP_FUZZ_CASES",  # the tests: the file fuzzer's case count
     }
 )
 """``FIELDAPP_*`` variables that fieldapp's own tools read and that are not settings: never
