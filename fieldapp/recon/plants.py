@@ -58,7 +58,6 @@ def assign_by_settings(
         s.ambiguity_margin_m,
         s.inward_penalty,
         s.bend_penalty_m,
-        s.bend_dead_band_deg,
     )
 
 

@@ -119,12 +119,9 @@ class StemSettings(_Section):
     seed_height_m: float = Field(default=0.15, gt=0.0)
     inward_penalty: float = Field(default=3.0, ge=0.0)
     """Extra cost per metre a path runs back towards the stem (plants grow outwards)."""
-    bend_penalty_m: float = Field(default=0.7, ge=0.0)
+    bend_penalty_m: float = Field(default=1.0, ge=0.0)
     """Extra cost of a path passing from one surface onto another (a leaf onto the neighbour's
-    leaf it touches): this per 90 degrees of turn between the surfaces' normals beyond
-    ``bend_dead_band_deg`` on each edge of the voxel graph."""
-    bend_dead_band_deg: float = Field(default=8.0, ge=0.0, lt=90.0)
-    """The turn per edge (1 cm) that costs nothing: a leaf's own curvature."""
+    leaf it touches): up to this for a right angle between the surfaces' normals."""
     reach_m: float = Field(default=1.0, gt=0.0)
     """How far (plan view) from its stem a plant's leaves may reach."""
     ambiguity_margin_m: float = Field(default=0.15, ge=0.0)
