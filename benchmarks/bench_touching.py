@@ -47,13 +47,31 @@ class _Stop(Exception):
     pass
 
 
+def _keeper(target: Path) -> Any:
+    """A stand-in for ``stages.find_plants`` that pickles its inputs to ``target`` and stops."""
+
+    def keep(placed: Any, settings: Any, ground_radius_m: float, grid: Any) -> Any:
+        inputs = {
+            "points": placed.cloud.points,
+            "colors": placed.cloud.colors,
+            "soil_m": placed.soil_m,
+            "ground_radius_m": ground_radius_m,
+        }
+        target.write_bytes(pickle.dumps(inputs))
+        raise _Stop
+
+    return keep
+
+
 def prepare(folder: Path, touching: list[int], seedling: list[int]) -> None:
     from fieldapp.io.session import load_session
     from fieldapp.recon import stages
     from fieldapp.recon.pipeline import run_reconstruction
     from fieldapp.recon.settings import ReconstructionSettings
 
-    runs = [(f"t{s}", s, "touching") for s in touching] + [(f"s{s}", s, "seedling") for s in seedling]
+    runs = [(f"t{s}", s, "touching") for s in touching] + [
+        (f"s{s}", s, "seedling") for s in seedling
+    ]
     for name, seed, stage in runs:
         session = folder / name
         if not (session / "truth.json").exists():
@@ -63,18 +81,7 @@ def prepare(folder: Path, touching: list[int], seedling: list[int]) -> None:
         if target.exists():
             continue
         original = stages.find_plants
-
-        def keep(placed: Any, settings: Any, ground_radius_m: float, grid: Any) -> Any:
-            inputs = {
-                "points": placed.cloud.points,
-                "colors": placed.cloud.colors,
-                "soil_m": placed.soil_m,
-                "ground_radius_m": ground_radius_m,
-            }
-            target.write_bytes(pickle.dumps(inputs))
-            raise _Stop
-
-        stages.find_plants = keep  # type: ignore[assignment]
+        stages.find_plants = _keeper(target)  # type: ignore[assignment]
         try:
             run_reconstruction(load_session(session), ReconstructionSettings(threads=1))
         except _Stop:
@@ -100,9 +107,8 @@ def _settings(overrides: list[str]) -> Any:
 
 def evaluate(inputs: dict[str, Any], truth_path: Path, settings: Any) -> dict[str, Any]:
     """The plants step on one input, matched to the truth."""
-    from fieldapp.evaluate.references import load_truth
     from fieldapp.evaluate.metrics import agreement
-    from fieldapp.evaluate.references import match_positions
+    from fieldapp.evaluate.references import load_truth, match_positions
     from fieldapp.recon.cloud import Cloud
     from fieldapp.recon.plants import search_plants
 
@@ -122,7 +128,9 @@ def evaluate(inputs: dict[str, Any], truth_path: Path, settings: Any) -> dict[st
     ]
     height = agreement([r[2] for r in rows], [r[4].height_cm for r in rows])
     width = agreement([r[3] for r in rows], [r[4].width_cm for r in rows])
-    errors = sorted(((r[3] - r[4].width_cm, r[0], r[1].ambiguous_share) for r in rows), key=lambda e: -abs(e[0]))
+    errors = sorted(
+        ((r[3] - r[4].width_cm, r[0], r[1].ambiguous_share) for r in rows), key=lambda e: -abs(e[0])
+    )
     flag = settings.stems.flag_ambiguous_share
     return {
         "found": len(rows),
@@ -149,29 +157,45 @@ def run(folder: Path, only: list[str], perturb: int, overrides: list[str], every
     settings = _settings(overrides)
     names = sorted((p.stem for p in folder.glob("*.pkl")), key=lambda n: (n[0] == "s", int(n[1:])))
     names = [n for n in names if not only or n in only]
-    print("session found phant  h_rmse h_mape  w_rmse w_mape flag  worst            cpu_s  "
-          "w_rmse perturbed (min-max)")
+    print(
+        "session found phant  h_rmse h_mape  w_rmse w_mape flag  worst            cpu_s  "
+        "w_rmse perturbed (min-max of all inputs)"
+    )
     for name in names:
         inputs = pickle.loads((folder / f"{name}.pkl").read_bytes())
         truth = folder / name / "truth.json"
         f = evaluate(inputs, truth, settings)
-        spread = [evaluate(_perturbed(inputs, s), truth, settings)["width_rmse"] for s in range(1, perturb + 1)]
+        spread = [
+            evaluate(_perturbed(inputs, s), truth, settings)["width_rmse"]
+            for s in range(1, perturb + 1)
+        ]
         worst = f"{f['errors'][0][1]} {f['errors'][0][0]:+.1f}" if f["errors"] else "-"
         extra = ""
         if spread:
-            extra = " ".join(f"{w:.2f}" for w in spread) + f" ({min(spread):.2f}-{max(spread):.2f})"
+            every_input = [f["width_rmse"], *spread]
+            extra = " ".join(f"{w:.2f}" for w in spread)
+            extra += f" ({min(every_input):.2f}-{max(every_input):.2f})"
         print(
-            f"{name:7s} {f['found']:2d}/{f['truth']:2d} {f['phantoms']:3d}  {f['height_rmse']:6.2f} "
-            f"{f['height_mape']:5.2f}%  {f['width_rmse']:6.2f} {f['width_mape']:5.2f}% {f['flagged']:3d}  "
-            f"{worst:15s} {f['cpu_s']:6.2f}  {extra}",
+            f"{name:7s} {f['found']:2d}/{f['truth']:2d} {f['phantoms']:3d}  "
+            f"{f['height_rmse']:6.2f} {f['height_mape']:5.2f}%  {f['width_rmse']:6.2f} "
+            f"{f['width_mape']:5.2f}% {f['flagged']:3d}  {worst:15s} {f['cpu_s']:6.2f}  {extra}",
             flush=True,
         )
         if every:
-            print("        " + ", ".join(f"{n} {e:+.1f}{'*' if a > 0.005 else ''}" for e, n, a in f["errors"] if abs(e) >= 1.0))
+            print(
+                "        "
+                + ", ".join(
+                    f"{n} {e:+.1f}{'*' if a > settings.stems.flag_ambiguous_share else ''}"
+                    for e, n, a in f["errors"]
+                    if abs(e) >= 1.0
+                )
+            )
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("prepare")
     p.add_argument("--dir", type=Path, required=True)
