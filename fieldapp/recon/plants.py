@@ -239,7 +239,7 @@ def _labels(
         _join_fragments(points_m, labels, settings.cluster_voxel_m, merges)
         if s.follow_leaves:
             feet = np.array([[*stem.xy_m, stem.ground_z_m] for stem in stems])
-            moved = follow_leaves(points_m, labels, ambiguous, feet, s.flag_ambiguous_share)
+            moved = follow_leaves(points_m, labels, ambiguous, feet)
             if moved:
                 merges.append(f"{moved} points given to the leaf that runs on through them")
     rest = np.flatnonzero(labels == UNREACHED)

@@ -8,7 +8,7 @@ that part sooner, and no local cost sees the contact: the normals agree across i
 is the leaf itself: a ribbon (a smooth midrib whose direction and curvature continue, a width
 that tapers) that runs on through the contact while the neighbour's leaf runs off at an angle.
 
-For each plant with ambiguous points (the plants step's flag) every leaf
+For each plant with ambiguous points every leaf
 (:func:`fieldapp.recon.organs.segment_organs`) is traced (:func:`trace_leaf`): its midrib, the
 centres of the 1 cm level sets of the geodesic distance from its base, and the width of each
 section, up to where the leaf meets another plant (its sections touch another plant's points or
@@ -253,18 +253,18 @@ def _trace_plants(
     labels: NDArray[np.intp],
     ambiguous: NDArray[np.bool_],
     feet_m: NDArray[np.float64],
-    flagged: NDArray[np.intp],
+    traced: NDArray[np.intp],
     tree: cKDTree,
 ) -> tuple[list[tuple[int, Ribbon]], NDArray[np.bool_]]:
-    """The ribbons of the ``flagged`` stems' leaves (with their stem) and (N,) the points their
+    """The ribbons of the ``traced`` stems' leaves (with their stem) and (N,) the points their
     leaves hold (:func:`trace_leaf`)."""
     ribbons: list[tuple[int, Ribbon]] = []
     held = np.zeros(len(points_m), dtype=bool)
     on_stems = (labels >= 0) & (labels < len(feet_m))
     touching = ambiguous.copy()
     order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], [flagged, flagged + 1])
-    for stem, start, stop in zip(flagged, *bounds, strict=True):
+    bounds = np.searchsorted(labels[order], [traced, traced + 1])
+    for stem, start, stop in zip(traced, *bounds, strict=True):
         members = order[start:stop]
         organs = segment_organs(points_m[members], feet_m[stem])
         touching[members] |= _touching(points_m, tree, members, on_stems & (labels != stem))
@@ -282,22 +282,20 @@ def follow_leaves(
     labels: NDArray[np.intp],
     ambiguous: NDArray[np.bool_],
     feet_m: NDArray[np.float64],
-    flag_share: float,
 ) -> int:
-    """The leaves of the plants with more than ``flag_share`` of their points ``ambiguous``
-    (N,) followed across their contacts: ``labels`` (N,) (the stem of each point, 0..S-1 for
-    the stems whose feet are ``feet_m`` (S, 3); other labels are left alone) are changed in
-    place where a leaf's ribbon runs on through a neighbour's points. Returns how many points
-    changed hands."""
+    """The leaves of every plant with a point ``ambiguous`` (N,) followed across their
+    contacts: ``labels`` (N,) (the stem of each point, 0..S-1 for the stems whose feet are
+    ``feet_m`` (S, 3); other labels are left alone) are changed in place where a leaf's ribbon
+    runs on through a neighbour's points. Returns how many points changed hands. Every such
+    plant, not only those over the report's flag: a plant whose share of ambiguous points
+    slipped under the flag lost its ribbon, and its leaf, on a 0.1 % change."""
     stems = len(feet_m)
     on_stems = (labels >= 0) & (labels < stems)
-    counts = np.bincount(labels[on_stems], minlength=stems)
-    shared = np.bincount(labels[on_stems & ambiguous], minlength=stems)
-    flagged = np.flatnonzero(shared > flag_share * np.maximum(counts, 1))
-    if len(flagged) == 0:
+    traced = np.flatnonzero(np.bincount(labels[on_stems & ambiguous], minlength=stems))
+    if len(traced) == 0:
         return 0
     tree = cKDTree(points_m)
-    ribbons, held = _trace_plants(points_m, labels, ambiguous, feet_m, flagged, tree)
+    ribbons, held = _trace_plants(points_m, labels, ambiguous, feet_m, traced, tree)
     claimer = np.full(len(points_m), -1, dtype=np.intp)
     nearest = np.full(len(points_m), np.inf)
     for stem, ribbon in ribbons:

@@ -129,8 +129,9 @@ class StemSettings(_Section):
     flag_ambiguous_share: float = Field(default=0.005, ge=0.0, le=1.0)
     """A plant with more of its points ambiguous than this is flagged in the report."""
     follow_leaves: bool = True
-    """The flagged plants' leaves traced as ribbons and followed across their contacts
-    (``fieldapp/recon/ribbons.py``): a leaf lying on a neighbour's keeps its outer part."""
+    """The leaves of every plant with an ambiguous point traced as ribbons and followed across
+    their contacts (``fieldapp/recon/ribbons.py``): a leaf lying on a neighbour's keeps its
+    outer part."""
 
 
 class PlantSettings(_Section):

@@ -1,0 +1,219 @@
+"""The plants step on touching canopies (issue 20): accuracy per seed and its spread.
+
+``prepare`` simulates sessions (``fieldapp simulate --stage touching`` and seedling plots),
+reconstructs each up to the plants step once and pickles that step's inputs (the plot cloud
+and soil in the map frame, the local ground radius). ``run`` then runs only the plants step
+(without a grid prior) and its traits on every pickled input, and on perturbed copies of it
+(a random share of the points dropped), and prints per session: plants found / phantoms,
+height and width RMSE and MAPE, flagged plants, the worst plant and its width error (matched
+to ``truth.json`` within 12 cm in the map frame), the plants step's CPU time, and the spread
+of width RMSE over the perturbations:
+
+    .venv/bin/python benchmarks/bench_touching.py prepare --dir /tmp/touching \
+        --touching 0-8 --seedling 0-2
+    .venv/bin/python benchmarks/bench_touching.py run --dir /tmp/touching [--perturb 3] \
+        [--set stems.follow_leaves=false] [--only t3,t8] [--plants]
+
+``--set`` overrides a plant setting (dotted path under ``plants``) for the run; ``--plants``
+prints every plant's width error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pickle
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+MATCH_RADIUS_M = 0.12
+DROP_SHARE = 0.03
+
+
+def _seeds(text: str) -> list[int]:
+    out: list[int] = []
+    for part in filter(None, text.split(",")):
+        low, _, high = part.partition("-")
+        out.extend(range(int(low), int(high or low) + 1))
+    return out
+
+
+class _Stop(Exception):
+    pass
+
+
+def _keeper(target: Path) -> Any:
+    """A stand-in for ``stages.find_plants`` that pickles its inputs to ``target`` and stops."""
+
+    def keep(placed: Any, settings: Any, ground_radius_m: float, grid: Any) -> Any:
+        inputs = {
+            "points": placed.cloud.points,
+            "colors": placed.cloud.colors,
+            "soil_m": placed.soil_m,
+            "ground_radius_m": ground_radius_m,
+        }
+        target.write_bytes(pickle.dumps(inputs))
+        raise _Stop
+
+    return keep
+
+
+def prepare(folder: Path, touching: list[int], seedling: list[int]) -> None:
+    from fieldapp.io.session import load_session
+    from fieldapp.recon import stages
+    from fieldapp.recon.pipeline import run_reconstruction
+    from fieldapp.recon.settings import ReconstructionSettings
+
+    runs = [(f"t{s}", s, "touching") for s in touching] + [
+        (f"s{s}", s, "seedling") for s in seedling
+    ]
+    for name, seed, stage in runs:
+        session = folder / name
+        if not (session / "truth.json").exists():
+            cmd = [sys.executable, "-m", "fieldapp", "simulate", "--out", str(session)]
+            subprocess.run([*cmd, "--seed", str(seed), "--stage", stage], check=True)
+        target = folder / f"{name}.pkl"
+        if target.exists():
+            continue
+        original = stages.find_plants
+        stages.find_plants = _keeper(target)  # type: ignore[assignment]
+        try:
+            run_reconstruction(load_session(session), ReconstructionSettings(threads=1))
+        except _Stop:
+            pass
+        finally:
+            stages.find_plants = original
+        print(name, "prepared", flush=True)
+
+
+def _settings(overrides: list[str]) -> Any:
+    from fieldapp.recon.settings import PlantSettings
+
+    data: dict[str, Any] = PlantSettings().model_dump()
+    for item in overrides:
+        path, _, value = item.partition("=")
+        *parents, leaf = path.split(".")
+        node = data
+        for key in parents:
+            node = node[key]
+        node[leaf] = json.loads(value)
+    return PlantSettings.model_validate(data)
+
+
+def evaluate(inputs: dict[str, Any], truth_path: Path, settings: Any) -> dict[str, Any]:
+    """The plants step on one input, matched to the truth."""
+    from fieldapp.evaluate.metrics import agreement
+    from fieldapp.evaluate.references import load_truth, match_positions
+    from fieldapp.recon.cloud import Cloud
+    from fieldapp.recon.plants import search_plants
+
+    cloud = Cloud(inputs["points"], inputs["colors"])
+    start = time.process_time()
+    search = search_plants(cloud, inputs["soil_m"], settings, inputs["ground_radius_m"], None)
+    cpu = time.process_time() - start
+    truth = load_truth(truth_path).plants
+    truth_xy = np.array([t.plot_xy_m for t in truth]).reshape(-1, 2)
+    plants = search.plants
+    plant_xy = np.array([[p.traits.x_m, p.traits.y_m] for p in plants]).reshape(-1, 2)
+    matches = match_positions(truth_xy, plant_xy, MATCH_RADIUS_M)
+    rows = [
+        (truth[m].name, p, 100 * p.traits.height_m, 100 * p.traits.width_m, truth[m])
+        for p, m in zip(plants, matches, strict=True)
+        if m is not None
+    ]
+    height = agreement([r[2] for r in rows], [r[4].height_cm for r in rows])
+    width = agreement([r[3] for r in rows], [r[4].width_cm for r in rows])
+    errors = sorted(
+        ((r[3] - r[4].width_cm, r[0], r[1].ambiguous_share) for r in rows), key=lambda e: -abs(e[0])
+    )
+    flag = settings.stems.flag_ambiguous_share
+    return {
+        "found": len(rows),
+        "truth": len(truth),
+        "phantoms": sum(m is None for m in matches),
+        "height_rmse": height.rmse,
+        "height_mape": height.mape_percent,
+        "width_rmse": width.rmse,
+        "width_mape": width.mape_percent,
+        "flagged": sum(p.ambiguous_share > flag for p in plants),
+        "errors": errors,
+        "cpu_s": cpu,
+        "merges": search.merges,
+    }
+
+
+def _perturbed(inputs: dict[str, Any], seed: int) -> dict[str, Any]:
+    rng = np.random.default_rng(seed)
+    keep = rng.random(len(inputs["points"])) >= DROP_SHARE
+    return {**inputs, "points": inputs["points"][keep], "colors": inputs["colors"][keep]}
+
+
+def run(folder: Path, only: list[str], perturb: int, overrides: list[str], every: bool) -> None:
+    settings = _settings(overrides)
+    names = sorted((p.stem for p in folder.glob("*.pkl")), key=lambda n: (n[0] == "s", int(n[1:])))
+    names = [n for n in names if not only or n in only]
+    print(
+        "session found phant  h_rmse h_mape  w_rmse w_mape flag  worst            cpu_s  "
+        "w_rmse perturbed (min-max of all inputs)"
+    )
+    for name in names:
+        inputs = pickle.loads((folder / f"{name}.pkl").read_bytes())
+        truth = folder / name / "truth.json"
+        f = evaluate(inputs, truth, settings)
+        spread = [
+            evaluate(_perturbed(inputs, s), truth, settings)["width_rmse"]
+            for s in range(1, perturb + 1)
+        ]
+        worst = f"{f['errors'][0][1]} {f['errors'][0][0]:+.1f}" if f["errors"] else "-"
+        extra = ""
+        if spread:
+            every_input = [f["width_rmse"], *spread]
+            extra = " ".join(f"{w:.2f}" for w in spread)
+            extra += f" ({min(every_input):.2f}-{max(every_input):.2f})"
+        print(
+            f"{name:7s} {f['found']:2d}/{f['truth']:2d} {f['phantoms']:3d}  "
+            f"{f['height_rmse']:6.2f} {f['height_mape']:5.2f}%  {f['width_rmse']:6.2f} "
+            f"{f['width_mape']:5.2f}% {f['flagged']:3d}  {worst:15s} {f['cpu_s']:6.2f}  {extra}",
+            flush=True,
+        )
+        if every:
+            print(
+                "        "
+                + ", ".join(
+                    f"{n} {e:+.1f}{'*' if a > settings.stems.flag_ambiguous_share else ''}"
+                    for e, n, a in f["errors"]
+                    if abs(e) >= 1.0
+                )
+            )
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("prepare")
+    p.add_argument("--dir", type=Path, required=True)
+    p.add_argument("--touching", type=_seeds, default=_seeds("0-8"))
+    p.add_argument("--seedling", type=_seeds, default=_seeds("0-2"))
+    r = sub.add_parser("run")
+    r.add_argument("--dir", type=Path, required=True)
+    r.add_argument("--only", type=lambda t: t.split(","), default=[])
+    r.add_argument("--perturb", type=int, default=0)
+    r.add_argument("--set", action="append", default=[])
+    r.add_argument("--plants", action="store_true")
+    args = parser.parse_args()
+    if args.command == "prepare":
+        prepare(args.dir, args.touching, args.seedling)
+    else:
+        run(args.dir, args.only, args.perturb, args.set, args.plants)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
