@@ -242,9 +242,10 @@ def _result(
     timer: StageTimer,
     warnings: list[str],
 ) -> Reconstruction:
-    """The :class:`Reconstruction` of ``plot``, its warnings logged."""
-    for warning in warnings:
-        log.warning("%s", warning)
+    """The :class:`Reconstruction` of ``plot``, its warnings logged (debug: every caller shows
+    them itself, and the CLI printed each twice)."""
+    for warning in warnings:  # each caller shows them (the CLI after the run, report.json)
+        log.debug("reconstruction warning: %s", warning)
     placed = plot.placed
     return Reconstruction(
         session_id=session_id,
