@@ -178,6 +178,7 @@ def test_the_neighbour_search_runs_on_the_threads_asked_with_the_same_masks() ->
     import pykdtree
 
     libraries = list((Path(pykdtree.__file__).parent.parent / "pykdtree.libs").glob("libgomp*"))
+    assert libraries, "the locked pykdtree wheel brings its own libgomp (requirements.lock)"
     rng = np.random.default_rng(4)
     points = np.concatenate([ground_patch(rng, 0.05, 4000), rng.uniform(-0.3, 0.3, (30, 3))])
     masks = []
