@@ -86,9 +86,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_with_bar(steps: Generator[Progress, None, Reconstruction], quiet: bool) -> Reconstruction:
-    """Run the reconstruction's ``steps`` to their end, with a progress bar unless ``quiet``
-    (then rich, 0.07 s of imports, is not loaded)."""
-    if quiet:
+    """Run the reconstruction's ``steps`` to their end, with a progress bar unless ``quiet`` or
+    the output is not a terminal (a pipe or a log file got a stray blank line from the bar);
+    without one rich, 0.07 s of imports, is not loaded."""
+    if quiet or not sys.stdout.isatty():
         while True:
             try:
                 next(steps)

@@ -144,14 +144,15 @@ def _damaged_copy(source: Path, target: Path) -> None:
 def test_cli_on_a_session_with_missing_captures_writes_results_and_warns(
     plot_session: Simulated, tmp_path: Path
 ) -> None:
-    """The command as a user runs it: each warning said once (the pipeline's log of them
-    printed every one a second time)."""
+    """The command as a user runs it, its output piped: each warning said once (the pipeline's
+    log of them printed every one a second time), no progress bar's leftovers."""
     damaged = tmp_path / "damaged"
     _damaged_copy(plot_session.folder, damaged)
     out = tmp_path / "out"
     command = [sys.executable, "-m", "fieldapp", "reconstruct", str(damaged), "--out", str(out)]
-    done = subprocess.run([*command, "--quiet"], capture_output=True, text=True, timeout=600)
+    done = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
+    assert "" not in done.stdout.splitlines(), done.stdout  # no progress bar into a pipe
     assert done.stderr.count("8 captures missing: s9 v0") == 1, done.stderr
     assert done.stderr.count("station 1 view 3 skipped") == 1, done.stderr
 
