@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 UNREACHED = -1
 SHEET_THICKNESS = 0.06
 SHEET_RADIUS_M = 0.035
-SHEET_MIN_ANGLE_DEG = 25.0
+SHEET_MIN_ANGLE_DEG = 35.0
 SHEET_TOLERANCE_M = 0.005
 
 _HALF_NEIGHBOURHOOD = np.array(
@@ -188,6 +188,7 @@ def crossing_sheets(
     n, at = normals[neighbour], graph.centres_m[neighbour]
     k, directions = len(candidates), _directions(200)
     close, apart = np.cos(np.radians(12.0)), np.cos(np.radians(min_angle_deg))
+    half = np.cos(np.radians(min_angle_deg / 2.0))
     # each thin voxel's normal binned to its nearest direction, once; a direction's votes are
     # the normals binned within 12 degrees of it
     bins = np.argmax(np.abs(normals[thin] @ directions.T), axis=1)
@@ -203,7 +204,7 @@ def crossing_sheets(
         best = np.argmax(votes, axis=1)
         d = directions[best]
         along = np.sum(n * d[owner], axis=1)
-        member = np.abs(along) > close
+        member = np.abs(along) > half  # a sheet's normals: within half the angle apart
         size = np.bincount(owner[member], minlength=k)
         signed = n[member] * np.sign(along[member])[:, None]
         normal = np.stack([np.bincount(owner[member], signed[:, a], k) for a in range(3)], 1)
@@ -216,12 +217,17 @@ def crossing_sheets(
         )
         sheets[:, p] = normal
         votes *= np.abs(d @ directions.T) < apart  # no further sheet within min_angle_deg
-    two = through.sum(axis=1) >= 2
+    held = through.sum(axis=1)
+    two = held >= 1
     voxel, normal_rows = [], []
     for p in range(3):
         keep = two & through[:, p]
         voxel.append(candidates[keep])
         normal_rows.append(sheets[keep, p])
+    if True:  # one sheet through it: the ring's own normal kept beside it
+        one = held == 1
+        voxel.append(candidates[one])
+        normal_rows.append(normals[candidates[one]])
     return Sheets(np.concatenate(voxel), np.concatenate(normal_rows))
 
 
