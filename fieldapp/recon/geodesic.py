@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import coo_matrix, csr_matrix, identity
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 UNREACHED = -1
@@ -159,6 +159,7 @@ def crossing_sheets(
     radius_m: float = SHEET_RADIUS_M,
     min_angle_deg: float = SHEET_MIN_ANGLE_DEG,
     tolerance_m: float = SHEET_TOLERANCE_M,
+    within: NDArray[np.bool_] | None = None,
 ) -> Sheets:
     """The voxels where two or three sheets cross (two leaves in an X, a leaf across a stem),
     each with its sheets' normals.
@@ -175,6 +176,8 @@ def crossing_sheets(
     normals = vectors[:, :, 0]
     total = values.sum(axis=1)
     thick = values[:, 0] > thickness * total
+    if within is not None:  # only there (the voxels two stems could reach)
+        thick &= within
     candidates, thin = np.flatnonzero(thick), np.flatnonzero(~thick & (total > 0.0))
     nothing = Sheets(np.empty(0, dtype=np.intp), np.empty((0, 3)))
     if len(candidates) == 0 or len(thin) == 0:
@@ -218,16 +221,12 @@ def crossing_sheets(
         sheets[:, p] = normal
         votes *= np.abs(d @ directions.T) < apart  # no further sheet within min_angle_deg
     held = through.sum(axis=1)
-    two = held >= 1
+    two = held >= 2
     voxel, normal_rows = [], []
     for p in range(3):
         keep = two & through[:, p]
         voxel.append(candidates[keep])
         normal_rows.append(sheets[keep, p])
-    if True:  # one sheet through it: the ring's own normal kept beside it
-        one = held == 1
-        voxel.append(candidates[one])
-        normal_rows.append(normals[candidates[one]])
     return Sheets(np.concatenate(voxel), np.concatenate(normal_rows))
 
 
@@ -283,8 +282,10 @@ def assign_to_stems(
     (:func:`bend_weighted`); with ``sheet_aware``, judged against the sheet the path is on
     where two sheets cross (:func:`sheet_graph`)."""
     voxels = len(graph.centres_m)
-    if bend_penalty_m > 0.0 and sheet_aware:
-        edges, state_voxel = sheet_graph(graph, bend_penalty_m, crossing_sheets(graph))
+    shared = _shared(graph, stems_xy_m, seed_radius_m) if sheet_aware else None
+    if bend_penalty_m > 0.0 and shared is not None and shared.any():
+        sheets = crossing_sheets(graph, within=shared)
+        edges, state_voxel = sheet_graph(graph, bend_penalty_m, sheets)
     else:
         if bend_penalty_m > 0.0:
             graph = bend_weighted(graph, bend_penalty_m)
@@ -327,6 +328,22 @@ def assign_to_stems(
     ambiguous = np.zeros(voxels, dtype=bool)
     ambiguous[reached_twice] = second[reached_twice] - best[reached_twice] < ambiguity_margin_m
     return Assignment(owner[graph.point_voxel], ambiguous[graph.point_voxel])
+
+
+def _shared(
+    graph: VoxelGraph, stems_xy_m: NDArray[np.float64], seed_radius_m: float
+) -> NDArray[np.bool_]:
+    """(V,) the voxels of the graph's connected parts that hold two stems' feet or more: only
+    there can two plants' paths meet (on a seedling plot, where no canopies touch, nowhere)."""
+    _, label = connected_components(graph.edges, directed=False)
+    tree = cKDTree(graph.centres_m[:, :2])
+    feet = tree.query_ball_point(np.asarray(stems_xy_m).reshape(-1, 2), seed_radius_m)
+    parts = [np.unique(label[np.asarray(f, dtype=np.intp)]) for f in feet]
+    stems_per_part = np.bincount(
+        np.concatenate([*parts, np.empty(0, dtype=np.intp)]).astype(np.intp),
+        minlength=int(label.max()) + 1,
+    )
+    return stems_per_part[label] >= 2  # type: ignore[no-any-return]
 
 
 def _subgraph(edges: csr_matrix, local: NDArray[np.intp], position: NDArray[np.intp]) -> csr_matrix:
