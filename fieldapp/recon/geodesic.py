@@ -30,6 +30,7 @@ SHEET_THICKNESS = 0.06
 SHEET_RADIUS_M = 0.035
 SHEET_MIN_ANGLE_DEG = 35.0
 SHEET_TOLERANCE_M = 0.005
+OFF_SHEET = bool(__import__('os').environ.get('OFF_SHEET'))
 
 _HALF_NEIGHBOURHOOD = np.array(
     [offset for offset in itertools.product((-1, 0, 1), repeat=3) if offset > (0, 0, 0)],
@@ -258,6 +259,16 @@ def sheet_graph(
     col = first[edges.col][edge] + k % across
     cosine = np.abs(np.sum(state_normal[row] * state_normal[col], axis=1))
     cost = edges.data[edge] + bend_penalty_m * (1.0 - np.minimum(cosine, 1.0))
+    if OFF_SHEET:
+        step = graph.centres_m[edges.col][edge] - graph.centres_m[edges.row][edge]
+        step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
+        # a step out of a crossing's sheet pays as a bend by its angle to the sheet's plane
+        out = np.zeros(len(row))
+        for end in (row, col):
+            on_sheet = split[state_voxel[end]]
+            sine = np.abs(np.sum(step[on_sheet] * state_normal[end[on_sheet]], axis=1))
+            out[on_sheet] = np.maximum(out[on_sheet], 1.0 - np.sqrt(1.0 - np.minimum(sine, 1.0) ** 2))
+        cost += bend_penalty_m * out
     states = len(state_voxel)
     return coo_matrix((cost, (row, col)), shape=(states, states)).tocsr(), state_voxel
 
