@@ -5,7 +5,8 @@ Synthetic plots of ``n x n`` maize-like plants 0.8 m apart (a stem and 5-8 archi
 soil sample of 2 cm spacing. Prints the CPU and wall time of ``search_plants`` per plot size and
 per plant; run by hand on a quiet machine:
 
-    .venv/bin/python benchmarks/bench_plants.py [--sizes 4,6,8,10,12] [--repeats 3] [--no-ribbons] [--sheets]
+    .venv/bin/python benchmarks/bench_plants.py [--sizes 4,6,8,10,12] [--repeats 3] \
+        [--no-ribbons] [--sheets]
 
 ``--no-ribbons``: without following the flagged plants' leaves across contacts
 (``plants.stems.follow_leaves``), to see what the ribbons cost; ``--sheets``: with the

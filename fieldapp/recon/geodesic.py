@@ -11,7 +11,9 @@ reaches within ``ambiguity_margin_m`` of the first is *ambiguous* (it could belo
 A path that passes from one surface onto another at an angle (onto a leaf that touches or
 crosses the one it runs on) pays for the bend (:func:`bend_weighted`): a leaf is followed as
 one smooth sheet from its base, where it leaves its stem nearly along it, while a neighbour's
-path that reaches it across a contact pays at the contact.
+path that reaches it across a contact pays at the contact. With ``sheet_aware``, where two
+sheets cross the bend is judged against the sheet a path is on rather than the voxels'
+normals blurred from both (:func:`crossing_sheets`, :func:`sheet_graph`).
 """
 
 from __future__ import annotations
@@ -30,7 +32,6 @@ SHEET_THICKNESS = 0.06
 SHEET_RADIUS_M = 0.035
 SHEET_MIN_ANGLE_DEG = 35.0
 SHEET_TOLERANCE_M = 0.005
-OFF_SHEET = bool(__import__('os').environ.get('OFF_SHEET'))
 
 _HALF_NEIGHBOURHOOD = np.array(
     [offset for offset in itertools.product((-1, 0, 1), repeat=3) if offset > (0, 0, 0)],
@@ -172,7 +173,9 @@ def crossing_sheets(
     whose normals are one sheet's each: the directions (one of 200 over the hemisphere) that
     most of their normals lie within 12 degrees of, up to three, each ``min_angle_deg`` or more
     from the others and held by 3 voxels or more, each sheet's normal the mean of those normals.
-    A thick voxel with fewer than two such sheets (a stem, a leaf's fold) is left as it is."""
+    each sheet's plane passing within ``tolerance_m`` of the voxel's centroid. A thick voxel
+    with fewer than two such sheets (a stem, a leaf's fold, a sheet's edge beside another) is
+    left as it is; ``within`` (V,) limits the search to some voxels."""
     values, vectors = _ring_spread(graph)
     normals = vectors[:, :, 0]
     total = values.sum(axis=1)
@@ -188,7 +191,9 @@ def crossing_sheets(
     if counts.sum() == 0:
         return nothing
     owner = np.repeat(np.arange(len(candidates)), counts)
-    neighbour = thin[np.fromiter(itertools.chain.from_iterable(near), dtype=np.intp, count=int(counts.sum()))]
+    neighbour = thin[
+        np.fromiter(itertools.chain.from_iterable(near), dtype=np.intp, count=int(counts.sum()))
+    ]
     n, at = normals[neighbour], graph.centres_m[neighbour]
     k, directions = len(candidates), _directions(200)
     close, apart = np.cos(np.radians(12.0)), np.cos(np.radians(min_angle_deg))
@@ -198,7 +203,9 @@ def crossing_sheets(
     bins = np.argmax(np.abs(normals[thin] @ directions.T), axis=1)
     binned = np.zeros(len(normals), dtype=np.intp)
     binned[thin] = bins
-    counted = np.bincount(owner * len(directions) + binned[neighbour], minlength=k * len(directions))
+    counted = np.bincount(
+        owner * len(directions) + binned[neighbour], minlength=k * len(directions)
+    )
     within = (np.abs(directions @ directions.T) > close).astype(np.float64)
     votes = counted.reshape(k, len(directions)).astype(np.float64) @ within
     centre = graph.centres_m[candidates]
@@ -211,10 +218,10 @@ def crossing_sheets(
         member = np.abs(along) > half  # a sheet's normals: within half the angle apart
         size = np.bincount(owner[member], minlength=k)
         signed = n[member] * np.sign(along[member])[:, None]
-        normal = np.stack([np.bincount(owner[member], signed[:, a], k) for a in range(3)], 1)
-        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
-        mean = np.stack([np.bincount(owner[member], at[member, a], k) for a in range(3)], 1)
-        mean /= np.maximum(size, 1)[:, None]
+        summed = np.stack([np.bincount(owner[member], signed[:, a], k) for a in range(3)], 1)
+        normal = summed / np.maximum(np.linalg.norm(summed, axis=1, keepdims=True), 1e-12)
+        total_at = np.stack([np.bincount(owner[member], at[member, a], k) for a in range(3)], 1)
+        mean = total_at / np.maximum(size, 1)[:, None]
         # a sheet of this voxel's: held by 3 thin voxels or more, its plane through the voxel
         through[:, p] = (size >= 3) & (
             np.abs(np.sum((centre - mean) * normal, axis=1)) <= tolerance_m
@@ -239,7 +246,10 @@ def sheet_graph(
     A step between two states costs its length plus ``bend_penalty_m`` times (1 - |cos|) of
     the angle between the states' normals, so a path that runs through a crossing on its own
     sheet pays nothing for the crossing, and one that turns onto the other sheet pays the bend
-    between the two. Returns the (S, S) edges and each state's voxel (S,), in voxel order."""
+    between the two. A step to or from a sheet's state also pays as a bend by its angle to
+    the sheet's plane (a step along the sheet pays next to nothing, one across to a sheet
+    stacked over it the full bend). Returns the (S, S) edges and each state's voxel (S,), in
+    voxel order."""
     normals = surface_normals(graph)
     voxels = len(normals)
     split = np.zeros(voxels, dtype=bool)
@@ -259,16 +269,16 @@ def sheet_graph(
     col = first[edges.col][edge] + k % across
     cosine = np.abs(np.sum(state_normal[row] * state_normal[col], axis=1))
     cost = edges.data[edge] + bend_penalty_m * (1.0 - np.minimum(cosine, 1.0))
-    if OFF_SHEET:
-        step = graph.centres_m[edges.col][edge] - graph.centres_m[edges.row][edge]
-        step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
-        # a step out of a crossing's sheet pays as a bend by its angle to the sheet's plane
-        out = np.zeros(len(row))
-        for end in (row, col):
-            on_sheet = split[state_voxel[end]]
-            sine = np.abs(np.sum(step[on_sheet] * state_normal[end[on_sheet]], axis=1))
-            out[on_sheet] = np.maximum(out[on_sheet], 1.0 - np.sqrt(1.0 - np.minimum(sine, 1.0) ** 2))
-        cost += bend_penalty_m * out
+    # a step out of a crossing's sheet pays as a bend by its angle to the sheet's plane: two
+    # sheets stacked 1-3 cm apart are no X, and stepping from one to the other leaves both
+    step = graph.centres_m[edges.col][edge] - graph.centres_m[edges.row][edge]
+    step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
+    out = np.zeros(len(row))
+    for end in (row, col):
+        on = split[state_voxel[end]]
+        sine = np.minimum(np.abs(np.sum(step[on] * state_normal[end[on]], axis=1)), 1.0)
+        out[on] = np.maximum(out[on], 1.0 - np.sqrt(1.0 - sine**2))
+    cost += bend_penalty_m * out
     states = len(state_voxel)
     return coo_matrix((cost, (row, col)), shape=(states, states)).tocsr(), state_voxel
 
@@ -317,7 +327,8 @@ def assign_to_stems(
         offset = np.concatenate([[0], np.cumsum(n)[:-1]])  # each local voxel's first state
         states = np.repeat(first[local] - offset, n) + np.arange(int(n.sum()))
         sources = np.repeat(offset[sources], n[sources]) + (
-            np.arange(int(n[sources].sum())) - np.repeat(np.cumsum(n[sources]) - n[sources], n[sources])
+            np.arange(int(n[sources].sum()))
+            - np.repeat(np.cumsum(n[sources]) - n[sources], n[sources])
         )
         position[states] = np.arange(len(states))
         sub = _outward(

@@ -36,7 +36,7 @@ def test_with_blurred_normals_the_neighbour_takes_the_leaf_at_the_x(seed: int) -
     """The reason for the sheets: with one normal per voxel, blurred from both sheets at the
     crossing, A's path pays as much going straight through the X as turning there, and B,
     whose path reaches the X along 10 cm of its own leaf, takes A's leaf around it."""
-    a, b, first, second = _search(False, seed)
+    _, b, _, second = _search(False, seed)
     assert second.traits.width_m > width_m(b) + 0.02
 
 
