@@ -5,10 +5,12 @@ Synthetic plots of ``n x n`` maize-like plants 0.8 m apart (a stem and 5-8 archi
 soil sample of 2 cm spacing. Prints the CPU and wall time of ``search_plants`` per plot size and
 per plant; run by hand on a quiet machine:
 
-    .venv/bin/python benchmarks/bench_plants.py [--sizes 4,6,8,10,12] [--repeats 3] [--no-ribbons]
+    .venv/bin/python benchmarks/bench_plants.py [--sizes 4,6,8,10,12] [--repeats 3] \
+        [--no-ribbons] [--sheets]
 
 ``--no-ribbons``: without following the flagged plants' leaves across contacts
-(``plants.stems.follow_leaves``), to see what the ribbons cost.
+(``plants.stems.follow_leaves``), to see what the ribbons cost; ``--sheets``: with the
+sheet-aware bend cost (``plants.stems.sheet_aware``), to see what it costs.
 """
 
 from __future__ import annotations
@@ -63,9 +65,12 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-ribbons", action="store_true", help="leaves not followed")
+    parser.add_argument("--sheets", action="store_true", help="the sheet-aware bend cost")
     args = parser.parse_args()
     settings = PlantSettings()
-    settings.stems = settings.stems.model_copy(update={"follow_leaves": not args.no_ribbons})
+    settings.stems = settings.stems.model_copy(
+        update={"follow_leaves": not args.no_ribbons, "sheet_aware": args.sheets}
+    )
     print("plants  points    found  cpu_s (min)  wall_s (min)  cpu ms per plant")
     for n in (int(s) for s in args.sizes.split(",")):
         cloud, soil = plot(n, args.seed)

@@ -11,7 +11,9 @@ reaches within ``ambiguity_margin_m`` of the first is *ambiguous* (it could belo
 A path that passes from one surface onto another at an angle (onto a leaf that touches or
 crosses the one it runs on) pays for the bend (:func:`bend_weighted`): a leaf is followed as
 one smooth sheet from its base, where it leaves its stem nearly along it, while a neighbour's
-path that reaches it across a contact pays at the contact.
+path that reaches it across a contact pays at the contact. With ``sheet_aware``, where two
+sheets cross the bend is judged against the sheet a path is on rather than the voxels'
+normals blurred from both (:func:`crossing_sheets`, :func:`sheet_graph`).
 """
 
 from __future__ import annotations
@@ -22,10 +24,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import coo_matrix, csr_matrix, identity
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 UNREACHED = -1
+SHEET_THICKNESS = 0.06
+SHEET_RADIUS_M = 0.035
+SHEET_MIN_ANGLE_DEG = 35.0
+SHEET_TOLERANCE_M = 0.005
 
 _HALF_NEIGHBOURHOOD = np.array(
     [offset for offset in itertools.product((-1, 0, 1), repeat=3) if offset > (0, 0, 0)],
@@ -96,6 +102,12 @@ def voxel_graph(
 def surface_normals(graph: VoxelGraph) -> NDArray[np.float64]:
     """(V, 3) unit normal of the surface at each voxel: the direction of least spread of its
     own and its graph neighbours' centroids (about 3 cm across at 1 cm voxels)."""
+    return _ring_spread(graph)[1][:, :, 0]
+
+
+def _ring_spread(graph: VoxelGraph) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Eigenvalues (V, 3), ascending, and eigenvectors (V, 3, 3) of the spread of each voxel's
+    own and its graph neighbours' centroids."""
     ring = graph.edges.copy()
     ring.data[:] = 1.0
     ring = (ring + identity(ring.shape[0], format="csr")).tocsr()
@@ -106,8 +118,8 @@ def surface_normals(graph: VoxelGraph) -> NDArray[np.float64]:
     for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
         covariance[:, i, j] = ring @ (c[:, i] * c[:, j]) / count - mean[:, i] * mean[:, j]
         covariance[:, j, i] = covariance[:, i, j]
-    _, vectors = np.linalg.eigh(covariance)  # eigenvalues ascending
-    return vectors[:, :, 0]
+    values, vectors = np.linalg.eigh(covariance)  # eigenvalues ascending
+    return values, vectors
 
 
 def bend_weighted(graph: VoxelGraph, bend_penalty_m: float) -> VoxelGraph:
@@ -125,6 +137,152 @@ def bend_weighted(graph: VoxelGraph, bend_penalty_m: float) -> VoxelGraph:
     return VoxelGraph(graph.centres_m, graph.point_voxel, weighted)
 
 
+@dataclass(frozen=True)
+class Sheets:
+    """The sheets that cross at some voxels (two leaves in an X): ``voxel`` (K,) and ``normal``
+    (K, 3), one row per sheet, each such voxel in two or three rows."""
+
+    voxel: NDArray[np.intp]
+    normal: NDArray[np.float64]
+
+
+def _directions(count: int) -> NDArray[np.float64]:
+    """``count`` unit vectors spread evenly over the upper hemisphere (a Fibonacci lattice)."""
+    i = np.arange(count) + 0.5
+    z = 1.0 - i / count
+    angle = np.pi * (1.0 + 5.0**0.5) * i
+    r = np.sqrt(1.0 - z**2)
+    return np.column_stack([r * np.cos(angle), r * np.sin(angle), z])
+
+
+def crossing_sheets(
+    graph: VoxelGraph,
+    thickness: float = SHEET_THICKNESS,
+    radius_m: float = SHEET_RADIUS_M,
+    min_angle_deg: float = SHEET_MIN_ANGLE_DEG,
+    tolerance_m: float = SHEET_TOLERANCE_M,
+    within: NDArray[np.bool_] | None = None,
+) -> Sheets:
+    """The voxels where two or three sheets cross (two leaves in an X, a leaf across a stem),
+    each with its sheets' normals.
+
+    A voxel's ring normal (:func:`surface_normals`) is the least spread of about 3 cm of
+    centroids; where two sheets cross it is neither sheet's normal and the ring is *thick*
+    (its least spread over the total above ``thickness``; one sheet, even curved, is thin over
+    3 cm). The sheets at a thick voxel are read off the *thin* voxels within ``radius_m``,
+    whose normals are one sheet's each: the directions (one of 200 over the hemisphere) that
+    most of their normals lie within 12 degrees of, up to three, each ``min_angle_deg`` or more
+    from the others and held by 3 voxels or more, each sheet's normal the mean of those normals.
+    each sheet's plane passing within ``tolerance_m`` of the voxel's centroid. A thick voxel
+    with fewer than two such sheets (a stem, a leaf's fold, a sheet's edge beside another) is
+    left as it is; ``within`` (V,) limits the search to some voxels."""
+    values, vectors = _ring_spread(graph)
+    normals = vectors[:, :, 0]
+    total = values.sum(axis=1)
+    thick = values[:, 0] > thickness * total
+    if within is not None:  # only there (the voxels two stems could reach)
+        thick &= within
+    candidates, thin = np.flatnonzero(thick), np.flatnonzero(~thick & (total > 0.0))
+    nothing = Sheets(np.empty(0, dtype=np.intp), np.empty((0, 3)))
+    if len(candidates) == 0 or len(thin) == 0:
+        return nothing
+    near = cKDTree(graph.centres_m[thin]).query_ball_point(graph.centres_m[candidates], radius_m)
+    counts = np.fromiter((len(n) for n in near), dtype=np.intp, count=len(near))
+    if counts.sum() == 0:
+        return nothing
+    owner = np.repeat(np.arange(len(candidates)), counts)
+    neighbour = thin[
+        np.fromiter(itertools.chain.from_iterable(near), dtype=np.intp, count=int(counts.sum()))
+    ]
+    n, at = normals[neighbour], graph.centres_m[neighbour]
+    k, directions = len(candidates), _directions(200)
+    close, apart = np.cos(np.radians(12.0)), np.cos(np.radians(min_angle_deg))
+    half = np.cos(np.radians(min_angle_deg / 2.0))
+    # each thin voxel's normal binned to its nearest direction, once; a direction's votes are
+    # the normals binned within 12 degrees of it
+    bins = np.argmax(np.abs(normals[thin] @ directions.T), axis=1)
+    binned = np.zeros(len(normals), dtype=np.intp)
+    binned[thin] = bins
+    counted = np.bincount(
+        owner * len(directions) + binned[neighbour], minlength=k * len(directions)
+    )
+    within = (np.abs(directions @ directions.T) > close).astype(np.float64)
+    votes = counted.reshape(k, len(directions)).astype(np.float64) @ within
+    centre = graph.centres_m[candidates]
+    sheets = np.zeros((k, 3, 3))
+    through = np.zeros((k, 3), dtype=bool)
+    for p in range(3):
+        best = np.argmax(votes, axis=1)
+        d = directions[best]
+        along = np.sum(n * d[owner], axis=1)
+        member = np.abs(along) > half  # a sheet's normals: within half the angle apart
+        size = np.bincount(owner[member], minlength=k)
+        signed = n[member] * np.sign(along[member])[:, None]
+        summed = np.stack([np.bincount(owner[member], signed[:, a], k) for a in range(3)], 1)
+        normal = summed / np.maximum(np.linalg.norm(summed, axis=1, keepdims=True), 1e-12)
+        total_at = np.stack([np.bincount(owner[member], at[member, a], k) for a in range(3)], 1)
+        mean = total_at / np.maximum(size, 1)[:, None]
+        # a sheet of this voxel's: held by 3 thin voxels or more, its plane through the voxel
+        through[:, p] = (size >= 3) & (
+            np.abs(np.sum((centre - mean) * normal, axis=1)) <= tolerance_m
+        )
+        sheets[:, p] = normal
+        votes *= np.abs(d @ directions.T) < apart  # no further sheet within min_angle_deg
+    held = through.sum(axis=1)
+    two = held >= 2
+    voxel, normal_rows = [], []
+    for p in range(3):
+        keep = two & through[:, p]
+        voxel.append(candidates[keep])
+        normal_rows.append(sheets[keep, p])
+    return Sheets(np.concatenate(voxel), np.concatenate(normal_rows))
+
+
+def sheet_graph(
+    graph: VoxelGraph, bend_penalty_m: float, sheets: Sheets
+) -> tuple[csr_matrix, NDArray[np.intp]]:
+    """The graph of :func:`bend_weighted` over (voxel, sheet) states: a voxel where sheets
+    cross (``sheets``) has one state per sheet, every other voxel one with its surface normal.
+    A step between two states costs its length plus ``bend_penalty_m`` times (1 - |cos|) of
+    the angle between the states' normals, so a path that runs through a crossing on its own
+    sheet pays nothing for the crossing, and one that turns onto the other sheet pays the bend
+    between the two. A step to or from a sheet's state also pays as a bend by its angle to
+    the sheet's plane (a step along the sheet pays next to nothing, one across to a sheet
+    stacked over it the full bend). Returns the (S, S) edges and each state's voxel (S,), in
+    voxel order."""
+    normals = surface_normals(graph)
+    voxels = len(normals)
+    split = np.zeros(voxels, dtype=bool)
+    split[sheets.voxel] = True
+    state_voxel = np.concatenate([np.flatnonzero(~split), sheets.voxel])
+    state_normal = np.concatenate([normals[~split], sheets.normal])
+    order = np.argsort(state_voxel, kind="stable")
+    state_voxel, state_normal = state_voxel[order], state_normal[order]
+    count = np.bincount(state_voxel, minlength=voxels)
+    first = np.concatenate([[0], np.cumsum(count)[:-1]])
+    edges = graph.edges.tocoo()
+    pairs = count[edges.row] * count[edges.col]
+    edge = np.repeat(np.arange(len(edges.row)), pairs)
+    k = np.arange(len(edge)) - np.repeat(np.cumsum(pairs) - pairs, pairs)
+    across = count[edges.col][edge]
+    row = first[edges.row][edge] + k // across
+    col = first[edges.col][edge] + k % across
+    cosine = np.abs(np.sum(state_normal[row] * state_normal[col], axis=1))
+    cost = edges.data[edge] + bend_penalty_m * (1.0 - np.minimum(cosine, 1.0))
+    # a step out of a crossing's sheet pays as a bend by its angle to the sheet's plane: two
+    # sheets stacked 1-3 cm apart are no X, and stepping from one to the other leaves both
+    step = graph.centres_m[edges.col][edge] - graph.centres_m[edges.row][edge]
+    step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
+    out = np.zeros(len(row))
+    for end in (row, col):
+        on = split[state_voxel[end]]
+        sine = np.minimum(np.abs(np.sum(step[on] * state_normal[end[on]], axis=1)), 1.0)
+        out[on] = np.maximum(out[on], 1.0 - np.sqrt(1.0 - sine**2))
+    cost += bend_penalty_m * out
+    states = len(state_voxel)
+    return coo_matrix((cost, (row, col)), shape=(states, states)).tocsr(), state_voxel
+
+
 def assign_to_stems(
     graph: VoxelGraph,
     stems_xy_m: NDArray[np.float64],
@@ -134,6 +292,7 @@ def assign_to_stems(
     ambiguity_margin_m: float,
     inward_penalty: float = 0.0,
     bend_penalty_m: float = 0.0,
+    sheet_aware: bool = False,
 ) -> Assignment:
     """Each voxel to the stem (``stems_xy_m`` (S, 2)) it is geodesically nearest to.
 
@@ -141,26 +300,46 @@ def assign_to_stems(
     higher than ``seed_height_m`` above the lowest of them. Each step back towards the stem
     (in plan view) costs ``inward_penalty`` times its inward length on top of its length
     (:func:`_outward`), and passing from one surface onto another up to ``bend_penalty_m``
-    (:func:`bend_weighted`)."""
-    if bend_penalty_m > 0.0:
-        graph = bend_weighted(graph, bend_penalty_m)
+    (:func:`bend_weighted`); with ``sheet_aware``, judged against the sheet the path is on
+    where two sheets cross (:func:`sheet_graph`)."""
     voxels = len(graph.centres_m)
+    shared = _shared(graph, stems_xy_m, seed_radius_m) if sheet_aware else None
+    if bend_penalty_m > 0.0 and shared is not None and shared.any():
+        sheets = crossing_sheets(graph, within=shared)
+        edges, state_voxel = sheet_graph(graph, bend_penalty_m, sheets)
+    else:
+        if bend_penalty_m > 0.0:
+            graph = bend_weighted(graph, bend_penalty_m)
+        edges, state_voxel = graph.edges, np.arange(voxels, dtype=np.intp)
+    count = np.bincount(state_voxel, minlength=voxels)  # each voxel's states, in voxel order
+    first = np.concatenate([[0], np.cumsum(count)[:-1]])
     best = np.full(voxels, np.inf)
     second = np.full(voxels, np.inf)
     owner = np.full(voxels, UNREACHED, dtype=np.intp)
     tree = cKDTree(graph.centres_m[:, :2])
-    position = np.full(voxels, -1, dtype=np.intp)  # global -> local index, reset after each stem
+    position = np.full(len(state_voxel), -1, dtype=np.intp)  # global -> local state index
     for index, xy in enumerate(stems_xy_m):
-        local = np.asarray(tree.query_ball_point(xy, reach_m), dtype=np.intp)
+        local = np.sort(np.asarray(tree.query_ball_point(xy, reach_m), dtype=np.intp))
         sources = _sources(graph.centres_m[local], xy, seed_radius_m, seed_height_m)
         if len(sources) == 0:
             continue
-        position[local] = np.arange(len(local))
-        sub = _outward(
-            _subgraph(graph.edges, local, position), graph.centres_m[local], xy, inward_penalty
+        n = count[local]
+        offset = np.concatenate([[0], np.cumsum(n)[:-1]])  # each local voxel's first state
+        states = np.repeat(first[local] - offset, n) + np.arange(int(n.sum()))
+        sources = np.repeat(offset[sources], n[sources]) + (
+            np.arange(int(n[sources].sum()))
+            - np.repeat(np.cumsum(n[sources]) - n[sources], n[sources])
         )
-        position[local] = -1
-        distance = dijkstra(sub, directed=True, indices=sources, min_only=True)
+        position[states] = np.arange(len(states))
+        sub = _outward(
+            _subgraph(edges, states, position),
+            graph.centres_m[state_voxel[states]],
+            xy,
+            inward_penalty,
+        )
+        position[states] = -1
+        by_state = dijkstra(sub, directed=True, indices=sources, min_only=True)
+        distance = np.minimum.reduceat(by_state, offset) if len(states) > len(local) else by_state
         reached = np.isfinite(distance)
         where, d = local[reached], distance[reached]
         better = d < best[where]
@@ -171,6 +350,22 @@ def assign_to_stems(
     ambiguous = np.zeros(voxels, dtype=bool)
     ambiguous[reached_twice] = second[reached_twice] - best[reached_twice] < ambiguity_margin_m
     return Assignment(owner[graph.point_voxel], ambiguous[graph.point_voxel])
+
+
+def _shared(
+    graph: VoxelGraph, stems_xy_m: NDArray[np.float64], seed_radius_m: float
+) -> NDArray[np.bool_]:
+    """(V,) the voxels of the graph's connected parts that hold two stems' feet or more: only
+    there can two plants' paths meet (on a seedling plot, where no canopies touch, nowhere)."""
+    _, label = connected_components(graph.edges, directed=False)
+    tree = cKDTree(graph.centres_m[:, :2])
+    feet = tree.query_ball_point(np.asarray(stems_xy_m).reshape(-1, 2), seed_radius_m)
+    parts = [np.unique(label[np.asarray(f, dtype=np.intp)]) for f in feet]
+    stems_per_part = np.bincount(
+        np.concatenate([*parts, np.empty(0, dtype=np.intp)]).astype(np.intp),
+        minlength=int(label.max()) + 1,
+    )
+    return stems_per_part[label] >= 2  # type: ignore[no-any-return]
 
 
 def _subgraph(edges: csr_matrix, local: NDArray[np.intp], position: NDArray[np.intp]) -> csr_matrix:

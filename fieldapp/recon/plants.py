@@ -58,6 +58,7 @@ def assign_by_settings(
         s.ambiguity_margin_m,
         s.inward_penalty,
         s.bend_penalty_m,
+        s.sheet_aware,
     )
 
 

@@ -95,3 +95,45 @@ def lying_pair(
         ]
     )
     return a, b
+
+
+def sloped_leaf(
+    rng: np.random.Generator,
+    foot_xy: tuple[float, float],
+    azimuth_deg: float,
+    node_z_m: float,
+    length_m: float,
+    slope_deg: float,
+    n: int,
+) -> NDArray[np.float64]:
+    """(n, 3) points on a flat ribbon leaf from the stem at ``node_z_m`` rising straight at
+    ``slope_deg`` from level, tapering from 7 cm wide to 2.8 cm at its tip."""
+    u = rng.uniform(0.0, 1.0, n)
+    across = rng.uniform(-0.5, 0.5, n) * 0.07 * (1.0 - 0.6 * u)
+    a, slope = np.radians(azimuth_deg), np.radians(slope_deg)
+    along = np.array([np.cos(a), np.sin(a)])
+    side = np.array([-np.sin(a), np.cos(a)])
+    s = u * length_m
+    xy = np.asarray(foot_xy) + (s * np.cos(slope))[:, None] * along + across[:, None] * side
+    return np.column_stack([xy, node_z_m + s * np.sin(slope)])
+
+
+def x_pair(
+    rng: np.random.Generator, slope_deg: float = 60.0
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two leaves crossing in an X: A's level leaf (along +x from (0, 0), 30 cm up, 65 cm long)
+    runs through B's leaf, which rises at ``slope_deg`` from B's stem at (0.55, 0.10) across
+    it (along -y) and crosses it 10 cm from B's stem, 55 cm from A's; A's tip runs on 10 cm
+    past the X. The sheets' normals are ``slope_deg`` apart."""
+    a = np.concatenate(
+        [plant(rng, (0.0, 0.0), []), level_leaf(rng, (0.0, 0.0), 0.0, 0.15, 0.65, 0.30, 7000)]
+    )
+    to_x = 0.10 / np.cos(np.radians(slope_deg))  # along B's leaf from its stem to A's leaf
+    node_z = 0.30 - to_x * np.sin(np.radians(slope_deg))
+    b = np.concatenate(
+        [
+            plant(rng, (0.55, 0.10), []),
+            sloped_leaf(rng, (0.55, 0.10), 270.0, node_z, to_x + 0.15, slope_deg, 5000),
+        ]
+    )
+    return a + rng.normal(0.0, 0.001, a.shape), b + rng.normal(0.0, 0.001, b.shape)
