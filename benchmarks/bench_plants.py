@@ -6,11 +6,12 @@ soil sample of 2 cm spacing. Prints the CPU and wall time of ``search_plants`` p
 per plant; run by hand on a quiet machine:
 
     .venv/bin/python benchmarks/bench_plants.py [--sizes 4,6,8,10,12] [--repeats 3] \
-        [--no-ribbons] [--sheets]
+        [--no-ribbons] [--no-sheets]
 
-``--no-ribbons``: without following the flagged plants' leaves across contacts
-(``plants.stems.follow_leaves``), to see what the ribbons cost; ``--sheets``: with the
-sheet-aware bend cost (``plants.stems.sheet_aware``), to see what it costs.
+``--no-ribbons``: without following the leaves of plants with ambiguous points across
+contacts (``plants.stems.follow_leaves``), to see what the ribbons cost; ``--no-sheets``:
+without the sheet-aware bend cost at crossings (``plants.stems.sheet_aware``), to see what it
+costs.
 """
 
 from __future__ import annotations
@@ -65,11 +66,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-ribbons", action="store_true", help="leaves not followed")
-    parser.add_argument("--sheets", action="store_true", help="the sheet-aware bend cost")
+    parser.add_argument(
+        "--no-sheets", action="store_true", help="without the sheet-aware bend cost"
+    )
     args = parser.parse_args()
     settings = PlantSettings()
     settings.stems = settings.stems.model_copy(
-        update={"follow_leaves": not args.no_ribbons, "sheet_aware": args.sheets}
+        update={"follow_leaves": not args.no_ribbons, "sheet_aware": not args.no_sheets}
     )
     print("plants  points    found  cpu_s (min)  wall_s (min)  cpu ms per plant")
     for n in (int(s) for s in args.sizes.split(",")):

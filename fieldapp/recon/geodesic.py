@@ -172,8 +172,8 @@ def crossing_sheets(
     3 cm). The sheets at a thick voxel are read off the *thin* voxels within ``radius_m``,
     whose normals are one sheet's each: the directions (one of 200 over the hemisphere) that
     most of their normals lie within 12 degrees of, up to three, each ``min_angle_deg`` or more
-    from the others and held by 3 voxels or more, each sheet's normal the mean of those normals.
-    each sheet's plane passing within ``tolerance_m`` of the voxel's centroid. A thick voxel
+    from the others and held by 3 voxels or more, each sheet's normal the mean of those normals
+    and its plane passing within ``tolerance_m`` of the voxel's centroid. A thick voxel
     with fewer than two such sheets (a stem, a leaf's fold, a sheet's edge beside another) is
     left as it is; ``within`` (V,) limits the search to some voxels."""
     values, vectors = _ring_spread(graph)
@@ -206,8 +206,8 @@ def crossing_sheets(
     counted = np.bincount(
         owner * len(directions) + binned[neighbour], minlength=k * len(directions)
     )
-    within = (np.abs(directions @ directions.T) > close).astype(np.float64)
-    votes = counted.reshape(k, len(directions)).astype(np.float64) @ within
+    neighbouring = (np.abs(directions @ directions.T) > close).astype(np.float64)
+    votes = counted.reshape(k, len(directions)).astype(np.float64) @ neighbouring
     centre = graph.centres_m[candidates]
     sheets = np.zeros((k, 3, 3))
     through = np.zeros((k, 3), dtype=bool)

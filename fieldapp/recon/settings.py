@@ -122,9 +122,11 @@ class StemSettings(_Section):
     bend_penalty_m: float = Field(default=1.0, ge=0.0)
     """Extra cost of a path passing from one surface onto another (a leaf onto the neighbour's
     leaf it touches): up to this for a right angle between the surfaces' normals."""
-    sheet_aware: bool = False
+    sheet_aware: bool = True
     """Where two sheets cross (two leaves in an X), the bend cost is judged against the sheet a
-    path is on, not the voxels' normals blurred from both (``geodesic.sheet_graph``)."""
+    path is on, not the voxels' normals blurred from both (``geodesic.sheet_graph``); only in
+    the parts of the plot where two stems' canopies are joined (nothing runs on a seedling
+    plot)."""
     reach_m: float = Field(default=1.0, gt=0.0)
     """How far (plan view) from its stem a plant's leaves may reach."""
     ambiguity_margin_m: float = Field(default=0.15, ge=0.0)
