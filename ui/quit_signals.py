@@ -55,6 +55,8 @@ class QuitSignals(QtCore.QObject):
             self._reader.fileno(), QtCore.QSocketNotifier.Type.Read, self
         )
         self._notifier.activated.connect(self._woken)
+        names = ", ".join(signal.Signals(number).name for number in self._previous)
+        log.debug("%s: the window closes, the devices stop", names)
 
     def _handler(self, number: int, frame: FrameType | None) -> None:
         """Python's handler: counts; the wake-up byte has already been written by then."""
