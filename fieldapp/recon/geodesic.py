@@ -162,6 +162,7 @@ def crossing_sheets(
     min_angle_deg: float = SHEET_MIN_ANGLE_DEG,
     tolerance_m: float = SHEET_TOLERANCE_M,
     within: NDArray[np.bool_] | None = None,
+    ring: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> Sheets:
     """The voxels where two or three sheets cross (two leaves in an X, a leaf across a stem),
     each with its sheets' normals.
@@ -175,8 +176,9 @@ def crossing_sheets(
     from the others and held by 3 voxels or more, each sheet's normal the mean of those normals
     and its plane passing within ``tolerance_m`` of the voxel's centroid. A thick voxel
     with fewer than two such sheets (a stem, a leaf's fold, a sheet's edge beside another) is
-    left as it is; ``within`` (V,) limits the search to some voxels."""
-    values, vectors = _ring_spread(graph)
+    left as it is; ``within`` (V,) limits the search to some voxels; ``ring``: the graph's
+    :func:`_ring_spread`, when the caller has it already."""
+    values, vectors = _ring_spread(graph) if ring is None else ring
     normals = vectors[:, :, 0]
     total = values.sum(axis=1)
     thick = values[:, 0] > thickness * total
@@ -239,7 +241,10 @@ def crossing_sheets(
 
 
 def sheet_graph(
-    graph: VoxelGraph, bend_penalty_m: float, sheets: Sheets
+    graph: VoxelGraph,
+    bend_penalty_m: float,
+    sheets: Sheets,
+    normals: NDArray[np.float64] | None = None,
 ) -> tuple[csr_matrix, NDArray[np.intp]]:
     """The graph of :func:`bend_weighted` over (voxel, sheet) states: a voxel where sheets
     cross (``sheets``) has one state per sheet, every other voxel one with its surface normal.
@@ -249,8 +254,8 @@ def sheet_graph(
     between the two. A step to or from a sheet's state also pays as a bend by its angle to
     the sheet's plane (a step along the sheet pays next to nothing, one across to a sheet
     stacked over it the full bend). Returns the (S, S) edges and each state's voxel (S,), in
-    voxel order."""
-    normals = surface_normals(graph)
+    voxel order. ``normals``: the graph's :func:`surface_normals`, when the caller has them."""
+    normals = surface_normals(graph) if normals is None else normals
     voxels = len(normals)
     split = np.zeros(voxels, dtype=bool)
     split[sheets.voxel] = True
@@ -303,10 +308,12 @@ def assign_to_stems(
     (:func:`bend_weighted`); with ``sheet_aware``, judged against the sheet the path is on
     where two sheets cross (:func:`sheet_graph`)."""
     voxels = len(graph.centres_m)
-    shared = _shared(graph, stems_xy_m, seed_radius_m) if sheet_aware else None
+    tree = cKDTree(graph.centres_m[:, :2])
+    shared = _shared(graph, tree, stems_xy_m, seed_radius_m) if sheet_aware else None
     if bend_penalty_m > 0.0 and shared is not None and shared.any():
-        sheets = crossing_sheets(graph, within=shared)
-        edges, state_voxel = sheet_graph(graph, bend_penalty_m, sheets)
+        ring = _ring_spread(graph)  # once, for the sheets and the states' normals
+        sheets = crossing_sheets(graph, within=shared, ring=ring)
+        edges, state_voxel = sheet_graph(graph, bend_penalty_m, sheets, ring[1][:, :, 0])
     else:
         if bend_penalty_m > 0.0:
             graph = bend_weighted(graph, bend_penalty_m)
@@ -316,7 +323,6 @@ def assign_to_stems(
     best = np.full(voxels, np.inf)
     second = np.full(voxels, np.inf)
     owner = np.full(voxels, UNREACHED, dtype=np.intp)
-    tree = cKDTree(graph.centres_m[:, :2])
     position = np.full(len(state_voxel), -1, dtype=np.intp)  # global -> local state index
     for index, xy in enumerate(stems_xy_m):
         local = np.sort(np.asarray(tree.query_ball_point(xy, reach_m), dtype=np.intp))
@@ -353,12 +359,12 @@ def assign_to_stems(
 
 
 def _shared(
-    graph: VoxelGraph, stems_xy_m: NDArray[np.float64], seed_radius_m: float
+    graph: VoxelGraph, tree: cKDTree, stems_xy_m: NDArray[np.float64], seed_radius_m: float
 ) -> NDArray[np.bool_]:
     """(V,) the voxels of the graph's connected parts that hold two stems' feet or more: only
-    there can two plants' paths meet (on a seedling plot, where no canopies touch, nowhere)."""
+    there can two plants' paths meet (on a seedling plot, where no canopies touch, nowhere).
+    ``tree``: the plan-view tree of the graph's voxel centres."""
     _, label = connected_components(graph.edges, directed=False)
-    tree = cKDTree(graph.centres_m[:, :2])
     feet = tree.query_ball_point(np.asarray(stems_xy_m).reshape(-1, 2), seed_radius_m)
     parts = [np.unique(label[np.asarray(f, dtype=np.intp)]) for f in feet]
     stems_per_part = np.bincount(

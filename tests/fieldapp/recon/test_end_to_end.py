@@ -150,7 +150,7 @@ def test_cli_on_a_session_with_missing_captures_writes_results_and_warns(
     _damaged_copy(plot_session.folder, damaged)
     out = tmp_path / "out"
     command = [sys.executable, "-m", "fieldapp", "reconstruct", str(damaged), "--out", str(out)]
-    done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    done = subprocess.run(command, capture_output=True, text=True)  # pytest-timeout: a hang
     assert done.returncode == 0, done.stderr[-2000:]
     assert "" not in done.stdout.splitlines(), done.stdout  # no progress bar into a pipe
     assert done.stderr.count("8 captures missing: s9 v0") == 1, done.stderr
