@@ -32,7 +32,7 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.session import CaptureImages, Session
 from fieldapp.recon.backproject import backproject, ray_table
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.filters import Separation, choose_separation, excess_green, otsu_threshold
+from fieldapp.recon.exg import Separation, choose_separation, excess_green, otsu_threshold
 from fieldapp.recon.scans import StationScan, captures_by_station, read_images
 from fieldapp.recon.settings import CropSettings
 from fieldapp.recon.turntable_axis import (
