@@ -36,11 +36,12 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # Only what reading the stations needs is imported before the session is loaded: the
+    # early reader starts on them while this process imports the rest (SciPy, small_gicp).
     from fieldapp.errors import FieldappError, FormatError
     from fieldapp.io.session import load_session
-    from fieldapp.provenance import provenance_of
-    from fieldapp.recon.outputs import existing_outputs, write_outputs
-    from fieldapp.recon.pipeline import reconstruct
+    from fieldapp.recon.early import start_reading
+    from fieldapp.recon.outputs import existing_outputs
     from fieldapp.settings import load_settings
 
     existing = existing_outputs(args.out) if args.out.is_dir() else []
@@ -62,7 +63,16 @@ def run(args: argparse.Namespace) -> int:
             f"{args.session}: not reconstructed ({len(error.problems)} problems)", file=sys.stderr
         )
         return 1
-    result = _run_with_bar(reconstruct(session, settings), args.quiet)
+    early = start_reading(session, settings)
+    try:
+        from fieldapp.provenance import provenance_of
+        from fieldapp.recon.outputs import write_outputs
+        from fieldapp.recon.pipeline import reconstruct
+
+        result = _run_with_bar(reconstruct(session, settings, early), args.quiet)
+    finally:
+        if early is not None:
+            early.close()
     try:
         write_outputs(
             args.out,

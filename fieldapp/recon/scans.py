@@ -74,6 +74,12 @@ def captures_by_station(session: Session) -> dict[int, list[Capture]]:
     return {s: sorted(c, key=lambda c: c.view) for s, c in sorted(grouped.items())}
 
 
+def carries_plant(session: Session) -> bool:
+    """Whether ``session`` is a plant-on-turntable session."""
+    table = session.document.turntable
+    return table is not None and table.carries == "plant"
+
+
 def turntable_axis_point(T_view_next: Matrix4, views: int) -> NDArray[np.float64]:
     """(3,) a point on the turntable axis in view-0 frame: the mean camera centre of a turn."""
     centres = [T_view0_view(T_view_next, view)[:3, 3] for view in range(max(views, 1))]

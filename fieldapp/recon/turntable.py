@@ -53,12 +53,6 @@ BELOW_SURFACE_M = 0.02
 SOIL_STRIDE = 8
 
 
-def carries_plant(session: Session) -> bool:
-    """Whether ``session`` is a plant-on-turntable session."""
-    table = session.document.turntable
-    return table is not None and table.carries == "plant"
-
-
 @dataclass
 class TurntableScan:
     """The joined scan of a plant-on-turntable session, where its field frame is, and how the
