@@ -95,9 +95,10 @@ def run_reconstruction(
     session: Session,
     settings: ReconstructionSettings,
     on_progress: Callable[[Progress], None] | None = None,
+    early: EarlyStations | None = None,
 ) -> Reconstruction:
     """Run :func:`reconstruct` to the end, passing each progress event to ``on_progress``."""
-    steps = reconstruct(session, settings)
+    steps = reconstruct(session, settings, early)
     while True:
         try:
             event = next(steps)
