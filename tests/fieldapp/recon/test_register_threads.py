@@ -20,8 +20,9 @@ pytestmark = pytest.mark.slow  # one more reconstruction of the standard plot
 
 
 def _write(result: Reconstruction, folder: Path) -> tuple[bytes, dict]:
+    plants = {p.id: p.cloud for p in result.plants}
     write_outputs(
-        folder, result.rows(), result.cloud, {p.id: p.cloud for p in result.plants}, result.report()
+        folder, result.rows(), result.cloud, plants, result.report(), **result.output_extras()
     )
     report = json.loads((folder / "report.json").read_text())
     for measured in ("timings_s", "cpu_s"):  # wall and CPU seconds differ from run to run
@@ -65,3 +66,4 @@ def test_stations_read_by_the_early_reader_give_identical_outputs(
     for name in ("cloud.ply", "leaves.csv"):
         assert (tmp_path / "early" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
     assert shared.warnings == reconstruction.warnings
+    assert repr(shared.organs) == repr(reconstruction.organs)
