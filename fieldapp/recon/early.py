@@ -13,7 +13,7 @@ interpreter, and decoding on a thread beside them slowed them by as much as it g
 Every station is :func:`~fieldapp.recon.scans.read_station` of the same arguments wherever it
 runs, and its result does not depend on the thread count, so the scans, their warnings (each
 capture skipped) and every output are those of one process. A station's scan comes back
-pickled over a pipe (0.5-2 MB for a seedling station); the reader's own thread writes them, so
+pickled over a pipe (2.0-2.5 MB for a seedling station); the reader's own thread writes them, so
 it never waits for this process to finish importing. Which side has a station is decided under
 a lock on a shared pair of counters (a ``memfd``, ``lockf``: released by the kernel when the
 reader dies).
