@@ -172,7 +172,11 @@ class EarlyStations:
             or not fork()
         ):
             return None
-        rays = ray_table(session.calibration.depth_camera.intrinsics())
+        try:
+            rays = ray_table(session.calibration.depth_camera.intrinsics())
+        except Exception as error:  # the pipeline meets it where it did, and says so there
+            log.debug("stations read in one process: no ray table (%s)", error)
+            return None
         stations = list(grouped.items())
         try:
             claims = _Claims(len(stations))

@@ -149,3 +149,15 @@ def test_a_reader_not_used_is_killed_and_reaped(small_session: Path) -> None:
     assert reader.pid is None
     with pytest.raises(ChildProcessError):  # reaped: no zombie left
         os.waitpid(pid, os.WNOHANG)
+
+
+def test_a_calibration_the_rays_cannot_come_from_starts_no_reader(
+    small_session: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The pipeline raises it where it did before, after its own checks of the calibration."""
+
+    def no_rays(*_: object) -> None:
+        raise ValueError("no ray table")
+
+    monkeypatch.setattr(early, "ray_table", no_rays)
+    assert start_reading(load_session(small_session), SETTINGS) is None
