@@ -22,7 +22,8 @@ from devices.geometry import Matrix4, make_transform
 from fieldapp.errors import FieldappError
 from fieldapp.imports.clouds import LoadedCloud
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.filters import excess_green, otsu_threshold, remove_outliers, voxel_mean
+from fieldapp.recon.exg import excess_green, otsu_threshold
+from fieldapp.recon.filters import remove_outliers, voxel_mean
 from fieldapp.recon.ground import GroundNotFound, T_level, fit_ground_plane, subsample
 from fieldapp.recon.outputs import PlantRow, write_outputs
 from fieldapp.recon.plants import Plant, find_plants

@@ -2,7 +2,7 @@
 
 The reconstruction's stages carry a colour per point; a depth-only capture gets a neutral grey
 (so ``cloud.ply`` is grey there), and the plants are told from the soil by geometry
-(:func:`fieldapp.recon.filters.choose_separation`).
+(:func:`fieldapp.recon.exg.choose_separation`).
 """
 
 from __future__ import annotations

@@ -97,14 +97,17 @@ def stems_at_empty_nodes(
     stems: list[Stem],
     grid: GridNodes,
     settings: StemSettings,
+    soil_tree: cKDTree | None = None,
 ) -> list[Stem]:
-    """Stems found with the weaker test (``prior_layer_fraction``) at nodes that have none."""
+    """Stems found with the weaker test (``prior_layer_fraction``) at nodes that have none.
+    ``soil_tree``: the plan-view tree over ``soil_m[:, :2]`` when the caller has one."""
     weak = settings.model_copy(update={"min_layer_fraction": settings.prior_layer_fraction})
     found: list[Stem] = []
     if len(points_m) == 0:
         return found
     tree = cKDTree(points_m[:, :2])
-    soil_tree = cKDTree(soil_m[:, :2]) if len(soil_m) else None  # once: a node asks twice
+    if soil_tree is None and len(soil_m):  # once: a node asks twice
+        soil_tree = cKDTree(soil_m[:, :2])
     for xy in grid.xy_m:
         if any(np.linalg.norm(stem.xy_m - xy) <= grid.snap_radius_m for stem in stems):
             continue

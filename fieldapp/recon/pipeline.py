@@ -20,6 +20,7 @@ from fieldapp.io.calibration import Stations, ViewStep
 from fieldapp.io.session import Session
 from fieldapp.recon import stages
 from fieldapp.recon.backproject import ray_table
+from fieldapp.recon.early import EarlyStations, StationRead, read_arguments
 from fieldapp.recon.filters import FilteredStation
 from fieldapp.recon.mapframe import station_map_poses
 from fieldapp.recon.organ_traits import PlantOrgans
@@ -27,9 +28,8 @@ from fieldapp.recon.plants import PlantSearch
 from fieldapp.recon.progress import Progress, StageTimer, progress
 from fieldapp.recon.register import StationRegistration
 from fieldapp.recon.result import Reconstruction
-from fieldapp.recon.scans import StationScan, captures_by_station
+from fieldapp.recon.scans import StationScan, captures_by_station, carries_plant
 from fieldapp.recon.settings import ReconstructionSettings
-from fieldapp.recon.turntable import carries_plant
 
 log = logging.getLogger(__name__)
 
@@ -43,13 +43,19 @@ class NothingUsable(FieldappError):
 
 
 def reconstruct(
-    session: Session, settings: ReconstructionSettings
+    session: Session, settings: ReconstructionSettings, early: EarlyStations | None = None
 ) -> Generator[Progress, None, Reconstruction]:
     """Reconstruct ``session``: local reconstruction of each station, levelling, plant
-    filtering, global registration, plants and their traits, organs and theirs."""
-    timer, (view_step, stations) = StageTimer(), _joinable(session)
-    # 1-2. Depth to points, every view of a station into its view 0 (Eq. 9).
-    local = yield from _local_reconstruction(session, settings, stations, timer)
+    filtering, global registration, plants and their traits, organs and theirs. ``early``: a
+    reader of the stations started before the pipeline's modules were imported
+    (:func:`fieldapp.recon.early.start_reading`), closed here in any case."""
+    try:
+        timer, (view_step, stations) = StageTimer(), _joinable(session)
+        # 1-2. Depth to points, every view of a station into its view 0 (Eq. 9).
+        local = yield from _local_reconstruction(session, settings, stations, timer, early)
+    finally:
+        if early is not None:
+            early.close()
     reference = stages.anchor(stations.reference, local.value.scans, stations.to_reference)
     # 3. Levelling: coarse placement by the pre-calibration, each station on its own ground.
     with timer.stage("levelling"):
@@ -89,9 +95,10 @@ def run_reconstruction(
     session: Session,
     settings: ReconstructionSettings,
     on_progress: Callable[[Progress], None] | None = None,
+    early: EarlyStations | None = None,
 ) -> Reconstruction:
     """Run :func:`reconstruct` to the end, passing each progress event to ``on_progress``."""
-    steps = reconstruct(session, settings)
+    steps = reconstruct(session, settings, early)
     while True:
         try:
             event = next(steps)
@@ -123,7 +130,11 @@ def _joinable(session: Session) -> tuple[ViewStep, Stations]:
 
 
 def _local_reconstruction(
-    session: Session, settings: ReconstructionSettings, stations: Stations, timer: StageTimer
+    session: Session,
+    settings: ReconstructionSettings,
+    stations: Stations,
+    timer: StageTimer,
+    early: EarlyStations | None,
 ) -> Generator[Progress, None, stages.Staged[stages.LocalScans]]:
     """Steps 1-2, a progress event per station (one for a plant on a turntable);
     :class:`NothingUsable` when no capture could be read."""
@@ -132,6 +143,8 @@ def _local_reconstruction(
             crop, top_m = settings.crop, settings.filters.pass_through_max_m
             local = stages.turntable_scan(session, crop, top_m, settings.registration.enabled)
         yield progress("local reconstruction", 1.0, "turntable views joined")
+    elif early is not None and early.serves(session, read_arguments(settings)):
+        local = yield from _early_scans(early, settings, stations, timer)
     else:
         local = yield from _station_scans(session, settings, stations, timer)
     if not local.value.scans:
@@ -163,6 +176,25 @@ def _station_scans(
         lambda index, _: f"station {index + 1} of {len(grouped)}",
     )
     return stages.calibrated_scans(read, stations.to_reference)
+
+
+def _early_scans(
+    early: EarlyStations, settings: ReconstructionSettings, stations: Stations, timer: StageTimer
+) -> Generator[Progress, None, stages.Staged[stages.LocalScans]]:
+    """Steps 1-2 shared with the early reader, a progress event per station as it is done."""
+    reads, count = early.read(settings.threads), 0
+    while True:
+        try:
+            with timer.stage("local reconstruction"):
+                next(reads)
+        except StopIteration as done:
+            read: dict[int, StationRead] = done.value
+            break
+        count += 1
+        message = f"station {count} of {early.station_count}"
+        yield progress("local reconstruction", count / early.station_count, message)
+    staged = {station: stages.Staged(scan, tuple(w)) for station, (scan, w) in read.items()}
+    return stages.calibrated_scans(staged, stations.to_reference)
 
 
 def _filtering(

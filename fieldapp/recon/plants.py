@@ -204,23 +204,28 @@ def search_plants(
         grid = prior_nodes(settings.grid)
     merges: list[str] = []
     stems: list[Stem] = []
+    # the plan-view tree over the soil, built once (0.04 s for a 3 x 3 plot): the stems' local
+    # ground, the plants' soil and the grid's seen nodes all ask it
+    soil_tree = cKDTree(soil_m[:, :2]) if len(soil_m) else None
     if settings.stems.enabled and len(cloud):
-        stems, merged = find_stems(cloud.points, soil_m, settings.stems)
+        stems, merged = find_stems(cloud.points, soil_m, settings.stems, soil_tree)
         if merged:
             merges.append(f"{merged} stem candidates merged into a stronger stem nearby")
         if grid is not None:
-            stems = stems + stems_at_empty_nodes(cloud.points, soil_m, stems, grid, settings.stems)
+            stems = stems + stems_at_empty_nodes(
+                cloud.points, soil_m, stems, grid, settings.stems, soil_tree
+            )
     labels, ambiguous = _labels(cloud.points, stems, settings, merges)
     if not stems and grid is not None:
         labels = apply_grid_prior_nodes(
             cloud.points, labels, grid, 2 * settings.base_slice_m, merges
         )
     plants, plant_labels = _measured(
-        cloud, soil_m, labels, ambiguous, len(stems), settings, ground_radius_m
+        cloud, soil_m, soil_tree, labels, ambiguous, len(stems), settings, ground_radius_m
     )
     search = PlantSearch(plants, merges=merges)
     if grid is not None:
-        _place_on_grid(search, grid, soil_m)
+        _place_on_grid(search, grid, soil_m, soil_tree)
     search.splits = _splits(cloud.points, labels, plant_labels, settings.cluster_voxel_m)
     return search
 
@@ -276,6 +281,7 @@ def _join_fragments(
 def _measured(
     cloud: Cloud,
     soil_m: NDArray[np.float64],
+    soil_tree: cKDTree | None,
     labels: NDArray[np.intp],
     ambiguous: NDArray[np.bool_],
     stem_count: int,
@@ -286,7 +292,6 @@ def _measured(
     and the label each plant id came from."""
     measured: list[tuple[PlantTraits, Cloud, bool, float]] = []
     measured_labels: list[int] = []
-    soil_tree = cKDTree(soil_m[:, :2]) if len(soil_m) else None
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(labels.max(initial=-1) + 2))
     for label in range(labels.max(initial=-1) + 1):
@@ -328,7 +333,9 @@ def _soil_near(
     return soil_m[near]
 
 
-def _place_on_grid(search: PlantSearch, grid: GridNodes, soil_m: NDArray[np.float64]) -> None:
+def _place_on_grid(
+    search: PlantSearch, grid: GridNodes, soil_m: NDArray[np.float64], soil_tree: cKDTree | None
+) -> None:
     """Each plant to the grid node its base stands at (within the snap radius), one plant per
     node (the nearest); the others are extra; the nodes left are missing where the soil sample
     (M, 3) has ground within the snap radius, unseen elsewhere (every node counts as seen
@@ -349,8 +356,8 @@ def _place_on_grid(search: PlantSearch, grid: GridNodes, soil_m: NDArray[np.floa
         at = owner[index]
         search.plants[index] = replace(plant, grid_cell=(int(grid.row[at]), int(grid.column[at])))
     seen = np.ones(len(grid.xy_m), dtype=bool)
-    if len(soil_m):
-        distance, _ = cKDTree(soil_m[:, :2]).query(grid.xy_m)
+    if soil_tree is not None:
+        distance, _ = soil_tree.query(grid.xy_m)
         seen = distance <= grid.snap_radius_m
     for node in range(len(grid.xy_m)):
         if node not in taken:

@@ -19,9 +19,7 @@ from typing import Any
 
 from fieldapp.errors import FieldappError
 from fieldapp.io.session import load_session
-from fieldapp.provenance import provenance_of
-from fieldapp.recon.outputs import write_outputs
-from fieldapp.recon.pipeline import reconstruct
+from fieldapp.recon.early import start_reading
 from fieldapp.recon.progress import Progress
 from fieldapp.recon.settings import ReconstructionSettings
 
@@ -89,11 +87,19 @@ def _receive(receiver: Connection, child: Any) -> tuple[str, Any]:
 def _child(
     session_folder: str, settings_json: str, results_dir: str, sender: Connection, cancel: Event
 ) -> None:
-    """The child's side: run the pipeline, send progress, write the outputs."""
+    """The child's side: run the pipeline, send progress, write the outputs. As in ``fieldapp
+    reconstruct``, a reader forked before the pipeline's modules are imported (this process is
+    spawned fresh: SciPy, small_gicp) starts on the stations while they load."""
+    early = None
     try:
         settings = ReconstructionSettings.model_validate_json(settings_json)
         session = load_session(Path(session_folder))
-        steps = reconstruct(session, settings)
+        early = start_reading(session, settings)
+        from fieldapp.provenance import provenance_of
+        from fieldapp.recon.outputs import write_outputs
+        from fieldapp.recon.pipeline import reconstruct
+
+        steps = reconstruct(session, settings, early)
         while True:
             if cancel.is_set():
                 steps.close()
@@ -119,4 +125,6 @@ def _child(
     except Exception as error:  # reported to the caller, whose log keeps the details
         sender.send(("error", f"unexpected error ({type(error).__name__}): {error}"))
     finally:
+        if early is not None:
+            early.close()
         sender.close()

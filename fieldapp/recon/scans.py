@@ -28,7 +28,7 @@ from fieldapp.io.session import Capture, CaptureImages, Session
 from fieldapp.recon.backproject import backproject_pixels
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.depth_only import read_scan_capture
-from fieldapp.recon.filters import (
+from fieldapp.recon.exg import (
     BY_COLOUR,
     NO_KEY,
     Separation,
@@ -74,6 +74,12 @@ def captures_by_station(session: Session) -> dict[int, list[Capture]]:
     return {s: sorted(c, key=lambda c: c.view) for s, c in sorted(grouped.items())}
 
 
+def carries_plant(session: Session) -> bool:
+    """Whether ``session`` is a plant-on-turntable session."""
+    table = session.document.turntable
+    return table is not None and table.carries == "plant"
+
+
 def turntable_axis_point(T_view_next: Matrix4, views: int) -> NDArray[np.float64]:
     """(3,) a point on the turntable axis in view-0 frame: the mean camera centre of a turn."""
     centres = [T_view0_view(T_view_next, view)[:3, 3] for view in range(max(views, 1))]
@@ -102,8 +108,8 @@ class ReadFrame:
     """One capture read: its images, its measured pixels (finite depth) and their colour keys.
 
     ``images``: as read; ``measured``: (H, W) bool; ``keys``: (H * W,) int32, the
-    :func:`~fieldapp.recon.filters.exg_keys` of every pixel in row-major order,
-    :data:`~fieldapp.recon.filters.NO_KEY` where none is measured, and ``tally``:
+    :func:`~fieldapp.recon.exg.exg_keys` of every pixel in row-major order,
+    :data:`~fieldapp.recon.exg.NO_KEY` where none is measured, and ``tally``:
     (EXG_KEYS,) int64, how many measured pixels have each key; both ``None`` for a
     depth-only capture (no colour: its plants are told by geometry).
     """

@@ -32,7 +32,7 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.session import CaptureImages, Session
 from fieldapp.recon.backproject import backproject, ray_table
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.filters import Separation, choose_separation, excess_green, otsu_threshold
+from fieldapp.recon.exg import Separation, choose_separation, excess_green, otsu_threshold
 from fieldapp.recon.scans import StationScan, captures_by_station, read_images
 from fieldapp.recon.settings import CropSettings
 from fieldapp.recon.turntable_axis import (
@@ -51,12 +51,6 @@ SURFACE_RADIUS_M = 0.10
 SURFACE_BIN_M = 0.005
 BELOW_SURFACE_M = 0.02
 SOIL_STRIDE = 8
-
-
-def carries_plant(session: Session) -> bool:
-    """Whether ``session`` is a plant-on-turntable session."""
-    table = session.document.turntable
-    return table is not None and table.carries == "plant"
 
 
 @dataclass

@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 QUIET_RUN = textwrap.dedent(
     """
@@ -29,3 +30,67 @@ def test_a_quiet_reconstruction_runs_to_its_end_without_loading_the_progress_bar
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+EARLY_READER = textwrap.dedent(
+    """
+    import sys
+    from fieldapp.cli import main
+    from fieldapp.recon import early
+
+    started = []
+    start = early.start_reading
+
+    def watched(session, settings):
+        heavy = ("scipy", "small_gicp", "open3d", "fieldapp.recon.pipeline")
+        started.append(sorted(m for m in heavy if m in sys.modules))
+        return start(session, settings)
+
+    early.start_reading = watched
+    code = main(["reconstruct", sys.argv[1], "--out", sys.argv[2], "--quiet"])
+    print(code, started)
+    """
+)
+
+
+def test_the_stations_reader_starts_before_scipy_and_small_gicp_load(
+    small_session: Path, tmp_path: Path
+) -> None:
+    """The reader forked at start-up overlaps the imports only if it starts before them."""
+    done = subprocess.run(
+        [sys.executable, "-c", EARLY_READER, str(small_session), str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "0 [[]]"
+    assert (tmp_path / "out" / "plants.csv").is_file()
+
+
+FROZEN_AT_EXIT = textwrap.dedent(
+    """
+    import atexit, gc, sys
+    from fieldapp.cli import main
+
+    code = main(["reconstruct", sys.argv[1], "--out", sys.argv[2], "--quiet"])
+    before = gc.get_freeze_count()
+    atexit._run_exitfuncs()  # what the interpreter's exit runs first
+    print(code, before, gc.get_freeze_count() > 0)
+    """
+)
+
+
+def test_the_objects_are_frozen_only_when_the_process_exits(
+    small_session: Path, tmp_path: Path
+) -> None:
+    """The exit's last collection skips the imports' objects (0.1 s of a run); a caller that
+    runs the command in its own process keeps collecting until it exits."""
+    done = subprocess.run(
+        [sys.executable, "-c", FROZEN_AT_EXIT, str(small_session), str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "0 0 True"

@@ -14,13 +14,8 @@ import pytest
 from fieldapp.cli import main
 from fieldapp.io.session import load_session
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.filters import (
-    NO_COLOUR,
-    NO_GREEN_CONTRAST,
-    choose_separation,
-    filter_station,
-    pass_through,
-)
+from fieldapp.recon.exg import NO_COLOUR, NO_GREEN_CONTRAST, choose_separation
+from fieldapp.recon.filters import filter_station, pass_through
 from fieldapp.recon.geometry_split import plants_above_local_ground
 from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.settings import FilterSettings, ReconstructionSettings

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fieldapp.recon.filters import (
+from fieldapp.recon.exg import (
     BY_COLOUR,
     EXG_KEYS,
     excess_green,

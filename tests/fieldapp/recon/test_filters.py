@@ -6,14 +6,16 @@ import pytest
 
 from fieldapp.recon import filters
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.filters import (
+from fieldapp.recon.exg import (
     BY_COLOUR,
     NO_SOIL_LEFT,
     choose_separation,
     excess_green,
-    filter_station,
     keep_soil,
     otsu_threshold,
+)
+from fieldapp.recon.filters import (
+    filter_station,
     outlier_inliers,
     pass_through,
     radius_outliers,

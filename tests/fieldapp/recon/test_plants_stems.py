@@ -174,3 +174,28 @@ def test_stems_at_empty_nodes_index_the_soil_once_however_many_nodes(monkeypatch
     found = grid.stems_at_empty_nodes(points, soil, [], nodes, StemSettings())
     assert len(found) == 6  # every node asked, and each found its plant's stem
     assert built.count(len(soil)) == 1
+
+
+def test_the_plants_step_indexes_the_soil_once(monkeypatch) -> None:
+    """The stems' local ground (twice), the weaker test at empty nodes, each plant's soil and
+    the grid's seen nodes share one plan-view tree over the soil (five were built: 0.2 s of a
+    3 x 3 plot's 0.44 s, issue 22); the plants are the same."""
+    from fieldapp.recon import grid, plants, stems
+
+    rng = np.random.default_rng(8)
+    points = np.concatenate([plant(rng, (0.0, 0.0), [(0.0, 0.12, 0.3, 0.1)])])
+    soil = ground_patch(rng, 1.0, 4000)
+    nodes = grid_nodes(1, 4, 0.8, 0.8, (0.0, 0.0), 0.0, np.eye(4))
+    built: list[int] = []
+
+    class CountingTree(stems.cKDTree):  # type: ignore[misc]
+        def __init__(self, data, *args, **kwargs) -> None:
+            built.append(len(data))
+            super().__init__(data, *args, **kwargs)
+
+    for module in (plants, stems, grid):
+        monkeypatch.setattr(module, "cKDTree", CountingTree)
+    search = search_plants(colored(points, LEAF_RGB), soil, PlantSettings(), 0.15, nodes)
+    assert [p.grid_cell for p in search.plants] == [(1, 1)]
+    assert search.missing_cells == [(1, 2)] and search.unseen_cells == [(1, 3), (1, 4)]
+    assert built.count(len(soil)) == 1

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -48,3 +50,17 @@ def test_the_childs_error_reaches_the_caller(tmp_path):
     steps = reconstruct_in_process(tmp_path / "nowhere", ReconstructionSettings(), tmp_path / "o")
     with pytest.raises(FieldappError, match="no such folder"):
         list(steps)
+
+
+def test_the_child_imports_the_pipeline_after_its_stations_reader_has_started():
+    """The spawned child imports ``process`` fresh: SciPy and small_gicp load after
+    ``start_reading`` (in ``_child``), so the reader overlaps their import as in the CLI."""
+    script = (
+        "import sys; import fieldapp.recon.process; "
+        "print(sorted(m for m in ('scipy', 'small_gicp', 'fieldapp.recon.pipeline') "
+        "if m in sys.modules))"
+    )
+    command = [sys.executable, "-c", script]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"

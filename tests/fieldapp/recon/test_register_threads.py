@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from fieldapp.io.session import load_session
+from fieldapp.recon.early import start_reading
 from fieldapp.recon.outputs import write_outputs
 from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.result import Reconstruction
@@ -19,8 +20,9 @@ pytestmark = pytest.mark.slow  # one more reconstruction of the standard plot
 
 
 def _write(result: Reconstruction, folder: Path) -> tuple[bytes, dict]:
+    plants = {p.id: p.cloud for p in result.plants}
     write_outputs(
-        folder, result.rows(), result.cloud, {p.id: p.cloud for p in result.plants}, result.report()
+        folder, result.rows(), result.cloud, plants, result.report(), **result.output_extras()
     )
     report = json.loads((folder / "report.json").read_text())
     for measured in ("timings_s", "cpu_s"):  # wall and CPU seconds differ from run to run
@@ -46,3 +48,22 @@ def test_one_and_two_threads_give_identical_outputs(
     verdicts = {s["verdict"] for s in report_one["stations"].values()}
     assert verdicts == {"reference", "refined"}
     assert all(s["uncertainty_mm"] is not None for s in report_one["stations"].values())
+
+
+def test_stations_read_by_the_early_reader_give_identical_outputs(
+    reconstruction: Reconstruction, plot_session: Simulated, tmp_path: Path
+) -> None:
+    """``fieldapp reconstruct``'s path: a reader forked before the pipeline starts."""
+    session, settings = load_session(plot_session.folder), ReconstructionSettings()
+    early = start_reading(session, settings)
+    assert early is not None
+    shared = run_reconstruction(session, settings, early=early)
+    assert early.pid is None  # reaped once the stations were read
+    csv_two, report_two = _write(reconstruction, tmp_path / "two")
+    csv_early, report_early = _write(shared, tmp_path / "early")
+    assert csv_early == csv_two
+    assert report_early == report_two
+    for name in ("cloud.ply", "leaves.csv"):
+        assert (tmp_path / "early" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
+    assert shared.warnings == reconstruction.warnings
+    assert repr(shared.organs) == repr(reconstruction.organs)

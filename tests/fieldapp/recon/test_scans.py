@@ -13,7 +13,7 @@ from fieldapp.io.session import Capture, CaptureImages, Session, load_session
 from fieldapp.recon import scans
 from fieldapp.recon.backproject import ray_table
 from fieldapp.recon.depth_only import read_scan_capture
-from fieldapp.recon.filters import BY_COLOUR, excess_green, otsu_threshold
+from fieldapp.recon.exg import BY_COLOUR, excess_green, otsu_threshold
 from fieldapp.recon.scans import StationScan, captures_by_station, read_station
 from fieldapp.recon.settings import ReconstructionSettings
 

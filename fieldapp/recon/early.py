@@ -1,0 +1,336 @@
+"""A plot's stations read by a process forked at start-up, while this one imports the rest.
+
+``fieldapp reconstruct`` spends its first 0.3 s importing SciPy, small_gicp and the stages on
+one core, and reading the stations (decoding the PNGs, colour keys, back-projection) needs none
+of them: numpy and OpenCV only (:mod:`fieldapp.recon.scans`, :mod:`fieldapp.recon.exg`). So
+:meth:`EarlyStations.start`, called once the session and the settings are loaded, forks one
+reader that takes the stations from the front of the list, one at a time, while this process
+imports; when the pipeline's first stage starts, this process takes them from the back until
+the two meet (:meth:`EarlyStations.read`). A thread could not do this: the imports hold the
+interpreter, and decoding on a thread beside them slowed them by as much as it gained (issue
+22, "Tried, not kept").
+
+Every station is :func:`~fieldapp.recon.scans.read_station` of the same arguments wherever it
+runs, and its result does not depend on the thread count, so the scans, their warnings (each
+capture skipped) and every output are those of one process. A station's scan comes back
+pickled over a pipe (2.0-2.5 MB for a seedling station); the reader's own thread writes them, so
+it never waits for this process to finish importing. Which side has a station is decided under
+a lock on a shared pair of counters (a ``memfd``, ``lockf``: released by the kernel when the
+reader dies).
+
+Failures are this process's, as before: a station the reader could not read (any exception),
+or had taken when it died, is read here, in station order after the others, so an exception
+is raised here from the same call as without the reader, and the first station's that raises
+is the one raised. A reader that cannot be started (no ``fork``, no ``memfd``, a process
+limit) means the stations are read as before. The reader is forked with ``os.fork`` (the GUI's
+reconstruction process is a daemonic ``multiprocessing`` child, which that module forbids
+children) and leaves by ``os._exit``, never through this process's exit handlers; it is killed
+if the reconstruction ends before its stations are taken (an error, a cancel).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import pickle
+import queue
+import signal
+import struct
+import threading
+import warnings
+from collections.abc import Callable, Generator
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fieldapp.io.session import Capture, Session
+from fieldapp.recon.backproject import ray_table
+from fieldapp.recon.scans import StationScan, captures_by_station, carries_plant, read_station
+from fieldapp.recon.settings import CropSettings, ReconstructionSettings
+
+log = logging.getLogger(__name__)
+
+StationRead = tuple[StationScan | None, list[str]]
+"""What :func:`~fieldapp.recon.scans.read_station` returns: the scan and its warnings."""
+
+
+def can_fork_a_reader() -> bool:
+    """Whether this platform can fork and share the claims (Linux: ``fork``, ``memfd``)."""
+    return hasattr(os, "fork") and hasattr(os, "memfd_create")
+
+
+@dataclass(frozen=True)
+class ReadArguments:
+    """The settings a station is read with (:func:`~fieldapp.recon.scans.read_station`)."""
+
+    crop: CropSettings
+    exg_threshold: float | Literal["otsu"]
+    soil_pixel_stride: int
+
+
+def read_arguments(settings: ReconstructionSettings) -> ReadArguments:
+    """The arguments ``settings`` reads stations with."""
+    filters, ground = settings.filters, settings.ground
+    return ReadArguments(settings.crop, filters.exg_threshold, ground.soil_pixel_stride)
+
+
+def start_reading(session: Session, settings: ReconstructionSettings) -> EarlyStations | None:
+    """A reader forked now that starts on ``session``'s stations, for
+    :func:`fieldapp.recon.pipeline.reconstruct`'s ``early`` (``None`` where there is none:
+    see :meth:`EarlyStations.start`). Call it before importing the pipeline."""
+    return EarlyStations.start(session, read_arguments(settings), settings.threads)
+
+
+class _Claims:
+    """Which stations are taken: the next from the front, the next from the back, in shared
+    memory, changed under a ``lockf`` lock (per process, released when its holder dies)."""
+
+    def __init__(self, count: int) -> None:
+        import mmap
+
+        self._fd = os.memfd_create("fieldapp-stations")
+        os.ftruncate(self._fd, 16)
+        self._map = mmap.mmap(self._fd, 16)
+        struct.pack_into("<qq", self._map, 0, 0, count - 1)
+
+    def take(self, front: bool) -> int | None:
+        """The index of the station taken from the ``front`` (else the back), or ``None`` when
+        every station is taken."""
+        import fcntl
+
+        fcntl.lockf(self._fd, fcntl.LOCK_EX)
+        try:
+            first, last = struct.unpack_from("<qq", self._map, 0)
+            if first > last:
+                return None
+            struct.pack_into(
+                "<qq", self._map, 0, *((first + 1, last) if front else (first, last - 1))
+            )
+            return int(first if front else last)
+        finally:
+            fcntl.lockf(self._fd, fcntl.LOCK_UN)
+
+    def taken_from_front(self) -> int:
+        """How many stations were taken from the front (indices 0 to this, exclusive)."""
+        import fcntl
+
+        fcntl.lockf(self._fd, fcntl.LOCK_EX)
+        try:
+            return int(struct.unpack_from("<q", self._map, 0)[0])
+        finally:
+            fcntl.lockf(self._fd, fcntl.LOCK_UN)
+
+    def close(self) -> None:
+        self._map.close()
+        os.close(self._fd)
+
+
+class EarlyStations:
+    """One forked reader of a session's stations; use :meth:`start`, then :meth:`read` once,
+    then :meth:`close` (also when :meth:`read` was never called)."""
+
+    def __init__(
+        self,
+        pid: int,
+        connection: Connection,
+        claims: _Claims,
+        session: Session,
+        stations: list[tuple[int, list[Capture]]],
+        arguments: ReadArguments,
+        rays: NDArray[np.float64],
+    ) -> None:
+        self._pid: int | None = pid
+        self._connection = connection
+        self._claims = claims
+        self._session = session
+        self._stations = stations
+        self.arguments = arguments
+        self._rays = rays
+        self._left = False  # the reader's end of the pipe has closed: it is leaving
+
+    @classmethod
+    def start(
+        cls,
+        session: Session,
+        arguments: ReadArguments,
+        threads: int,
+        fork: Callable[[], bool] = can_fork_a_reader,
+    ) -> EarlyStations | None:
+        """A reader forked now for ``session``'s stations, or ``None`` where there is none to
+        start: ``threads`` 1 (one core's work), a plant on a turntable (read otherwise), a
+        calibration without a view step, fewer than two stations, or a system that cannot."""
+        grouped = captures_by_station(session)
+        if (
+            threads < 2
+            or len(grouped) < 2
+            or carries_plant(session)
+            or session.calibration.view_step is None
+            or not fork()
+        ):
+            return None
+        try:
+            rays = ray_table(session.calibration.depth_camera.intrinsics())
+        except Exception as error:  # the pipeline meets it where it did, and says so there
+            log.debug("stations read in one process: no ray table (%s)", error)
+            return None
+        stations = list(grouped.items())
+        try:
+            claims = _Claims(len(stations))
+        except OSError as error:
+            log.info("stations read in one process: no shared claims (%s)", error)
+            return None
+        try:
+            receive_fd, send_fd = os.pipe()
+            with warnings.catch_warnings():  # as in forkmap: the reader takes no lock
+                warnings.simplefilter("ignore", DeprecationWarning)
+                pid = os.fork()
+        except OSError as error:
+            log.info("stations read in one process: no reader could be started (%s)", error)
+            claims.close()
+            return None
+        if pid == 0:  # the reader: read from the front, then leave without the exit handlers
+            code = 1
+            try:
+                os.close(receive_fd)
+                _read_from_front(session, stations, arguments, rays, claims, send_fd)
+                code = 0
+            finally:
+                os._exit(code)
+        os.close(send_fd)
+        connection = Connection(receive_fd, writable=False)
+        return cls(pid, connection, claims, session, stations, arguments, rays)
+
+    @property
+    def station_count(self) -> int:
+        return len(self._stations)
+
+    @property
+    def pid(self) -> int | None:
+        """The reader's process id while it has not been reaped."""
+        return self._pid
+
+    def serves(self, session: Session, arguments: ReadArguments) -> bool:
+        """Whether this reader reads ``session``'s stations with ``arguments``."""
+        return (
+            session is self._session
+            and arguments == self.arguments
+            and list(captures_by_station(session).items()) == self._stations
+        )
+
+    def read(self, threads: int) -> Generator[int, None, dict[int, StationRead]]:
+        """Every station read, by station in order: those the reader sends, the others read
+        here from the back (on one thread while the reader runs), then those the reader did
+        not deliver (it failed or died; on ``threads`` threads). Yields each station as it is
+        done (for progress). Raises the first station's exception, in station order."""
+        done: dict[int, StationRead] = {}
+        failed: dict[int, Exception] = {}
+        while True:
+            yield from self._receive(done, wait=False)
+            index = self._claims.take(front=False)
+            if index is None:
+                break
+            try:
+                done[index] = self._read_here(index, 1)
+            except Exception as error:  # raised below, in station order
+                failed[index] = error
+            yield self._stations[index][0]
+        yield from self._receive(done, wait=True)  # until the reader has sent all and left
+        self.close()
+        for index in range(len(self._stations)):
+            if index in failed:
+                raise failed[index]
+            if index not in done:  # the reader could not read it, or died holding it
+                done[index] = self._read_here(index, threads)
+                yield self._stations[index][0]
+        return {self._stations[index][0]: done[index] for index in range(len(self._stations))}
+
+    def _read_here(self, index: int, threads: int) -> StationRead:
+        station, captures = self._stations[index]
+        a = self.arguments
+        return read_station(
+            self._session,
+            station,
+            captures,
+            a.crop,
+            a.exg_threshold,
+            a.soil_pixel_stride,
+            self._rays,
+            threads,
+        )
+
+    def _receive(self, done: dict[int, StationRead], wait: bool) -> Generator[int, None, None]:
+        """The reader's stations waiting on the pipe (``wait``: until it closes), into ``done``;
+        yields each station received."""
+        try:
+            while wait or self._connection.poll(0):
+                index, read = pickle.loads(self._connection.recv_bytes())
+                if read is not None:
+                    done[index] = read
+                    yield self._stations[index][0]
+        except (EOFError, OSError):  # the reader has left (or died): nothing more comes
+            self._left = True
+
+    def close(self) -> None:
+        """Reap the reader: awaited when its pipe has closed (it is leaving), else killed (it
+        holds nothing to clean up); free the pipe and the claims."""
+        if self._pid is None:
+            return
+        pid, self._pid = self._pid, None
+        self._connection.close()
+        with contextlib.suppress(ChildProcessError):
+            if not self._left:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        self._claims.close()
+
+
+def _read_from_front(
+    session: Session,
+    stations: list[tuple[int, list[Capture]]],
+    arguments: ReadArguments,
+    rays: NDArray[np.float64],
+    claims: _Claims,
+    send_fd: int,
+) -> None:
+    """The reader's work: take stations from the front until none is left, read each on one
+    thread and send ``(index, (scan, warnings))``, or ``(index, None)`` when it raised; a
+    thread of its own writes to the pipe, so reading goes on while this process imports."""
+    connection = Connection(send_fd, readable=False)
+    outbox: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
+    gone = threading.Event()
+
+    def send() -> None:
+        while (message := outbox.get()) is not None:
+            try:
+                connection.send_bytes(message)
+            except OSError:  # this process has closed its end: stop reading
+                gone.set()
+                return
+
+    sender = threading.Thread(target=send, name="early-stations")
+    sender.start()
+    while not gone.is_set() and (index := claims.take(front=True)) is not None:
+        station, captures = stations[index]
+        try:
+            read = read_station(
+                session,
+                station,
+                captures,
+                arguments.crop,
+                arguments.exg_threshold,
+                arguments.soil_pixel_stride,
+                rays,
+                1,
+            )
+            message = pickle.dumps((index, read), protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception:  # read again in this process, which raises it as before
+            message = pickle.dumps((index, None))
+        outbox.put(message)
+    outbox.put(None)
+    sender.join()
+    connection.close()

@@ -1,0 +1,204 @@
+"""Excess green (ExG) on colour images, by colour key, and a station's threshold (Otsu's): how
+plants are told from soil before any point exists.
+
+Apart from :mod:`fieldapp.recon.filters` so that reading a session's stations needs numpy
+alone, not SciPy: the early station reader (:mod:`fieldapp.recon.early`) runs in a process
+forked before SciPy is imported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+from numpy.typing import NDArray
+
+OTSU_BINS = 256
+SUM_LEVELS = 3 * 255 + 1
+EXG_KEYS = 256 * SUM_LEVELS
+"""Colour keys of excess green (:func:`exg_keys`): 2G - R - B over S = R + G + B is 3G / S - 1,
+a function of the green level G and the sum S alone, so 196 608 keys hold every value."""
+NO_KEY = EXG_KEYS
+"""The key of a pixel left out (no depth): one past the last, never tallied, never green."""
+VALLEY_SMOOTHING_BINS = 5
+MIN_GREEN_CONTRAST = 0.1
+"""Least difference of the mean ExG of Otsu's two classes for colour to separate plants: green
+leaves on soil differ by 0.3-0.5, a grey or constant image by less than 0.05."""
+
+MIN_SOIL_SHARE = 0.01
+"""Least share of a station's measured pixels a set ExG threshold must leave as soil for the
+soil sample (levelling, local ground, registration): seedling plots leave 99 %, a threshold
+of -1 (every colour, as for white reference spheres among plants) leaves none."""
+
+NO_COLOUR = "no colour"
+NO_GREEN_CONTRAST = "colour has no green contrast"
+NO_SOIL_LEFT = "the excess-green threshold leaves no soil"
+
+
+@dataclass(frozen=True)
+class Separation:
+    """How a station's plants are told from the soil: ``"colour"`` (excess green) or
+    ``"geometry"`` (height above the local ground, connectivity), and why geometry."""
+
+    method: str
+    reason: str = ""
+
+    @property
+    def by_geometry(self) -> bool:
+        return self.method == "geometry"
+
+    def describe(self) -> str:
+        """One line for the report and the CLI."""
+        if self.by_geometry:
+            return f"plants separated by geometry: {self.reason}"
+        return "plants separated by colour (excess green)"
+
+
+BY_COLOUR = Separation("colour")
+
+
+def green_contrast(
+    exg: NDArray[np.float64],
+    weights: NDArray[np.int64] | None = None,
+    threshold: float | None = None,
+) -> float:
+    """The difference of the mean ExG (N,) of the classes either side of Otsu's threshold
+    (``threshold`` when already known); 0 for a constant image. ``weights`` (N,): how many
+    pixels have each value (see :func:`otsu_threshold`; default one each)."""
+    if len(exg) == 0:
+        return 0.0
+    weights = np.ones(len(exg), dtype=np.int64) if weights is None else weights
+    high = exg > (otsu_threshold(exg, weights) if threshold is None else threshold)
+    count_high, count = int(weights[high].sum()), int(weights.sum())
+    if count_high == 0 or count_high == count:
+        return 0.0
+    weighted = exg * weights
+    return float(weighted[high].sum() / count_high - weighted[~high].sum() / (count - count_high))
+
+
+def choose_separation(
+    exg: NDArray[np.float64] | None,
+    weights: NDArray[np.int64] | None = None,
+    otsu: float | None = None,
+) -> Separation:
+    """Colour when every capture has a colour image (``exg`` (N,): the ExG of the measured
+    pixels, or its distinct values and their ``weights``; ``otsu``: their Otsu threshold when
+    already known) with green contrast, else geometry, saying why."""
+    if exg is None:
+        return Separation("geometry", NO_COLOUR)
+    if green_contrast(exg, weights, otsu) < MIN_GREEN_CONTRAST:
+        return Separation("geometry", NO_GREEN_CONTRAST)
+    return BY_COLOUR
+
+
+def keep_soil(
+    separation: Separation,
+    exg: NDArray[np.float64],
+    threshold: float,
+    weights: NDArray[np.int64] | None = None,
+) -> Separation:
+    """``separation``, or geometry when the colour ``threshold`` calls (nearly) every measured
+    pixel (ExG (N,), or distinct values and their ``weights``) green: with no soil pixel the
+    station has no ground to be levelled on and registration only the points above an
+    unlevelled ground."""
+    if separation.by_geometry or len(exg) == 0:
+        return separation
+    weights = np.ones(len(exg), dtype=np.int64) if weights is None else weights
+    if int(weights[exg <= threshold].sum()) < MIN_SOIL_SHARE * int(weights.sum()):
+        return Separation("geometry", NO_SOIL_LEFT)
+    return separation
+
+
+def excess_green(colors: NDArray[np.uint8]) -> NDArray[np.float64]:
+    """ExG = 2g - r - b on chromaticity-normalised colour (r = R / (R + G + B)...), (N,) in
+    [-1, 2]; black pixels get 0. The sums are exact in int16, so the one float64 division
+    gives the same values as float64 arithmetic throughout, at a seventh of its cost."""
+    r, g, b = (colors[:, channel].astype(np.int16) for channel in range(3))
+    total = r + g + b
+    total[total == 0] = 1
+    return (2 * g - r - b) / total
+
+
+def exg_keys(colors: NDArray[np.uint8]) -> NDArray[np.int32]:
+    """(N,) int32: the key ``G * 766 + S`` of each colour (N, 3) uint8 RGB, which fixes its
+    excess green (:func:`exg_of_keys`). Cheaper than the ExG itself, and a station's pixels
+    are then tallied (``np.bincount``) over :data:`EXG_KEYS` values instead of histogrammed
+    as floats."""
+    keys = np.multiply(colors[:, 1], SUM_LEVELS, dtype=np.int32)
+    total = np.add(colors[:, 0], colors[:, 1], dtype=np.int32)
+    total += colors[:, 2]
+    keys += total
+    return keys
+
+
+@cache
+def exg_of_keys() -> NDArray[np.float64]:
+    """(EXG_KEYS,) float64: the excess green of each key of :func:`exg_keys`, bit for bit
+    :func:`excess_green`'s value for the colours of that key (read-only)."""
+    green, total = np.divmod(np.arange(EXG_KEYS, dtype=np.int64), SUM_LEVELS)
+    difference = 3 * green - total  # 2G - R - B
+    total[total == 0] = 1
+    table = difference / total
+    table.flags.writeable = False
+    return table
+
+
+def exg_tally(keys: NDArray[np.int32]) -> NDArray[np.int64]:
+    """(EXG_KEYS,) int64: how many of the pixels ``keys`` (N,) (see :func:`exg_keys`; those
+    of :data:`NO_KEY` left out) have each key."""
+    return np.bincount(keys, minlength=NO_KEY + 1)[:EXG_KEYS]
+
+
+def exg_values(tally: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The distinct excess-green values (M,) of a :func:`exg_tally` and how many pixels have
+    each (M,) int64, for :func:`otsu_threshold`, :func:`choose_separation` and
+    :func:`keep_soil`. Two keys may share a value (the same ratio): it is then listed twice,
+    which changes no histogram, count or mean."""
+    present = np.flatnonzero(tally)
+    return exg_of_keys()[present], tally[present]
+
+
+def otsu_threshold(values: NDArray[np.float64], weights: NDArray[np.int64] | None = None) -> float:
+    """Otsu's threshold of ``values`` (N,), placed in the valley between the two classes.
+    With ``weights`` (N,) int64, positive, ``values[i]`` counts ``weights[i]`` times: the same
+    threshold, bit for bit, as of the values repeated (a station's pixels, tallied by colour).
+
+    Otsu's cut maximises the between-class variance; its two class means bracket the valley of
+    the histogram. The threshold returned is the middle of the first lowest run of bins between
+    the means: the same cut as Otsu's on a continuous histogram, and on a gappy one (soil, then
+    a small class of yellow-green stems, then leaves) it does not split the small class off
+    with the soil.
+    """
+    if len(values) == 0:
+        raise ValueError("Otsu's threshold of no values")
+    low, high = float(values.min()), float(values.max())
+    if high - low < 1e-12:
+        return high
+    counts, edges = np.histogram(values, bins=OTSU_BINS, range=(low, high), weights=weights)
+    centres = (edges[:-1] + edges[1:]) / 2.0
+    weight_low = np.cumsum(counts)
+    weight_high = weight_low[-1] - weight_low
+    sum_low = np.cumsum(counts * centres)
+    mean_low = sum_low / np.maximum(weight_low, 1)
+    mean_high = (sum_low[-1] - sum_low) / np.maximum(weight_high, 1)
+    between = weight_low * weight_high * (mean_low - mean_high) ** 2
+    cut = int(np.argmax(between))
+    return _valley(counts, edges, mean_low[cut], mean_high[cut])
+
+
+def _valley(
+    counts: NDArray[np.intp], edges: NDArray[np.float64], mean_low: float, mean_high: float
+) -> float:
+    """The middle of the first run of least-populated bins (after a light smoothing, so a
+    stray empty bin in a tail is no valley) with centres in (mean_low, mean_high)."""
+    centres = (edges[:-1] + edges[1:]) / 2.0
+    inside = np.flatnonzero((centres > mean_low) & (centres < mean_high))
+    if len(inside) == 0:
+        return float((mean_low + mean_high) / 2.0)
+    smooth = np.convolve(counts, np.ones(VALLEY_SMOOTHING_BINS), mode="same")
+    lowest = inside[smooth[inside] == smooth[inside].min()]
+    run_end = lowest[0]
+    while run_end + 1 in lowest:
+        run_end += 1
+    return float((edges[lowest[0]] + edges[run_end + 1]) / 2.0)
