@@ -42,7 +42,7 @@ def test_the_leaves_are_followed_whatever_the_reports_flag() -> None:
     """Every plant with an ambiguous point has its leaves followed, not only the plants the
     report flags: on a touching plot a plant's ambiguous share slipped under the flag (0.5 %)
     with a small change of the bend cost, and its ribbon, and the outer part of its leaf, went
-    with it (RECONSTRUCTION.md, "Touching canopies", seed 4 p02)."""
+    with it (docs/notes/touching-canopies.md, seed 4 p02)."""
     a, b = lying_pair(np.random.default_rng(0))
     settings = PlantSettings(stems=StemSettings(flag_ambiguous_share=0.5))
     search = search_plants(colored(np.concatenate([a, b]), LEAF_RGB), NO_SOIL, settings, 0.15)

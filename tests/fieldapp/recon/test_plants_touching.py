@@ -71,7 +71,7 @@ def test_the_widths_of_a_touching_canopy_meet_issue_20s_target(
 ) -> None:
     """On this seed p11's leaf crosses p10's in an X; with the voxels' blurred normals the
     geodesic gave the tip past the X to p10 (2.74 cm), the sheet-aware cost keeps it with p11
-    (RECONSTRUCTION.md, 'Sheets at crossings')."""
+    (docs/notes/touching-canopies.md, 'Sheets at crossings')."""
     e = matched_errors(touching, touching_session.truth)
     assert np.sqrt(np.mean(e["dw_cm"] ** 2)) <= 2.0
 
