@@ -48,7 +48,8 @@ SEEDLING_HEIGHT_M = (0.24, 0.38)
 TOUCHING_HEIGHT_M = (0.60, 0.95)
 SEEDLING_LONGEST_LEAF = (0.8, 1.1)
 """The longest leaf relative to the plant's height (seedlings)."""
-TOUCHING_LONGEST_LEAF_M = (0.55, 0.85)
+TOUCHING_LONGEST_LEAF = (0.95, 1.15)
+"""The longest leaf relative to the plant's height (touching stage: 55-100 cm long)."""
 HABITS = ("erect", "arching", "drooping")
 
 
@@ -67,7 +68,7 @@ def make_irregular_plant(
         grown = np.random.default_rng([seed, 29, 1])
         count = int(grown.integers(6, MAX_LEAVES + 1))
         height_m = float(grown.uniform(*TOUCHING_HEIGHT_M))
-        longest_m = float(grown.uniform(*TOUCHING_LONGEST_LEAF_M))
+        longest_m = height_m * float(grown.uniform(*TOUCHING_LONGEST_LEAF))
         stem_diameter_m = float(grown.uniform(0.022, 0.03))
         breadth = 0.10
     azimuth0 = float(rng.uniform(0.0, 2 * np.pi))
@@ -95,7 +96,8 @@ def make_irregular_plant(
         [np.full(len(p[0]), k - 1 if k else STEM_PART, np.int16) for k, p in enumerate(parts)]
     )
     leaning = rotation_z(lean_dir) @ rotation_x(lean_deg) @ rotation_z(-lean_dir)
-    vertices = vertices @ leaning.T  # built to size: its height is what its leaves make it
+    vertices = vertices @ leaning.T
+    vertices *= height_m / vertices[:, 2].max()  # built near size, held to the stage's heights
     base = np.array([base_xy_m[0], base_xy_m[1], ground_z_m])
     vertices += base
     shade = float(rng.uniform(0.92, 1.08))
