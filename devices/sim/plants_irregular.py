@@ -20,9 +20,12 @@ Specified on its own, in metres, from how field maize looks (not by perturbing
 - **Colour**: each leaf its own green (still clearly green: excess green > 0.2 on the albedo),
   a lighter midrib, yellower tips, older leaves paler; per-leaf near-infrared albedo.
 
-Both stages (``seedling``: 24-38 cm on day 0, 4-7 leaves, growing with ``day`` as the first
-model does; ``touching``: 60-95 cm, 6-9 leaves up to 55-85 cm long). Truth (height, width, organs)
-is read from the finished mesh, as for the first model.
+Both stages: ``seedling`` (24-38 cm on day 0, 4-7 leaves, the longest 0.8-1.1 x the height,
+growing with ``day`` as the first model does) and ``touching`` (60-95 cm, 6-9 leaves, the longest
+0.95-1.15 x the height as built, so 45-110 cm; own draws, the seedlings unchanged by them).
+Each plant is built near size, then scaled to its drawn height, as the first model's are (built
+to size, some touching plants reached 117 cm, above what the rig's camera sees whole). Truth
+(height, width, organs) is read from the finished mesh, as for the first model.
 """
 
 from __future__ import annotations
