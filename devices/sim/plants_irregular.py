@@ -30,6 +30,8 @@ to size, some touching plants reached 117 cm, above what the rig's camera sees w
 
 from __future__ import annotations
 
+from statistics import NormalDist
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -39,6 +41,7 @@ from devices.sim.plants import (
     STEM_PART,
     Part,
     PlantMesh,
+    _strip,
     growth_factor,
     leaves_on_day,
 )
@@ -118,9 +121,7 @@ def make_irregular_plant(
 
 
 def _normal(u: float) -> float:
-    """A standard normal deviate from a uniform one (Box-Muller's radius alone would need two)."""
-    from statistics import NormalDist
-
+    """A standard normal deviate from a uniform draw (each leaf's draws are all uniform)."""
     return NormalDist().inv_cdf(min(max(u, 1e-6), 1 - 1e-6))
 
 
@@ -234,9 +235,3 @@ def _habit(rank: float, draw: float) -> str:
     if draw < erect:
         return "erect"
     return "drooping" if draw < erect + drooping else "arching"
-
-
-def _strip(rings: int, per_ring: int, closed: bool) -> NDArray[np.int64]:
-    from devices.sim.plants import _strip as strip
-
-    return strip(rings, per_ring, closed)
