@@ -6,6 +6,9 @@ same plants. Two stages (:data:`STAGES`): ``seedling`` (the paper's plots, 26-35
 and ``touching`` (the later scan dates: 55-90 cm, 5-8 leaves, long leaves that reach across the
 80 cm spacing into the neighbours' space). Truth (height, width) is computed from the finished
 mesh.
+
+This is the ``distichous`` model, the default; :data:`PLANT_MODELS` names the second,
+``irregular`` (:mod:`devices.sim.plants_irregular`), drawn through the same :func:`make_plant`.
 """
 
 from __future__ import annotations
