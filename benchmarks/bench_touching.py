@@ -1,6 +1,7 @@
 """The plants step on touching canopies (issue 20): accuracy per seed and its spread.
 
-``prepare`` simulates sessions (``fieldapp simulate --stage touching`` and seedling plots),
+``prepare`` simulates sessions (``fieldapp simulate --stage touching`` and seedling plots, of
+the default plant model or of ``--plant-model``; keep each model in its own ``--dir``),
 reconstructs each up to the plants step once and pickles that step's inputs (the plot cloud
 and soil in the map frame, the local ground radius). ``run`` then runs only the plants step
 (without a grid prior) and its traits on every pickled input, and on perturbed copies of it
@@ -10,7 +11,7 @@ to ``truth.json`` within 12 cm in the map frame), the plants step's CPU time, an
 of width RMSE over the perturbations:
 
     .venv/bin/python benchmarks/bench_touching.py prepare --dir /tmp/touching \
-        --touching 0-8 --seedling 0-2
+        --touching 0-8 --seedling 0-2 [--plant-model irregular]
     .venv/bin/python benchmarks/bench_touching.py run --dir /tmp/touching [--perturb 3] \
         [--set stems.follow_leaves=false] [--only t3,t8] [--plants]
 
@@ -63,7 +64,9 @@ def _keeper(target: Path) -> Any:
     return keep
 
 
-def prepare(folder: Path, touching: list[int], seedling: list[int]) -> None:
+def prepare(
+    folder: Path, touching: list[int], seedling: list[int], plant_model: str = "distichous"
+) -> None:
     from fieldapp.io.session import load_session
     from fieldapp.recon import stages
     from fieldapp.recon.pipeline import run_reconstruction
@@ -76,6 +79,7 @@ def prepare(folder: Path, touching: list[int], seedling: list[int]) -> None:
         session = folder / name
         if not (session / "truth.json").exists():
             cmd = [sys.executable, "-m", "fieldapp", "simulate", "--out", str(session)]
+            cmd += ["--plant-model", plant_model]
             subprocess.run([*cmd, "--seed", str(seed), "--stage", stage], check=True)
         target = folder / f"{name}.pkl"
         if target.exists():
@@ -201,6 +205,7 @@ def main() -> int:
     p.add_argument("--dir", type=Path, required=True)
     p.add_argument("--touching", type=_seeds, default=_seeds("0-8"))
     p.add_argument("--seedling", type=_seeds, default=_seeds("0-2"))
+    p.add_argument("--plant-model", default="distichous")
     r = sub.add_parser("run")
     r.add_argument("--dir", type=Path, required=True)
     r.add_argument("--only", type=lambda t: t.split(","), default=[])
@@ -209,7 +214,7 @@ def main() -> int:
     r.add_argument("--plants", action="store_true")
     args = parser.parse_args()
     if args.command == "prepare":
-        prepare(args.dir, args.touching, args.seedling)
+        prepare(args.dir, args.touching, args.seedling, args.plant_model)
     else:
         run(args.dir, args.only, args.perturb, args.set, args.plants)
     return 0

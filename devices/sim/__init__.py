@@ -1,7 +1,8 @@
 """The simulated world: a plot of maize seedlings, foam spheres and checkerboards on uneven
 soil, seen by a simulated Kinect v2 on a turntable on a mobile base.
 
-- :mod:`devices.sim.scene` (with ``soil``, ``plants``, ``boards``): the world's meshes and truth.
+- :mod:`devices.sim.scene` (with ``soil``, ``plants``, ``boards``): the world's meshes and truth;
+  ``plants`` and ``plants_irregular`` are the two plant models (``--plant-model``).
 - :mod:`devices.sim.rig`: stations, base, turntable and camera poses.
 - :mod:`devices.sim.render`: ray casting into Kinect-like frames (colour, IR), with
   :mod:`devices.sim.sensor` (noise, artefacts, range) and :mod:`devices.sim.shadows`.

@@ -2,8 +2,10 @@
 azimuth and insertion height, and the stem's diameter (definitions in docs/TRAITS.md).
 
 Read from the finished mesh (leaning, scaled, settled on the soil): the stem is a tapering
-prism of rings (:func:`devices.sim.plants._stem`), a leaf a ribbon of three vertices per
-section, its midrib the middle one.
+prism of rings of ``PlantMesh.stem_sides`` vertices (:func:`devices.sim.plants._stem`), a leaf a
+ribbon of ``PlantMesh.section_vertices`` vertices per section (three for the first model, five
+for the ``irregular`` one), its midrib the middle one, its flattened width the length of the
+section from margin to margin.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from devices.sim.plants import STEM_PART, STEM_SIDES, PlantMesh
+from devices.sim.plants import STEM_PART, PlantMesh
 
 BASE_CHORD_M = 0.05
 """The midrib's direction at its base: the chord from the collar to the midrib point this far
@@ -42,7 +44,8 @@ def organ_truth(mesh: PlantMesh) -> dict[str, Any]:
         leaf["leaf_id"] = number
     lowest_m = min((leaf["insertion_height_cm"] for leaf in leaves), default=0.0) / 100.0
     heights = mesh.base_m[2] + np.linspace(0.0, lowest_m, STEM_SAMPLES)
-    diameters = 2.0 * np.interp(heights, centres[:, 2], radii) * _GIRTH_PER_DIAMETER
+    girth = mesh.stem_sides * np.sin(np.pi / mesh.stem_sides) / np.pi
+    diameters = 2.0 * np.interp(heights, centres[:, 2], radii) * girth
     return {
         "stem_diameter_mm": round(1000.0 * float(np.median(diameters)), 3),
         "leaf_count": len(leaves),
@@ -51,13 +54,9 @@ def organ_truth(mesh: PlantMesh) -> dict[str, Any]:
     }
 
 
-_GIRTH_PER_DIAMETER = STEM_SIDES * np.sin(np.pi / STEM_SIDES) / np.pi
-"""A regular prism's girth over pi, per circumscribed diameter: the diameter a tape gives."""
-
-
 def _stem_rings(mesh: PlantMesh) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Centres (R, 3) and circumscribed radii (R,) of the stem's rings, bottom first."""
-    stem = mesh.vertices_m[mesh.organ_of_vertex == STEM_PART].reshape(-1, STEM_SIDES, 3)
+    stem = mesh.vertices_m[mesh.organ_of_vertex == STEM_PART].reshape(-1, mesh.stem_sides, 3)
     centres = stem.mean(axis=1)
     radii = np.linalg.norm(stem - centres[:, None, :], axis=2).mean(axis=1)
     return centres, radii
@@ -71,13 +70,13 @@ def _leaf_truth(
     axis: NDArray[np.float64],
 ) -> dict[str, Any]:
     chosen = np.flatnonzero(mesh.organ_of_vertex == k)
-    sections = mesh.vertices_m[chosen].reshape(-1, 3, 3)  # (S, left/midrib/right, xyz)
-    midrib = _from_collar(sections[:, 1], centres, radii, axis)
+    across = mesh.section_vertices
+    sections = mesh.vertices_m[chosen].reshape(-1, across, 3)  # (S, margin to margin, xyz)
+    middle = sections[:, across // 2]
+    midrib = _from_collar(middle, centres, radii, axis)
     collar, tip = midrib[0], midrib[-1]
-    width = np.linalg.norm(sections[:, 0] - sections[:, 1], axis=1) + np.linalg.norm(
-        sections[:, 2] - sections[:, 1], axis=1
-    )
-    section_s = _arc(sections[:, 1])
+    width = np.linalg.norm(np.diff(sections, axis=1), axis=2).sum(axis=1)  # flattened
+    section_s = _arc(middle)
     collar_s = section_s[-1] - _arc_length(midrib)
     s = np.concatenate([[collar_s], section_s[section_s > collar_s]])
     area = np.trapezoid(np.interp(s, section_s, width), s)

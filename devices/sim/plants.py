@@ -6,11 +6,14 @@ same plants. Two stages (:data:`STAGES`): ``seedling`` (the paper's plots, 26-35
 and ``touching`` (the later scan dates: 55-90 cm, 5-8 leaves, long leaves that reach across the
 80 cm spacing into the neighbours' space). Truth (height, width) is computed from the finished
 mesh.
+
+This is the ``distichous`` model, the default; :data:`PLANT_MODELS` names the second,
+``irregular`` (:mod:`devices.sim.plants_irregular`), drawn through the same :func:`make_plant`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -26,6 +29,9 @@ GROWTH_PER_DAY = 0.05
 """Relative height gain per day (linear): 1.25 x on day 5, 2 x on day 20."""
 
 STAGES = ("seedling", "touching")
+PLANT_MODELS = ("distichous", "irregular")
+"""``distichous`` (the default, this module's) and ``irregular``
+(:mod:`devices.sim.plants_irregular`, held out from the plants step's tuning)."""
 TOUCHING_HEIGHT_M = (0.55, 0.90)
 """Heights of the ``touching`` stage (uniform; ``--day`` does not change them)."""
 TOUCHING_LEAF_REACH = 1.8
@@ -50,6 +56,9 @@ class PlantMesh:
     - ``organ_of_vertex``: (V,) int16, :data:`STEM_PART` for the stem, k for leaf k (0 lowest);
       ``None`` when unknown. The organ truth (:mod:`devices.sim.organ_truth`) is read from it.
     - ``leaves``: how many leaves it has.
+    - ``stem_sides``: vertices per ring of the stem (its first vertices, rings bottom up);
+      ``section_vertices``: vertices per cross-section of a leaf (margin to margin, the midrib
+      the middle one). The organ truth reads the mesh through them.
     """
 
     vertices_m: NDArray[np.float64]
@@ -59,6 +68,8 @@ class PlantMesh:
     base_m: NDArray[np.float64]
     organ_of_vertex: NDArray[np.int16] | None = None
     leaves: int = 0
+    stem_sides: int = STEM_SIDES
+    section_vertices: int = 3
 
     @property
     def height_m(self) -> float:
@@ -88,14 +99,21 @@ def make_plant(
     base_xy_m: tuple[float, float],
     ground_z_m: float,
     stage: str = "seedling",
+    model: str = "distichous",
 ) -> PlantMesh:
     """Draw the plant of ``seed`` on ``day`` at ``stage`` (one of :data:`STAGES`), standing at
-    ``base_xy_m`` on ground ``ground_z_m``.
+    ``base_xy_m`` on ground ``ground_z_m``, from plant ``model`` (one of :data:`PLANT_MODELS`).
 
     Leaf tips may droop below uneven soil: lift them with :func:`settle_on_ground`.
     """
     if stage not in STAGES:
         raise ValueError(f"stage must be one of {', '.join(STAGES)}, got {stage!r}")
+    if model not in PLANT_MODELS:
+        raise ValueError(f"plant model must be one of {', '.join(PLANT_MODELS)}, got {model!r}")
+    if model == "irregular":
+        from devices.sim.plants_irregular import make_irregular_plant
+
+        return make_irregular_plant(seed, day, base_xy_m, ground_z_m, stage)
     rng = np.random.default_rng([seed, 7])
     base_leaves = int(rng.integers(5, 8))
     count = leaves_on_day(base_leaves, day)
@@ -148,15 +166,7 @@ def settle_on_ground(mesh: PlantMesh, ground_z_m: NDArray[np.float64]) -> PlantM
     floor = ground_z_m + 0.005
     lift = above_foot & (vertices[:, 2] < floor)
     vertices[lift, 2] = floor[lift]
-    return PlantMesh(
-        vertices,
-        mesh.triangles,
-        mesh.albedo_rgb,
-        mesh.albedo_ir,
-        mesh.base_m,
-        organ_of_vertex=mesh.organ_of_vertex,
-        leaves=mesh.leaves,
-    )
+    return replace(mesh, vertices_m=vertices)
 
 
 def _offset_triangles(parts: list[NDArray[np.int64]]) -> list[NDArray[np.int64]]:

@@ -182,16 +182,22 @@ class PlotLayout:
 
 
 def add_plot(
-    scene: Scene, seed: int, day: int, layout: PlotLayout, stage: str = "seedling"
+    scene: Scene,
+    seed: int,
+    day: int,
+    layout: PlotLayout,
+    stage: str = "seedling",
+    plant_model: str = "distichous",
 ) -> None:
     """Sow the plot of ``seed`` (positions and plants do not depend on ``day``) at ``stage``
-    (:data:`devices.sim.plants.STAGES`)."""
+    (:data:`devices.sim.plants.STAGES`) with plants of ``plant_model``
+    (:data:`devices.sim.plants.PLANT_MODELS`)."""
     if scene.soil is None:
         raise ValueError("a plot needs soil")
     rng = np.random.default_rng([seed, 11])
     for index, (x, y) in enumerate(layout.positions(rng)):
         ground_z = scene.soil.height_at(x, y)
-        mesh = make_plant(seed * 1000 + index, day, (x, y), ground_z, stage)
+        mesh = make_plant(seed * 1000 + index, day, (x, y), ground_z, stage, plant_model)
         ground = scene.soil.height_m(mesh.vertices_m[:, 0], mesh.vertices_m[:, 1])
         scene.add_plant(f"p{index + 1:02d}", settle_on_ground(mesh, ground))
 
@@ -224,11 +230,12 @@ def plot_scene(
     layout: PlotLayout | None = None,
     soil: SoilSpec | None = None,
     stage: str = "seedling",
+    plant_model: str = "distichous",
 ) -> Scene:
     """The paper's plot: 16 maize plants at 0.8 m on uneven soil (seedlings by default; or
-    ``layout``)."""
+    ``layout``; plants of ``plant_model``)."""
     scene = empty_scene(seed, soil)
-    add_plot(scene, seed, day, layout or PlotLayout(), stage)
+    add_plot(scene, seed, day, layout or PlotLayout(), stage, plant_model)
     return scene
 
 

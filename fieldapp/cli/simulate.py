@@ -65,6 +65,13 @@ def register(subparsers: Any) -> None:
         "canopies reaching across the 80 cm spacing)",
     )
     parser.add_argument(
+        "--plant-model",
+        default="distichous",
+        help="plot scene's plants: distichous (default: leaves at 180 degrees, set along the "
+        "rows when touching) or irregular (a second model: phyllotaxy off 180 degrees, plants "
+        "turned at random, twisted wavy leaves, erect to drooping)",
+    )
+    parser.add_argument(
         "--stations", default=None, help="stations to visit, e.g. 4,5 or 1-9 (default: all)"
     )
     parser.add_argument("--views", default="0-7", help="views per station, e.g. 0,1 or 0-7")
@@ -127,12 +134,16 @@ def run(args: argparse.Namespace) -> int:
 
     if args.scene not in SCENES:
         raise FieldappError(f"--scene: {args.scene!r} is not one of {', '.join(SCENES)}")
-    from devices.sim.plants import STAGES
+    from devices.sim.plants import PLANT_MODELS, STAGES
 
     seed = parse_int("seed", args.seed, 0, 2**31 - 1)
     day = parse_int("day", args.day, 0, 120)
     if args.stage not in STAGES:
         raise FieldappError(f"--stage: {args.stage!r} is not one of {', '.join(STAGES)}")
+    if args.plant_model not in PLANT_MODELS:
+        raise FieldappError(
+            f"--plant-model: {args.plant_model!r} is not one of {', '.join(PLANT_MODELS)}"
+        )
     rig = RigGeometry(grid=parse_int("grid", args.grid, 2, MAX_GRID))
     last = rig.grid**2
     stations = parse_list("stations", args.stations or f"1-{last}", 1, last)
@@ -148,9 +159,13 @@ def run(args: argparse.Namespace) -> int:
         if args.scene == "turntable":
             count = _write_turntable(args.out, seed, day, views, args.depth_only)
         else:
-            world = build_world(args.scene, seed, day, rig, args.plants, args.stage)
+            world = build_world(
+                args.scene, seed, day, rig, args.plants, args.stage, args.plant_model
+            )
             about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
             about |= {"stage": args.stage, "grid": rig.grid}
+            if args.plant_model != "distichous":  # absent: the first model (sessions unchanged)
+                about["plant_model"] = args.plant_model
             if arrival:
                 about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
             if args.depth_only:
@@ -180,6 +195,7 @@ def build_world(
     rig: RigGeometry,
     plants: bool,
     stage: str = "seedling",
+    plant_model: str = "distichous",
 ) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.scene import (
@@ -194,7 +210,7 @@ def build_world(
     layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
     soil = soil_for_plot(rig.plot_half_extent_m)
     if scene_name == "plot":
-        scene = plot_scene(seed, day, layout, soil, stage)
+        scene = plot_scene(seed, day, layout, soil, stage, plant_model)
     elif scene_name == "spheres":
         scene = spheres_scene(seed, day, plants, layout, soil)
     elif scene_name == "soil":
@@ -263,7 +279,8 @@ def write_session(
     from fieldapp.io.writer import SessionWriter
 
     stage = "" if about.get("stage", "seedling") == "seedling" else f"-{about['stage']}"
-    session_id = f"sim-{about['scene']}-seed{seed}-day{about['day']}{stage}"
+    model = f"-{about['plant_model']}" if "plant_model" in about else ""
+    session_id = f"sim-{about['scene']}-seed{seed}-day{about['day']}{stage}{model}"
     extra: dict[str, Any] = {"simulated": about} | ({"plan": plan} if plan else {})
     writer = SessionWriter.create(folder, session_id, nominal_calibration(world), extra=extra)
     truths = []
