@@ -32,3 +32,36 @@ def test_usage_errors_exit_2_without_traceback():
     assert result.returncode == 2
     assert "invalid choice" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_output_into_a_closed_pipe_ends_quietly():
+    """``fieldapp ... | head``: the reader leaves before the command writes; the command stops
+    as one killed by SIGPIPE would (141), without a traceback."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "fieldapp", "camera", "info"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert process.stdout is not None
+    process.stdout.close()  # before the child can write: its first line meets a closed pipe
+    _, stderr = process.communicate()
+    assert process.returncode == 128 + 13
+    assert "Traceback" not in stderr
+    assert "BrokenPipeError" not in stderr
+
+
+def test_a_broken_pipe_in_a_handler_returns_141(monkeypatch):
+    import argparse
+
+    import fieldapp.cli as cli
+
+    def handler(_args):
+        raise BrokenPipeError
+
+    parser = argparse.ArgumentParser(prog="fieldapp")
+    parser.add_argument("-v", "--verbose", action="store_true")
+    subparsers = parser.add_subparsers(dest="command", required=True)
+    subparsers.add_parser("write").set_defaults(handler=handler)
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    assert cli.main(["write"]) == cli.EXIT_BROKEN_PIPE
