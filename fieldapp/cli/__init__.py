@@ -5,7 +5,9 @@ Layers above the core add their subcommands through the ``fieldapp.commands`` en
 group (``pyproject.toml``): the core never imports them, yet ``fieldapp gui`` works.
 
 Subcommand modules import their heavy dependencies inside their handlers, so ``--help`` stays
-fast.
+fast. A command line naming one of the core's subcommands imports that module alone (and looks
+up no entry points): the others, 30 ms, were start-up that ``fieldapp reconstruct`` waits on
+before its station reader starts (issue 22).
 """
 
 from __future__ import annotations
@@ -16,9 +18,9 @@ import logging
 import pkgutil
 import sys
 from collections.abc import Callable, Sequence
-from importlib.metadata import entry_points
+from typing import Any
 
-from fieldapp import __version__
+import fieldapp
 from fieldapp.cli import _blas  # noqa: F401  (before numpy loads: OpenBLAS on one thread)
 from fieldapp.errors import FieldappError
 
@@ -29,27 +31,84 @@ PLUGIN_GROUP = "fieldapp.commands"
 log = logging.getLogger("fieldapp")
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _Version(argparse.Action):
+    """``--version``: the version is looked up only when asked for (``fieldapp.__version__``)."""
+
+    def __init__(self, option_strings: list[str], dest: str, **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, nargs=0, help="show the version and exit")
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> None:
+        print(f"fieldapp {fieldapp.__version__}")
+        parser.exit()
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The command line's parser; given the arguments, only what parsing them needs: the one
+    core subcommand they name (:func:`_named_module`), else every subcommand."""
+    only = _named_module(argv)
+    if only is not None:
+        parser = _parser([only], plugins=False)
+        command = _command(argv)
+        if command in _subcommands(parser):
+            return parser
+    modules = [info.name for info in pkgutil.iter_modules(__path__)]
+    return _parser(sorted(m for m in modules if not m.startswith("_")), plugins=True)
+
+
+def _parser(modules: list[str], plugins: bool) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fieldapp",
         description="Maize seedling phenotyping with a Kinect v2 on a turntable on a mobile base.",
     )
-    parser.add_argument("--version", action="version", version=f"fieldapp {__version__}")
+    parser.add_argument("--version", action=_Version)
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"{__name__}.{info.name}")
+    for name in modules:
+        module = importlib.import_module(f"{__name__}.{name}")
         module.register(subparsers)
-    for entry in sorted(entry_points(group=PLUGIN_GROUP), key=lambda e: e.name):
-        entry.load()(subparsers)
+    if plugins:
+        from importlib.metadata import entry_points
+
+        for entry in sorted(entry_points(group=PLUGIN_GROUP), key=lambda e: e.name):
+            entry.load()(subparsers)
     return parser
+
+
+def _command(argv: Sequence[str] | None) -> str | None:
+    """The subcommand's name: the first argument that is not an option (the options before it,
+    ``-v``, ``--version``, ``-h``, take no value)."""
+    for argument in sys.argv[1:] if argv is None else argv:
+        if not argument.startswith("-"):
+            return argument
+    return None
+
+
+def _named_module(argv: Sequence[str] | None) -> str | None:
+    """The core module that may hold the subcommand named in ``argv``: ``sim-base`` ->
+    ``sim_base``, ``import`` -> ``import_``; ``None`` when there is none (``--help``, a
+    plugin's command, a mistake)."""
+    command = _command(argv)
+    if command is None:
+        return None
+    modules = {info.name for info in pkgutil.iter_modules(__path__)}
+    for name in (command.replace("-", "_"), command.replace("-", "_") + "_"):
+        if name in modules and not name.startswith("_"):
+            return name
+    return None
+
+
+def _subcommands(parser: argparse.ArgumentParser) -> set[str]:
+    return {
+        name
+        for action in parser._actions
+        if isinstance(action, argparse._SubParsersAction)
+        for name in action.choices
+    }
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit code."""
-    parser = build_parser()
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,

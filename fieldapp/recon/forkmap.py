@@ -36,7 +36,7 @@ import signal
 import time
 import traceback
 import warnings
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Executor, ThreadPoolExecutor
 from multiprocessing.connection import Connection
 from types import TracebackType
@@ -109,19 +109,28 @@ class ForkedMap:
             self._local.shutdown(wait=True, cancel_futures=True)
             self._local = None
 
-    def map(self, function: Callable[[T], R], items: Iterable[T]) -> Iterator[R]:
+    def map(
+        self,
+        function: Callable[[T], R],
+        items: Iterable[T],
+        costs: Sequence[float] | None = None,
+    ) -> Iterator[R]:
         """``function`` of each item, in order. With a worker, ``function`` and the items must
         pickle (a module-level function, plain data). Closing the iterator early leaves the
-        items not started undone."""
+        items not started undone. ``costs``: each item's expected cost (any unit); with a
+        worker, each side then starts on the largest and the two meet on the smallest
+        (:func:`largest_at_the_ends`), so neither waits long for the other's last item."""
         items = list(items)
         if self._worker is not None and len(items) >= 2:
-            yield from self._shared(function, items)
+            order = list(range(len(items))) if costs is None else largest_at_the_ends(costs)
+            yield from self._shared(function, items, order)
             return
         yield from (self._local.map(function, items) if self._local else map(function, items))
 
-    def _shared(self, function: Callable[[T], R], items: list[T]) -> Iterator[R]:
-        """The worker takes items from the front, this process from the back, one at a time,
-        until they meet; results are yielded in order as soon as they are known."""
+    def _shared(self, function: Callable[[T], R], items: list[T], order: list[int]) -> Iterator[R]:
+        """The worker takes items from the front of ``order``, this process from the back, one
+        at a time, until they meet; results are yielded in the items' order as soon as they
+        are known."""
         worker = self._worker
         assert worker is not None
         done: dict[int, R] = {}
@@ -130,7 +139,7 @@ class ForkedMap:
         for i in range(len(items)):
             while i not in done:
                 if busy is None and worker.alive and front <= back:
-                    busy, front = front, front + 1
+                    busy, front = order[front], front + 1
                     worker.send(function, items[busy])
                 if busy is not None and (front > back or worker.ready()):
                     outcome = worker.receive(POLL_S if front > back else 0.0)
@@ -143,8 +152,18 @@ class ForkedMap:
                         done[busy] = outcome
                     busy = None
                 elif front <= back:
-                    done[back], back = function(items[back]), back - 1
+                    done[order[back]], back = function(items[order[back]]), back - 1
             yield done.pop(i)
+
+
+def largest_at_the_ends(costs: Sequence[float]) -> list[int]:
+    """An order of the items (indices) with the costliest at both ends and the cheapest in the
+    middle, alternately front and back from the largest down (ties in index order): two
+    processes taking items from the two ends then meet on cheap items."""
+    by_cost = sorted(range(len(costs)), key=lambda i: (-costs[i], i))
+    front = by_cost[0::2]
+    back = by_cost[1::2]
+    return front + back[::-1]
 
 
 _PENDING = object()

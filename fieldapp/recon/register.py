@@ -13,7 +13,7 @@ Every station gets a verdict (refined, coarse kept, unreliable) and an estimated
 from __future__ import annotations
 
 import logging
-from collections.abc import Generator
+from collections.abc import Callable, Generator, Iterable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -96,7 +96,9 @@ def register_stations(
         each = runner.worker_threads
         # closing this generator closes map's iterator, which drops the pairs not started
         for fit in runner.map(
-            _register_pair, [(o, nodes[o.b][:3, 3], settings, None, each) for o in overlaps]
+            _register_pair,
+            [(o, nodes[o.b][:3, 3], settings, None, each) for o in overlaps],
+            _pair_costs(overlaps),
         ):
             fits.append(fit)
             yield len(fits) / len(overlaps), f"stations {fit.a}-{fit.b} registered"
@@ -121,22 +123,31 @@ def register_stations(
         for k, fit in zip(sorted(guesses), again, strict=True):
             fits[k] = fit
             yield 1.0, f"stations {fit.a}-{fit.b} registered again from the plot's solution"
-    left_out = [doubtful[k] for k in sorted(set(doubtful) - set(guesses))]
-    registrations = _solve_plot(
-        nodes,
-        overlaps,
-        fits,
-        reference,
-        settings,
-        T_field_station_coarse,
-        None if guesses else first[1],
-        {found.k for found in left_out},
-    )
+        left_out = [doubtful[k] for k in sorted(set(doubtful) - set(guesses))]
+        # the guards' overlap checks, a pair at a time, on both processes (forked only: on
+        # threads the trees' builds would take turns on the GIL)
+        registrations = _solve_plot(
+            nodes,
+            overlaps,
+            fits,
+            reference,
+            settings,
+            T_field_station_coarse,
+            None if guesses else first[1],
+            {found.k for found in left_out},
+            runner.map if runner.forked else None,
+        )
     for station, note in ambiguity.notes(left_out).items():  # never silently wrong
         if registrations[station].verdict in (guards.COARSE_KEPT, guards.UNRELIABLE):
             message = f"{registrations[station].message}; {note}"
             registrations[station] = replace(registrations[station], message=message)
     return registrations
+
+
+def _pair_costs(overlaps: list[Overlap]) -> list[float]:
+    """Each pair's expected cost: its points (a pair's time follows them, correlation 0.93-0.97
+    on seeds 1 and 2)."""
+    return [float(len(o.points_a_m) + len(o.points_b_m)) for o in overlaps]
 
 
 def _register_pair(
@@ -145,6 +156,33 @@ def _register_pair(
     """:func:`register_overlap` of one ``(overlap, b's centre, settings, guess, threads)``: a
     module-level function of plain data, so a worker process can run it."""
     return register_overlap(*job)
+
+
+AgreementJob = tuple[Overlap, list[tuple[int, Matrix4, Matrix4]], float]
+"""An overlap, for each side to check (side, its move at the coarse pose, corrected), the cap."""
+PairMap = Callable[
+    [Callable[[AgreementJob], list[tuple[float, float]]], list[AgreementJob], list[float]],
+    Iterable[list[tuple[float, float]]],
+]
+""":meth:`ForkedMap.map` of the guards' checks: (function, jobs, their expected costs)."""
+
+
+def _pair_agreement(job: AgreementJob) -> list[tuple[float, float]]:
+    """The guards' (before, after) terms of each side of one overlap (:meth:`_Plot.agreement`):
+    the other side's tree built here, once for the pair, in whichever process runs it."""
+    overlap, sides, cap = job
+    clouds = (overlap.points_a_m, overlap.points_b_m)
+    answers = []
+    for side, T_before, T_after in sides:
+        mine = clouds[side][:: guards.SAMPLE_STRIDE]
+        theirs = cKDTree(clouds[1 - side])
+        answers.append(
+            (
+                guards.overlap_disagreement(mine, theirs, T_before, cap),
+                guards.overlap_disagreement(mine, theirs, T_after, cap),
+            )
+        )
+    return answers
 
 
 def _first_solution(
@@ -259,10 +297,14 @@ def _solve_plot(
     T_field_station_coarse: dict[int, Matrix4],
     first: posegraph.Solution | None = None,
     left_out: frozenset[int] | set[int] = frozenset(),
+    map_pairs: PairMap | None = None,
 ) -> dict[int, StationRegistration]:
     """Solve the graph, then fix the station failing its guards worst at its coarse pose and
     solve again, until every free station passes. ``first``: the solution of the graph of
-    every usable fit (but those ``left_out``), when already solved."""
+    every usable fit (but those ``left_out``), when already solved. ``map_pairs``: runs the
+    overlap checks of each solution a pair at a time (:func:`_pair_agreement`, on a worker
+    process too); without it they run here, with one tree of each side kept for every
+    solution."""
     all_edges, priors = _edges(nodes, fits, reference, settings)
     usable = [k for k in _usable_fits(all_edges, fits, nodes, settings) if k not in left_out]
     tolerance = posegraph.Tolerance(settings.edge_tolerance_m, settings.edge_tolerance_deg)
@@ -279,6 +321,8 @@ def _solve_plot(
         plot = _Plot(
             nodes, priors, overlaps, fits, chosen, solution, settings, reference, fixed, trees
         )
+        if map_pairs is not None:
+            plot.terms = plot.agreement_terms(map_pairs)
         failure = plot.worst_failure()
         if failure is None:
             break
@@ -301,6 +345,9 @@ class _Plot:
     reference: int
     fixed: dict[int, str]
     trees: dict[tuple[int, int], cKDTree]
+    terms: dict[tuple[int, int], tuple[float, float]] = field(default_factory=dict)
+    """(overlap, side) -> that side's (before, after) terms of :meth:`agreement`, computed
+    ahead (:meth:`agreement_terms`); the rest are computed when asked for."""
 
     def correction(self, station: int) -> Matrix4:
         """Field-frame correction of ``station`` relative to the reference station (maps its
@@ -340,18 +387,9 @@ class _Plot:
 
     def guard_problem(self, station: int) -> tuple[float, str] | None:
         """(severity, reason) when the station's correction fails a guard."""
-        twist = se3.log(
-            invert(self.nodes[station]) @ self.correction(station) @ self.nodes[station]
-        )
-        sigmas = guards.mahalanobis(twist, self.priors[station])
-        if sigmas > self.settings.guard_sigmas:
-            shift_m, turn_deg = posegraph.disagreement(twist)
-            limit_m, limit_deg = self.limits(station)
-            return sigmas, (
-                f"correction {1000 * shift_m:.0f} mm / {turn_deg:.2f} deg is {sigmas:.1f} sigma "
-                f"of the expected arrival error (limit {self.settings.guard_sigmas:g} sigma: "
-                f"about {1000 * limit_m:.0f} mm / {limit_deg:.2f} deg here)"
-            )
+        implausible = self._implausible(station)
+        if implausible is not None:
+            return implausible
         before, after = self.agreement(station)
         if self.kept_fits(station) and after >= before:
             return 0.0, (
@@ -360,22 +398,84 @@ class _Plot:
             )
         return None
 
+    def _implausible(self, station: int) -> tuple[float, str] | None:
+        """(severity, reason) when the station's correction lies beyond ``guard_sigmas`` of
+        its expected arrival error."""
+        twist = se3.log(
+            invert(self.nodes[station]) @ self.correction(station) @ self.nodes[station]
+        )
+        sigmas = guards.mahalanobis(twist, self.priors[station])
+        if sigmas <= self.settings.guard_sigmas:
+            return None
+        shift_m, turn_deg = posegraph.disagreement(twist)
+        limit_m, limit_deg = self.limits(station)
+        return sigmas, (
+            f"correction {1000 * shift_m:.0f} mm / {turn_deg:.2f} deg is {sigmas:.1f} sigma "
+            f"of the expected arrival error (limit {self.settings.guard_sigmas:g} sigma: "
+            f"about {1000 * limit_m:.0f} mm / {limit_deg:.2f} deg here)"
+        )
+
     def agreement(self, station: int) -> tuple[float, float]:
         """Mean squared overlap disagreement (m^2) of ``station`` at its coarse and its
         corrected pose, the neighbours at their solved poses (kept edges only)."""
         before = after = 0.0
         for k in self.kept_fits(station):
-            overlap = self.overlaps[k]
-            side = 0 if overlap.a == station else 1
-            mine = (overlap.points_a_m, overlap.points_b_m)[side][:: guards.SAMPLE_STRIDE]
-            theirs = self.tree(k, 1 - side)
-            T_other_inverse = invert(self.correction((overlap.b, overlap.a)[side]))
-            cap = self.settings.max_correspondence_m
-            before += guards.overlap_disagreement(mine, theirs, T_other_inverse, cap)
-            after += guards.overlap_disagreement(
-                mine, theirs, T_other_inverse @ self.correction(station), cap
-            )
+            side = 0 if self.overlaps[k].a == station else 1
+            if (k, side) in self.terms:
+                term_before, term_after = self.terms[(k, side)]
+            else:
+                T_before, T_after = self._moves(k, side)
+                overlap = self.overlaps[k]
+                mine = (overlap.points_a_m, overlap.points_b_m)[side][:: guards.SAMPLE_STRIDE]
+                theirs = self.tree(k, 1 - side)
+                cap = self.settings.max_correspondence_m
+                term_before = guards.overlap_disagreement(mine, theirs, T_before, cap)
+                term_after = guards.overlap_disagreement(mine, theirs, T_after, cap)
+            before += term_before
+            after += term_after
         return before, after
+
+    def _moves(self, k: int, side: int) -> tuple[Matrix4, Matrix4]:
+        """How side ``side`` of overlap ``k`` is moved onto the other side's points for
+        :meth:`agreement`: at its coarse pose, then corrected, the other at its solved pose."""
+        overlap = self.overlaps[k]
+        T_other_inverse = invert(self.correction((overlap.b, overlap.a)[side]))
+        return T_other_inverse, T_other_inverse @ self.correction((overlap.a, overlap.b)[side])
+
+    def agreement_terms(self, map_pairs: PairMap) -> dict[tuple[int, int], tuple[float, float]]:
+        """Every term :meth:`worst_failure` will ask :meth:`agreement` for, a pair at a time
+        through ``map_pairs``: the sides of the kept pairs of each free station whose
+        correction is plausible. Each term is the same call on the same points and matrices
+        as :meth:`agreement`'s, so the guards' verdicts are those of one process."""
+        wanted: dict[int, list[int]] = {}
+        for station in sorted(set(self.nodes) - set(self.fixed) - {self.reference}):
+            if self._implausible(station) is not None:
+                continue
+            for k in self.kept_fits(station):
+                wanted.setdefault(k, []).append(0 if self.overlaps[k].a == station else 1)
+        jobs = [
+            (
+                self.overlaps[k],
+                [(side, *self._moves(k, side)) for side in sides],
+                self.settings.max_correspondence_m,
+            )
+            for k, sides in sorted(wanted.items())
+        ]
+        # a side's cost: a tree of the other side's points, a query of a quarter of its own
+        costs = []
+        for overlap, sides_moves, _ in jobs:
+            clouds = (overlap.points_a_m, overlap.points_b_m)
+            costs.append(
+                float(
+                    sum(len(clouds[1 - side]) + len(clouds[side]) // 4 for side, *_ in sides_moves)
+                )
+            )
+        terms = {}
+        for (k, sides), answers in zip(
+            sorted(wanted.items()), map_pairs(_pair_agreement, jobs, costs), strict=True
+        ):
+            terms.update({(k, side): answer for side, answer in zip(sides, answers, strict=True)})
+        return terms
 
     def tree(self, k: int, side: int) -> cKDTree:
         """The k-d tree of side ``side`` (0: a, 1: b) of overlap ``k``'s points, built once."""

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from fieldapp.recon.forkmap import ForkedMap, _Worker
+from fieldapp.recon.forkmap import ForkedMap, _Worker, largest_at_the_ends
 
 
 def _square_and_pid(x: int) -> tuple[int, int]:
@@ -143,3 +143,22 @@ def test_a_worker_that_will_not_stop_is_killed_and_reaped() -> None:
     assert not worker._is_alive()
     with pytest.raises(ChildProcessError):  # reaped: no zombie left behind
         os.waitpid(worker.pid, os.WNOHANG)
+
+
+def test_the_costliest_items_go_to_the_ends_and_the_cheapest_meet_in_the_middle() -> None:
+    assert largest_at_the_ends([1.0, 5.0, 3.0, 4.0, 2.0]) == [1, 2, 0, 4, 3]
+    assert largest_at_the_ends([2.0, 2.0, 2.0]) == [0, 2, 1]  # ties in index order
+    assert largest_at_the_ends([]) == []
+
+
+def test_with_costs_each_side_starts_on_the_costliest_and_results_stay_in_order() -> None:
+    costs = [float(x % 7) for x in range(30)]
+    with ForkedMap(2) as runner:
+        worker = runner.worker_pid
+        results = list(runner.map(_square_and_pid, range(30), costs))
+    assert [value for value, _ in results] == [x * x for x in range(30)]
+    assert results[largest_at_the_ends(costs)[0]][1] == worker  # the worker's first item
+    with ForkedMap(1) as runner:  # one process: the costs change nothing
+        assert list(runner.map(_square_and_pid, range(5), [5.0, 1, 2, 3, 4])) == [
+            (x * x, os.getpid()) for x in range(5)
+        ]

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
+from typing import Any
 
 import numpy as np
 import pytest
 
 from devices.geometry import invert, make_transform, pose_error, rotation_z, transform_points
-from fieldapp.recon import guards
+from fieldapp.recon import guards, register
 from fieldapp.recon.pairwise import find_overlaps, icp, preprocess, score
 from fieldapp.recon.register import StationRegistration, register_stations
 from fieldapp.recon.settings import RegistrationSettings
@@ -257,3 +259,45 @@ def test_openmp_threads_sleep_when_idle() -> None:
         [sys.executable, "-c", code], env=environment, capture_output=True, text=True, check=True
     )
     assert shown.stdout.split() == ["PASSIVE", "True"]
+
+
+def test_the_guards_overlap_checks_made_a_pair_at_a_time_equal_those_made_here(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Issue 22: with a worker process, each solution's overlap checks are computed ahead, a
+    pair at a time on both processes; every station's agreement is bit for bit the one
+    computed here with the trees kept for every solution."""
+    checked = []
+    ahead = register._Plot.agreement_terms
+
+    def compared(plot: register._Plot, map_pairs: Any) -> dict:
+        terms = ahead(plot, map_pairs)
+        here = dataclasses.replace(plot, terms={})
+        for station in sorted(set(plot.nodes) - set(plot.fixed) - {plot.reference}):
+            if plot._implausible(station) is None:
+                plot.terms = terms
+                assert plot.agreement(station) == here.agreement(station)
+                checked.append(station)
+        return terms
+
+    monkeypatch.setattr(register._Plot, "agreement_terms", compared)
+    points, coarse, _, reference = _plot(2, 3, 0.03, 1.5)
+    _run(points, coarse, reference, RegistrationSettings(), threads=2)
+    assert len(checked) == 8
+
+
+def test_the_guards_verdicts_are_the_same_on_two_processes() -> None:
+    """Stations failing their guards, fixed one at a time: every solution's checks are made
+    ahead on two processes, with the same verdicts and messages as on one."""
+    points, coarse, _, reference = _plot(0, 3, 0.03, 1.5)
+    for believed in (
+        RegistrationSettings(arrival_sigma_m=0.002, arrival_sigma_deg=0.05),
+        RegistrationSettings(arrival_sigma_m=0.02, arrival_sigma_deg=0.5),
+    ):
+        one = _run(points, coarse, reference, believed, threads=1)
+        two = _run(points, coarse, reference, believed, threads=2)
+        assert [(r.verdict, r.message) for r in one.values()] == [
+            (r.verdict, r.message) for r in two.values()
+        ]
+        for station in one:
+            assert one[station].T_field_station.tobytes() == two[station].T_field_station.tobytes()
