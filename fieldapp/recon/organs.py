@@ -279,7 +279,7 @@ def pair_graph(
 def pair_lengths(points_m: NDArray[np.float64], pairs: NDArray[np.intp]) -> NDArray[np.float64]:
     """(P,) the distance between the points (N, 3) of each pair (P, 2)."""
     step = points_m[pairs[:, 0]] - points_m[pairs[:, 1]]
-    return np.sqrt(np.sum(step * step, axis=1))  # type: ignore[no-any-return]
+    return np.sqrt(np.einsum("ij,ij->i", step, step))  # type: ignore[no-any-return]
 
 
 @dataclass(frozen=True)
@@ -291,6 +291,8 @@ class _LeafGraph:
 
     means: NDArray[np.float64]
     voxel: NDArray[np.intp]
+    pairs: NDArray[np.intp]
+    lengths: NDArray[np.float64]
     graph: csr_matrix
     component: NDArray[np.intp]
 
@@ -298,12 +300,16 @@ class _LeafGraph:
     def of(points_m: NDArray[np.float64]) -> _LeafGraph:
         if len(points_m) == 0:
             empty = np.zeros(0, dtype=np.intp)
-            return _LeafGraph(np.zeros((0, 3)), empty, csr_matrix((0, 0)), empty)
+            no_pairs = np.zeros((0, 2), dtype=np.intp)
+            return _LeafGraph(
+                np.zeros((0, 3)), empty, no_pairs, np.zeros(0), csr_matrix((0, 0)), empty
+            )
         means, inverse = voxel_means(points_m)
         pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
-        graph = pair_graph(pairs, len(means), pair_lengths(means, pairs) + 1e-9)
+        lengths = pair_lengths(means, pairs) + 1e-9
+        graph = pair_graph(pairs, len(means), lengths)
         component = connected_components(graph, directed=False)[1].astype(np.intp)
-        return _LeafGraph(means, inverse, graph, component)
+        return _LeafGraph(means, inverse, pairs, lengths, graph, component)
 
     def part(
         self, voxel: NDArray[np.intp]
@@ -341,64 +347,84 @@ def _split_at_bases(
 
 
 def _split_forks(
-    members: NDArray[np.intp],
-    leaves: _LeafGraph,
+    leaves: list[NDArray[np.intp]],
+    graph: _LeafGraph,
     point_voxel: NDArray[np.intp],
     radial: NDArray[np.float64],
     cut_m: float,
 ) -> list[NDArray[np.intp]]:
-    """A branch that forks into two or more long arms going away from the stem is as many
-    leaves lying over each other near the stem: one leaf per arm, each of the shared part's
-    points going to the arm it is nearest to along the branch."""
-    used, inverse, graph = leaves.part(point_voxel[members])
-    count = np.bincount(inverse, minlength=len(used))
-    near = np.zeros(len(used), dtype=bool)
-    near[inverse[radial[members] < cut_m + TOUCH_M]] = True
-    if not near.any() or len(used) < 2:
-        return [members]
-    links = graph.tocoo()
-    pairs = np.stack([links.row, links.col], axis=1).astype(np.intp)
+    """Every branch (``leaves``, disjoint in voxels) that forks into two or more long arms
+    going away from the stem is as many leaves lying over each other near the stem: one leaf
+    per arm (:func:`_arm_ends`), each voxel of the shared part going to the arm whose
+    shortest paths to the stem run through it most (:func:`_arms_behind`), what is left to
+    the arm nearest along the branch. All of a plant's branches at once: one graph, one
+    search from the stem."""
+    voxels = len(graph.means)
+    branch = np.full(voxels, -1, dtype=np.intp)
+    for k, leaf in enumerate(leaves):
+        branch[point_voxel[leaf]] = k
+    pairs, lengths = graph.pairs, graph.lengths
+    inside = (branch[pairs[:, 0]] == branch[pairs[:, 1]]) & (branch[pairs[:, 0]] >= 0)
+    pairs = pairs[inside]
+    links = pair_graph(pairs, voxels, lengths[inside])
+    near = np.zeros(voxels, dtype=bool)
+    at_stem = np.flatnonzero(radial[:] < cut_m + TOUCH_M)
+    near[point_voxel[at_stem][point_voxel[at_stem] >= 0]] = True
+    near &= branch >= 0
+    if not near.any():
+        return leaves
     distance, towards_stem, _ = dijkstra(
-        graph,
-        directed=False,
-        indices=np.flatnonzero(near),
-        min_only=True,
-        return_predecessors=True,
+        links, directed=False, indices=np.flatnonzero(near), min_only=True, return_predecessors=True
     )
-    if not np.all(np.isfinite(distance)):
-        return [members]
-    level = np.floor(distance / FORK_LEVEL_M).astype(np.intp)
+    reached = np.isfinite(distance)
+    level = np.where(reached, np.floor(np.where(reached, distance, 0.0) / FORK_LEVEL_M), -2)
+    level = level.astype(np.intp)
     lo, hi = level[pairs[:, 0]], level[pairs[:, 1]]
-    same = pairs[lo == hi]
-    piece = connected_components(pair_graph(same, len(used)), directed=False)[1]
+    piece = connected_components(pair_graph(pairs[lo == hi], voxels), directed=False)[1]
     pieces = int(piece.max()) + 1
     piece_level = np.zeros(pieces, dtype=np.intp)
     piece_level[piece] = level
+    count = np.bincount(graph.voxel, minlength=voxels)
     piece_points = np.bincount(piece, weights=count, minlength=pieces)
-    step = pairs[np.abs(lo - hi) == 1]
-    inner = np.where(level[step[:, 0]] < level[step[:, 1]], step[:, 0], step[:, 1])
-    outer = np.where(level[step[:, 0]] < level[step[:, 1]], step[:, 1], step[:, 0])
-    steps = np.unique(piece[inner] * pieces + piece[outer])
+    step = pairs[(np.abs(lo - hi) == 1) & (np.minimum(lo, hi) >= 0)]
+    outward = level[step[:, 0]] < level[step[:, 1]]
+    inner = np.where(outward, step[:, 0], step[:, 1])
+    outer = np.where(outward, step[:, 1], step[:, 0])
+    steps = np.unique(piece[inner].astype(np.int64) * pieces + piece[outer])
     if np.bincount(steps // pieces, minlength=pieces).max(initial=0) < 2:
-        return [members]  # no level set splits: one arm
+        return leaves  # no level set splits: no branch forks
     ends = _arm_ends(steps, pieces, piece_level, piece_points)
-    if len(ends) < 2:
-        return [members]
-    seeds = np.full(pieces, -1)
+    if not ends:
+        return leaves
+    seeds = np.full(pieces, -1, dtype=np.intp)
     for k, end in enumerate(ends):
         seeds[end] = k
-    voxel_seed = seeds[piece]
-    shared = voxel_seed < 0
-    behind = _arms_behind(towards_stem, voxel_seed, count, len(ends))
-    has_arm = behind.max(axis=1) > 0
-    voxel_seed[shared & has_arm] = np.argmax(behind[shared & has_arm], axis=1)
-    sources = np.flatnonzero(voxel_seed >= 0)
+    arm = seeds[piece]
+    forked = np.zeros(len(leaves), dtype=bool)
+    forked[branch[arm >= 0]] = True
+    shared = (arm < 0) & forked[np.maximum(branch, 0)] & (branch >= 0)
+    behind = _arms_behind(towards_stem, arm, count, len(ends))
+    through = shared & (behind.max(axis=1) > 0)
+    arm[through] = np.argmax(behind[through], axis=1)
     _, _, source = dijkstra(
-        graph, directed=False, indices=sources, min_only=True, return_predecessors=True
+        links,
+        directed=False,
+        indices=np.flatnonzero(arm >= 0),
+        min_only=True,
+        return_predecessors=True,
     )
-    arm = np.where(voxel_seed >= 0, voxel_seed, voxel_seed[np.maximum(source, 0)])
-    arm = np.where(arm >= 0, arm, 0)[inverse]
-    return [members[arm == k] for k in range(len(ends)) if np.any(arm == k)]
+    rest = shared & (arm < 0) & (source >= 0)
+    arm[rest] = arm[source[rest]]
+    out: list[NDArray[np.intp]] = []
+    for k, leaf in enumerate(leaves):
+        if not forked[k]:
+            out.append(leaf)
+            continue
+        of_leaf = arm[point_voxel[leaf]]
+        arms = np.unique(of_leaf[of_leaf >= 0])
+        of_leaf = np.where(of_leaf >= 0, of_leaf, arms[0])
+        out += [leaf[of_leaf == a] for a in arms]
+    return out
 
 
 def _arm_ends(
@@ -506,12 +532,12 @@ def _leaves_from_components(
         extent = float(np.ptp(points_m[members], axis=0).max())
         reaches = float(radial[members].min()) < cut_m + TOUCH_M
         if reaches and len(members) >= MIN_LEAF_POINTS and extent >= MIN_LEAF_EXTENT_M:
-            for leaf in _split_at_bases(points_m, members, graph, point_voxel, radial, cut_m):
-                leaves += _split_forks(leaf, graph, point_voxel, radial, cut_m)
+            leaves += _split_at_bases(points_m, members, graph, point_voxel, radial, cut_m)
         else:
             pieces.append(members)
     if not leaves:
         return leaves
+    leaves = _split_forks(leaves, graph, point_voxel, radial, cut_m)
     if not pieces:
         return leaves
     leaf_of = np.repeat(np.arange(len(leaves)), [len(leaf) for leaf in leaves])
