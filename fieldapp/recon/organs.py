@@ -8,7 +8,10 @@ expanded leaf, from the plant's points alone (docs/RECONSTRUCTION.md, "Organs").
 3. **Leaves**: what is left are the leaves, each one a branch that leaves the stem: connected
    components (1 cm links) of the points outside the cylinder. A component that does not reach
    the stem is a piece of a leaf cut off by a gap in the data: it joins the leaf it lies
-   nearest to. Leaves are numbered from the bottom by where they leave the stem.
+   nearest to. A component leaving the stem at two places is split between them, and one that
+   forks going away from the stem is as many leaves as it has leaf-sized arms (two leaves
+   lying over each other near the stem). Leaves are numbered from the bottom by where they
+   leave the stem.
 
 Works on any plant's points (N, 3), field frame, z up, whatever split the plot into plants.
 """
@@ -323,7 +326,7 @@ class _LeafGraph:
 def _split_at_bases(
     points_m: NDArray[np.float64],
     members: NDArray[np.intp],
-    leaves: _LeafGraph,
+    graph: _LeafGraph,
     point_voxel: NDArray[np.intp],
     radial: NDArray[np.float64],
     cut_m: float,
@@ -337,11 +340,11 @@ def _split_at_bases(
     kept = np.flatnonzero(sizes >= MIN_BASE_POINTS)
     if len(kept) < 2:
         return [members]
-    _, inverse, graph = leaves.part(point_voxel[members])
+    _, inverse, links = graph.part(point_voxel[members])
     distances = []
     for group in kept:
         starts = np.unique(inverse[at_base][groups == group])
-        distances.append(dijkstra(graph, directed=False, indices=starts, min_only=True))
+        distances.append(dijkstra(links, directed=False, indices=starts, min_only=True))
     owner = np.argmin(np.stack(distances), axis=0)[inverse]
     return [members[owner == k] for k in range(len(kept)) if np.any(owner == k)]
 
@@ -368,7 +371,7 @@ def _split_forks(
     pairs = pairs[inside]
     links = pair_graph(pairs, voxels, lengths[inside])
     near = np.zeros(voxels, dtype=bool)
-    at_stem = np.flatnonzero(radial[:] < cut_m + TOUCH_M)
+    at_stem = np.flatnonzero(radial < cut_m + TOUCH_M)
     near[point_voxel[at_stem][point_voxel[at_stem] >= 0]] = True
     near &= branch >= 0
     if not near.any():
