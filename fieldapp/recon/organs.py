@@ -388,7 +388,7 @@ def _split_forks(
     piece_level = np.zeros(pieces, dtype=np.intp)
     piece_level[piece] = level
     count = np.bincount(graph.voxel, minlength=voxels)
-    piece_points = np.bincount(piece, weights=count, minlength=pieces)
+    piece_points = np.bincount(piece, weights=count, minlength=pieces).astype(np.float64)
     step = pairs[(np.abs(lo - hi) == 1) & (np.minimum(lo, hi) >= 0)]
     outward = level[step[:, 0]] < level[step[:, 1]]
     inner = np.where(outward, step[:, 0], step[:, 1])
