@@ -8,7 +8,10 @@ expanded leaf, from the plant's points alone (docs/RECONSTRUCTION.md, "Organs").
 3. **Leaves**: what is left are the leaves, each one a branch that leaves the stem: connected
    components (1 cm links) of the points outside the cylinder. A component that does not reach
    the stem is a piece of a leaf cut off by a gap in the data: it joins the leaf it lies
-   nearest to. Leaves are numbered from the bottom by where they leave the stem.
+   nearest to. A component leaving the stem at two places is split between them, and one that
+   forks going away from the stem is as many leaves as it has leaf-sized arms (two leaves
+   lying over each other near the stem). Leaves are numbered from the bottom by where they
+   leave the stem.
 
 Works on any plant's points (N, 3), field frame, z up, whatever split the plot into plants.
 """
@@ -78,6 +81,10 @@ SHELL_REACH_M = 0.06
 """Leaves grow back into the stem's cylinder down to the stem's radius plus
 :data:`SHELL_GAP_M`, along links of :data:`SHELL_LINK_M`, at most :data:`SHELL_REACH_M` along
 them."""
+
+FORK_LEVEL_M = 0.01
+"""A branch's level sets: its points by their distance from the stem along the branch, in
+steps of this."""
 
 FRAGMENT_JOIN_M = 0.06
 """A fragment joins the nearest leaf within this distance; farther, it stays unassigned."""
@@ -184,8 +191,9 @@ def segment_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -
     stem_radius = float(np.clip(stem_radius, 0.003, 0.012))
     cut = max(stem_radius + CUT_MARGIN_M, MIN_CUT_RADIUS_M)
     outside = np.flatnonzero(radial > cut)
-    labels = _components(points_m[outside])
-    leaves = _leaves_from_components(points_m, outside, labels, radial, cut)
+    leaves = _leaves_from_components(
+        points_m, outside, _LeafGraph.of(points_m[outside]), radial, cut
+    )
     leaves = _grow_into_shell(points_m, leaves, radial, stem_radius + SHELL_GAP_M, cut)
     starts = [float(along[leaf][np.argmin(radial[leaf])]) for leaf in leaves]
     leaves = [leaves[i] for i in np.argsort(starts, kind="stable")]
@@ -274,44 +282,227 @@ def pair_graph(
 def pair_lengths(points_m: NDArray[np.float64], pairs: NDArray[np.intp]) -> NDArray[np.float64]:
     """(P,) the distance between the points (N, 3) of each pair (P, 2)."""
     step = points_m[pairs[:, 0]] - points_m[pairs[:, 1]]
-    return np.sqrt(np.sum(step * step, axis=1))  # type: ignore[no-any-return]
+    return np.sqrt(np.einsum("ij,ij->i", step, step))  # type: ignore[no-any-return]
 
 
-def _components(points_m: NDArray[np.float64]) -> NDArray[np.intp]:
-    """(N,) component of every point, voxels whose means are closer than :data:`LINK_M`
-    linked."""
-    if len(points_m) == 0:
-        return np.zeros(0, dtype=np.intp)
-    means, inverse = voxel_means(points_m)
-    pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
-    labels = connected_components(pair_graph(pairs, len(means)), directed=False)[1]
-    return labels[inverse].astype(np.intp)  # type: ignore[no-any-return]
+@dataclass(frozen=True)
+class _LeafGraph:
+    """The points outside the stem's cylinder as a graph: ``means`` (V, 3) of their
+    :data:`GRAPH_VOXEL_M` voxels, each point's voxel ``voxel`` (N,), the links between voxels
+    closer than :data:`LINK_M` weighted by their lengths (``graph``, each link once) and each
+    voxel's connected component ``component`` (V,)."""
+
+    means: NDArray[np.float64]
+    voxel: NDArray[np.intp]
+    pairs: NDArray[np.intp]
+    lengths: NDArray[np.float64]
+    graph: csr_matrix
+    component: NDArray[np.intp]
+
+    @staticmethod
+    def of(points_m: NDArray[np.float64]) -> _LeafGraph:
+        if len(points_m) == 0:
+            empty = np.zeros(0, dtype=np.intp)
+            no_pairs = np.zeros((0, 2), dtype=np.intp)
+            return _LeafGraph(
+                np.zeros((0, 3)), empty, no_pairs, np.zeros(0), csr_matrix((0, 0)), empty
+            )
+        means, inverse = voxel_means(points_m)
+        pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
+        lengths = pair_lengths(means, pairs) + 1e-9
+        graph = pair_graph(pairs, len(means), lengths)
+        component = connected_components(graph, directed=False)[1].astype(np.intp)
+        return _LeafGraph(means, inverse, pairs, lengths, graph, component)
+
+    def part(
+        self, voxel: NDArray[np.intp]
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], csr_matrix]:
+        """The voxels (U,) (sorted) of the points whose voxels are ``voxel`` (M,), each
+        point's place among them (M,) and the graph between them (U, U)."""
+        used, local = np.unique(voxel, return_inverse=True)
+        return used, local.astype(np.intp), self.graph[used][:, used]
 
 
 def _split_at_bases(
     points_m: NDArray[np.float64],
     members: NDArray[np.intp],
+    graph: _LeafGraph,
+    point_voxel: NDArray[np.intp],
     radial: NDArray[np.float64],
     cut_m: float,
 ) -> list[NDArray[np.intp]]:
     """One branch per base: a branch leaving the stem at two places (two leaves touching
     further out) is split, each point going to the base it is nearest to along the branch."""
-    base = members[radial[members] < cut_m + TOUCH_M]
+    at_base = radial[members] < cut_m + TOUCH_M
+    base = members[at_base]
     groups = _components_linked(points_m[base], BASE_LINK_M)
     sizes = np.bincount(groups)
     kept = np.flatnonzero(sizes >= MIN_BASE_POINTS)
     if len(kept) < 2:
         return [members]
-    means, inverse = voxel_means(points_m[members])
-    pairs = cKDTree(means).query_pairs(LINK_M, output_type="ndarray")
-    graph = pair_graph(pairs, len(means), pair_lengths(means, pairs) + 1e-9)
-    position = {int(v): i for i, v in enumerate(members)}
+    _, inverse, links = graph.part(point_voxel[members])
     distances = []
     for group in kept:
-        starts = np.unique(inverse[[position[int(v)] for v in base[groups == group]]])
-        distances.append(dijkstra(graph, directed=False, indices=starts, min_only=True))
+        starts = np.unique(inverse[at_base][groups == group])
+        distances.append(dijkstra(links, directed=False, indices=starts, min_only=True))
     owner = np.argmin(np.stack(distances), axis=0)[inverse]
     return [members[owner == k] for k in range(len(kept)) if np.any(owner == k)]
+
+
+def _split_forks(
+    leaves: list[NDArray[np.intp]],
+    graph: _LeafGraph,
+    point_voxel: NDArray[np.intp],
+    radial: NDArray[np.float64],
+    cut_m: float,
+) -> list[NDArray[np.intp]]:
+    """Every branch (``leaves``, disjoint in voxels) that forks into two or more long arms
+    going away from the stem is as many leaves lying over each other near the stem: one leaf
+    per arm (:func:`_arm_ends`), each voxel of the shared part going to the arm whose
+    shortest paths to the stem run through it most (:func:`_arms_behind`), what is left to
+    the arm nearest along the branch. All of a plant's branches at once: one graph, one
+    search from the stem."""
+    voxels = len(graph.means)
+    branch = np.full(voxels, -1, dtype=np.intp)
+    for k, leaf in enumerate(leaves):
+        branch[point_voxel[leaf]] = k
+    pairs, lengths = graph.pairs, graph.lengths
+    inside = (branch[pairs[:, 0]] == branch[pairs[:, 1]]) & (branch[pairs[:, 0]] >= 0)
+    pairs = pairs[inside]
+    links = pair_graph(pairs, voxels, lengths[inside])
+    near = np.zeros(voxels, dtype=bool)
+    at_stem = np.flatnonzero(radial < cut_m + TOUCH_M)
+    near[point_voxel[at_stem][point_voxel[at_stem] >= 0]] = True
+    near &= branch >= 0
+    if not near.any():
+        return leaves
+    distance, towards_stem, _ = dijkstra(
+        links, directed=False, indices=np.flatnonzero(near), min_only=True, return_predecessors=True
+    )
+    reached = np.isfinite(distance)
+    level = np.where(reached, np.floor(np.where(reached, distance, 0.0) / FORK_LEVEL_M), -2)
+    level = level.astype(np.intp)
+    lo, hi = level[pairs[:, 0]], level[pairs[:, 1]]
+    piece = connected_components(pair_graph(pairs[lo == hi], voxels), directed=False)[1]
+    pieces = int(piece.max()) + 1
+    piece_level = np.zeros(pieces, dtype=np.intp)
+    piece_level[piece] = level
+    count = np.bincount(graph.voxel, minlength=voxels)
+    piece_points = np.bincount(piece, weights=count, minlength=pieces).astype(np.float64)
+    step = pairs[(np.abs(lo - hi) == 1) & (np.minimum(lo, hi) >= 0)]
+    outward = level[step[:, 0]] < level[step[:, 1]]
+    inner = np.where(outward, step[:, 0], step[:, 1])
+    outer = np.where(outward, step[:, 1], step[:, 0])
+    steps = np.unique(piece[inner].astype(np.int64) * pieces + piece[outer])
+    if np.bincount(steps // pieces, minlength=pieces).max(initial=0) < 2:
+        return leaves  # no level set splits: no branch forks
+    ends = _arm_ends(steps, pieces, piece_level, piece_points)
+    if not ends:
+        return leaves
+    seeds = np.full(pieces, -1, dtype=np.intp)
+    for k, end in enumerate(ends):
+        seeds[end] = k
+    arm = seeds[piece]
+    forked = np.zeros(len(leaves), dtype=bool)
+    forked[branch[arm >= 0]] = True
+    shared = (arm < 0) & forked[np.maximum(branch, 0)] & (branch >= 0)
+    behind = _arms_behind(towards_stem, arm, count, len(ends))
+    through = shared & (behind.max(axis=1) > 0)
+    arm[through] = np.argmax(behind[through], axis=1)
+    _, _, source = dijkstra(
+        links,
+        directed=False,
+        indices=np.flatnonzero(arm >= 0),
+        min_only=True,
+        return_predecessors=True,
+    )
+    rest = shared & (arm < 0) & (source >= 0)
+    arm[rest] = arm[source[rest]]
+    out: list[NDArray[np.intp]] = []
+    for k, leaf in enumerate(leaves):
+        if not forked[k]:
+            out.append(leaf)
+            continue
+        of_leaf = arm[point_voxel[leaf]]
+        arms = np.unique(of_leaf[of_leaf >= 0])
+        of_leaf = np.where(of_leaf >= 0, of_leaf, arms[0])
+        out += [leaf[of_leaf == a] for a in arms]
+    return out
+
+
+def _arm_ends(
+    steps: NDArray[np.int64],
+    pieces: int,
+    piece_level: NDArray[np.intp],
+    piece_points: NDArray[np.float64],
+) -> list[list[int]]:
+    """The arms of a branch's level-set pieces (``pieces`` of them, each at a level with so
+    many points; ``steps`` the links inner * pieces + outer between pieces of consecutive
+    levels): the pieces beyond every fork, a fork being a piece from which two or more parts
+    of a leaf's size (:data:`MIN_LEAF_POINTS`, :data:`MIN_LEAF_EXTENT_M` beyond it) go
+    outwards without meeting again. Found by joining the pieces from the outermost level
+    inwards (the join tree of the distance from the stem); an arm with a fork further out is
+    not one, the arms beyond that fork are."""
+    children: dict[int, list[int]] = {}
+    for key in steps.tolist():
+        children.setdefault(key // pieces, []).append(key % pieces)
+    level = piece_level.tolist()
+    parent = list(range(pieces))
+    size = piece_points.tolist()
+    top = list(level)
+    forked = [False] * pieces
+    done: list[int] = []
+    reach = MIN_LEAF_EXTENT_M / FORK_LEVEL_M - 1e-9
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    ends: list[list[int]] = []
+    for p in np.argsort(-piece_level, kind="stable").tolist():
+        roots = {find(c) for c in children.get(p, ())}
+        arms = [r for r in roots if size[r] >= MIN_LEAF_POINTS and top[r] - level[p] >= reach]
+        if len(arms) >= 2:
+            owner = [find(q) for q in done]
+            ends += [
+                [q for q, o in zip(done, owner, strict=True) if o == r]
+                for r in arms
+                if not forked[r]
+            ]
+        for r in roots:
+            parent[r] = p
+            size[p] += size[r]
+            top[p] = max(top[p], top[r])
+            forked[p] = forked[p] or forked[r]
+        forked[p] = forked[p] or len(arms) >= 2
+        done.append(p)
+    return ends
+
+
+def _arms_behind(
+    parent: NDArray[np.intp], arm: NDArray[np.intp], count: NDArray[np.intp], arms: int
+) -> NDArray[np.float64]:
+    """(V, arms): for every voxel of a shortest-path tree from the stem (``parent``: each
+    voxel's next one towards the stem, negative at the stem), the points of each arm (``arm``
+    per voxel, -1 for none; ``count`` points per voxel) whose paths to the stem pass through
+    it."""
+    up = np.where(parent >= 0, parent, -1)
+    depth = (up >= 0).astype(np.intp)
+    jump = up.copy()
+    while np.any(jump >= 0):  # hops to the stem by pointer jumping
+        going = np.flatnonzero(jump >= 0)
+        depth[going], jump[going] = depth[going] + depth[jump[going]], jump[jump[going]]
+    total = np.zeros((len(parent), arms))
+    own = np.flatnonzero(arm >= 0)
+    total[own, arm[own]] = count[own]
+    by_depth = np.argsort(-depth, kind="stable")
+    bounds = np.flatnonzero(np.diff(depth[by_depth])) + 1
+    for group in np.split(by_depth, bounds):
+        group = group[up[group] >= 0]
+        np.add.at(total, up[group], total[group])
+    return total
 
 
 def _components_linked(points_m: NDArray[np.float64], link_m: float) -> NDArray[np.intp]:
@@ -324,12 +515,17 @@ def _components_linked(points_m: NDArray[np.float64], link_m: float) -> NDArray[
 def _leaves_from_components(
     points_m: NDArray[np.float64],
     outside: NDArray[np.intp],
-    labels: NDArray[np.intp],
+    graph: _LeafGraph,
     radial: NDArray[np.float64],
     cut_m: float,
 ) -> list[NDArray[np.intp]]:
-    """Leaves (indices into ``points_m``): the components that reach the stem and are large
-    enough; the other large pieces join the nearest such leaf."""
+    """Leaves (indices into ``points_m``): the components of the points ``outside`` the
+    cylinder (their ``graph``) that reach the stem and are large enough, split where they
+    leave the stem at two places and where they fork; the other large pieces join the
+    nearest such leaf."""
+    labels = graph.component[graph.voxel]
+    point_voxel = np.full(len(points_m), -1, dtype=np.intp)
+    point_voxel[outside] = graph.voxel
     leaves: list[NDArray[np.intp]] = []
     pieces: list[NDArray[np.intp]] = []
     for label in np.unique(labels):
@@ -339,11 +535,12 @@ def _leaves_from_components(
         extent = float(np.ptp(points_m[members], axis=0).max())
         reaches = float(radial[members].min()) < cut_m + TOUCH_M
         if reaches and len(members) >= MIN_LEAF_POINTS and extent >= MIN_LEAF_EXTENT_M:
-            leaves += _split_at_bases(points_m, members, radial, cut_m)
+            leaves += _split_at_bases(points_m, members, graph, point_voxel, radial, cut_m)
         else:
             pieces.append(members)
     if not leaves:
         return leaves
+    leaves = _split_forks(leaves, graph, point_voxel, radial, cut_m)
     if not pieces:
         return leaves
     leaf_of = np.repeat(np.arange(len(leaves)), [len(leaf) for leaf in leaves])

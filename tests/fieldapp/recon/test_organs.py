@@ -255,3 +255,53 @@ def test_cross_sections_are_measured_all_at_once() -> None:
     np.testing.assert_allclose(widths, [0.04, 0.04, 0.04, 0.0, 0.0], atol=1e-9)
     alone = section_widths_m(points[41:82], counts[1:2], tangents[1:2])
     assert alone[0] == pytest.approx(widths[1], abs=1e-15)
+
+
+def _ribbon(
+    corners: list[tuple[float, float]], azimuth_deg: float, rng: np.random.Generator
+) -> NDArray[np.float64]:
+    """A flat leaf 3 cm wide along the polyline of (distance from the axis, height)
+    ``corners`` at ``azimuth_deg`` about a vertical stem at the origin, sampled every 3 mm with
+    1 mm of noise."""
+    bends = np.asarray(corners)
+    steps = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(bends, axis=0), axis=1))]
+    s = np.arange(0.0, steps[-1], 0.003)
+    radius, height = np.interp(s, steps, bends[:, 0]), np.interp(s, steps, bends[:, 1])
+    a = np.radians(azimuth_deg)
+    across = np.arange(-0.015, 0.0151, 0.003)
+    r, w = np.meshgrid(radius, across)
+    z = np.meshgrid(height, across)[0]
+    x = r * np.cos(a) - w * np.sin(a)
+    y = r * np.sin(a) + w * np.cos(a)
+    points = np.c_[x.ravel(), y.ravel(), z.ravel()]
+    return points + rng.normal(0.0, 0.001, points.shape)
+
+
+@pytest.mark.parametrize("gap_m", [0.03, 0.05, 0.08])
+def test_two_leaves_stacked_on_the_same_side_are_two(gap_m: float) -> None:
+    """Leaves k and k + 2 on the same side (10 degrees apart), inserted ``gap_m`` apart: the
+    lower rises along the stem and leaves the stem's cylinder where the upper does, the two
+    run 4-5 mm apart (closer than the leaves' links) for 7 cm, then one rises and the other
+    droops. Taken for one leaf 5.6-6.5 cm wide (of 3) before the fork split."""
+    rng = np.random.default_rng(0)
+    angle, height = rng.uniform(0, 2 * np.pi, 6000), rng.uniform(0.0, 0.35, 6000)
+    stem = np.c_[0.008 * np.cos(angle), 0.008 * np.sin(angle), height]
+    z = 0.1 + gap_m
+    low = _ribbon([(0.008, 0.1), (0.03, z + 0.005), (0.1, z + 0.075), (0.18, z + 0.17)], 0, rng)
+    high = _ribbon(
+        [(0.008, z), (0.03, z + 0.009), (0.1, z + 0.079), (0.16, z + 0.05), (0.2, z - 0.02)],
+        10,
+        rng,
+    )
+    other = _ribbon([(0.008, 0.05), (0.06, 0.09), (0.2, 0.12)], 180, rng)
+    points = np.concatenate([stem, low, high, other])
+    truth = np.repeat([-1, 0, 1, 2], [len(stem), len(low), len(high), len(other)])
+    organs = measure_organs(points, np.zeros(3))
+    assert organs.leaf_count == 3
+    majority = []
+    for leaf, traits in zip(organs.organs.leaves, organs.leaves, strict=True):
+        labels, counts = np.unique(truth[leaf], return_counts=True)
+        majority.append(int(labels[np.argmax(counts)]))
+        assert counts.max() >= 0.7 * len(leaf)
+        assert traits.max_width_m < 0.04  # 3 cm wide; the two taken for one: 5.6-6.5 cm
+    assert sorted(majority) == [0, 1, 2]
