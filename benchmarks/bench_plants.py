@@ -6,12 +6,13 @@ soil sample of 2 cm spacing. Prints the CPU and wall time of ``search_plants`` p
 per plant; run by hand on a quiet machine:
 
     .venv/bin/python benchmarks/bench_plants.py [--sizes 4,6,8,10,12] [--repeats 3] \
-        [--no-ribbons] [--no-sheets]
+        [--no-ribbons] [--no-sheets] [--collar 0.02]
 
 ``--no-ribbons``: without following the leaves of plants with ambiguous points across
 contacts (``plants.stems.follow_leaves``), to see what the ribbons cost; ``--no-sheets``:
 without the sheet-aware bend cost at crossings (``plants.stems.sheet_aware``), to see what it
-costs.
+costs; ``--collar R``: with the per-source collar of that radius
+(``plants.stems.collar_radius_m``, up to 5 cm above the foot), to see what it costs.
 """
 
 from __future__ import annotations
@@ -69,10 +70,16 @@ def main() -> None:
     parser.add_argument(
         "--no-sheets", action="store_true", help="without the sheet-aware bend cost"
     )
+    parser.add_argument("--collar", type=float, default=0.0, help="collar radius (m)")
     args = parser.parse_args()
     settings = PlantSettings()
     settings.stems = settings.stems.model_copy(
-        update={"follow_leaves": not args.no_ribbons, "sheet_aware": not args.no_sheets}
+        update={
+            "follow_leaves": not args.no_ribbons,
+            "sheet_aware": not args.no_sheets,
+            "collar_radius_m": args.collar,
+            "collar_height_m": 0.05,
+        }
     )
     print("plants  points    found  cpu_s (min)  wall_s (min)  cpu ms per plant")
     for n in (int(s) for s in args.sizes.split(",")):

@@ -129,12 +129,38 @@ def bend_weighted(graph: VoxelGraph, bend_penalty_m: float) -> VoxelGraph:
     path passes from one surface onto another at an angle (onto a leaf it touches or crosses)
     it pays up to the full penalty on the sharpest edges. Surfaces that touch with the same
     normal (a leaf lying flat on another) cost nothing to pass between."""
+    return VoxelGraph(graph.centres_m, graph.point_voxel, _bend_edges(graph, bend_penalty_m)[0])
+
+
+def _bend_edges(
+    graph: VoxelGraph, bend_penalty_m: float, keep_bend: bool = False
+) -> tuple[csr_matrix, csr_matrix | None]:
+    """The edges of :func:`bend_weighted` and, with ``keep_bend``, the bend part of each, laid
+    out as the edges."""
     normals = surface_normals(graph)
     edges = graph.edges.tocoo()
     cosine = np.abs(np.sum(normals[edges.row] * normals[edges.col], axis=1))
-    cost = edges.data + bend_penalty_m * (1.0 - np.minimum(cosine, 1.0))
-    weighted = coo_matrix((cost, (edges.row, edges.col)), shape=edges.shape).tocsr()
-    return VoxelGraph(graph.centres_m, graph.point_voxel, weighted)
+    bend = bend_penalty_m * (1.0 - np.minimum(cosine, 1.0))
+    return _same_layout(edges.data + bend, bend, edges.row, edges.col, edges.shape, keep_bend)
+
+
+def _same_layout(
+    cost: NDArray[np.float64],
+    bend: NDArray[np.float64],
+    row: NDArray[np.intp],
+    col: NDArray[np.intp],
+    shape: tuple[int, int],
+    keep_bend: bool,
+) -> tuple[csr_matrix, csr_matrix | None]:
+    """``cost`` and, with ``keep_bend``, ``bend`` on the edges (``row``, ``col``) as CSR
+    matrices whose entries line up one for one (the bend kept off zero while converting, so
+    none is dropped)."""
+    weighted = coo_matrix((cost, (row, col)), shape=shape).tocsr()
+    if not keep_bend:
+        return weighted, None
+    part = coo_matrix((bend + 1.0, (row, col)), shape=shape).tocsr()
+    part.data -= 1.0
+    return weighted, part
 
 
 @dataclass(frozen=True)
@@ -245,7 +271,8 @@ def sheet_graph(
     bend_penalty_m: float,
     sheets: Sheets,
     normals: NDArray[np.float64] | None = None,
-) -> tuple[csr_matrix, NDArray[np.intp]]:
+    keep_bend: bool = False,
+) -> tuple[csr_matrix, NDArray[np.intp], csr_matrix | None]:
     """The graph of :func:`bend_weighted` over (voxel, sheet) states: a voxel where sheets
     cross (``sheets``) has one state per sheet, every other voxel one with its surface normal.
     A step between two states costs its length plus ``bend_penalty_m`` times (1 - |cos|) of
@@ -253,8 +280,9 @@ def sheet_graph(
     sheet pays nothing for the crossing, and one that turns onto the other sheet pays the bend
     between the two. A step to or from a sheet's state also pays as a bend by its angle to
     the sheet's plane (a step along the sheet pays next to nothing, one across to a sheet
-    stacked over it the full bend). Returns the (S, S) edges and each state's voxel (S,), in
-    voxel order. ``normals``: the graph's :func:`surface_normals`, when the caller has them."""
+    stacked over it the full bend). Returns the (S, S) edges, each state's voxel (S,), in
+    voxel order, and with ``keep_bend`` the bend part of each edge (laid out as the edges, else
+    None). ``normals``: the graph's :func:`surface_normals`, when the caller has them."""
     normals = surface_normals(graph) if normals is None else normals
     voxels = len(normals)
     split = np.zeros(voxels, dtype=bool)
@@ -285,7 +313,10 @@ def sheet_graph(
         out[on] = np.maximum(out[on], 1.0 - np.sqrt(1.0 - sine**2))
     cost += bend_penalty_m * out
     states = len(state_voxel)
-    return coo_matrix((cost, (row, col)), shape=(states, states)).tocsr(), state_voxel
+    weighted, bend = _same_layout(
+        cost, cost - edges.data[edge], row, col, (states, states), keep_bend
+    )
+    return weighted, state_voxel, bend
 
 
 def assign_to_stems(
@@ -298,6 +329,8 @@ def assign_to_stems(
     inward_penalty: float = 0.0,
     bend_penalty_m: float = 0.0,
     sheet_aware: bool = False,
+    collar_radius_m: float = 0.0,
+    collar_height_m: float = 0.0,
 ) -> Assignment:
     """Each voxel to the stem (``stems_xy_m`` (S, 2)) it is geodesically nearest to.
 
@@ -306,17 +339,26 @@ def assign_to_stems(
     (in plan view) costs ``inward_penalty`` times its inward length on top of its length
     (:func:`_outward`), and passing from one surface onto another up to ``bend_penalty_m``
     (:func:`bend_weighted`); with ``sheet_aware``, judged against the sheet the path is on
-    where two sheets cross (:func:`sheet_graph`)."""
+    where two sheets cross (:func:`sheet_graph`). With ``collar_radius_m`` > 0 a stem's own
+    paths pay no bend on steps within that (plan view) of the stem and no higher than
+    ``collar_height_m`` above its highest source (:func:`_free_collar`): the turn from a stem
+    onto its own leaf; every other stem's paths still pay there. Off by default: measured on
+    both plant models in ``docs/notes/touching-canopies.md`` ("The collar, per source")."""
     voxels = len(graph.centres_m)
     tree = cKDTree(graph.centres_m[:, :2])
     shared = _shared(graph, tree, stems_xy_m, seed_radius_m) if sheet_aware else None
+    bend: csr_matrix | None = None  # each edge's bend part, when a collar is free of it
+    collar = collar_radius_m > 0.0
     if bend_penalty_m > 0.0 and shared is not None and shared.any():
         ring = _ring_spread(graph)  # once, for the sheets and the states' normals
         sheets = crossing_sheets(graph, within=shared, ring=ring)
-        edges, state_voxel = sheet_graph(graph, bend_penalty_m, sheets, ring[1][:, :, 0])
+        edges, state_voxel, bend = sheet_graph(
+            graph, bend_penalty_m, sheets, ring[1][:, :, 0], collar
+        )
+    elif bend_penalty_m > 0.0:
+        edges, bend = _bend_edges(graph, bend_penalty_m, collar)
+        state_voxel = np.arange(voxels, dtype=np.intp)
     else:
-        if bend_penalty_m > 0.0:
-            graph = bend_weighted(graph, bend_penalty_m)
         edges, state_voxel = graph.edges, np.arange(voxels, dtype=np.intp)
     count = np.bincount(state_voxel, minlength=voxels)  # each voxel's states, in voxel order
     first = np.concatenate([[0], np.cumsum(count)[:-1]])
@@ -337,12 +379,12 @@ def assign_to_stems(
             - np.repeat(np.cumsum(n[sources]) - n[sources], n[sources])
         )
         position[states] = np.arange(len(states))
-        sub = _outward(
-            _subgraph(edges, states, position),
-            graph.centres_m[state_voxel[states]],
-            xy,
-            inward_penalty,
-        )
+        sub = _subgraph(edges, states, position)
+        at = graph.centres_m[state_voxel[states]]
+        if bend is not None:
+            top = float(at[sources, 2].max()) + collar_height_m  # above the stem's foot
+            sub = _free_collar(sub, _subgraph(bend, states, position), at, xy, collar_radius_m, top)
+        sub = _outward(sub, at, xy, inward_penalty)
         position[states] = -1
         by_state = dijkstra(sub, directed=True, indices=sources, min_only=True)
         distance = np.minimum.reduceat(by_state, offset) if len(states) > len(local) else by_state
@@ -383,6 +425,26 @@ def _subgraph(edges: csr_matrix, local: NDArray[np.intp], position: NDArray[np.i
     row_ids = np.repeat(np.arange(len(local)), np.diff(rows.indptr))
     n = len(local)
     return coo_matrix((rows.data[keep], (row_ids[keep], columns[keep])), shape=(n, n)).tocsr()
+
+
+def _free_collar(
+    edges: csr_matrix,
+    bend: csr_matrix,
+    centres_m: NDArray[np.float64],
+    stem_xy: NDArray[np.float64],
+    radius_m: float,
+    top_m: float,
+) -> csr_matrix:
+    """``edges`` without their ``bend`` part (laid out as ``edges``) on the steps that stay
+    within ``radius_m`` (plan view) of this path's own stem and below ``top_m``: its collar."""
+    inside = (np.sum((centres_m[:, :2] - stem_xy) ** 2, axis=1) <= radius_m**2) & (
+        centres_m[:, 2] <= top_m
+    )
+    rows = np.repeat(np.arange(edges.shape[0]), np.diff(edges.indptr))
+    free = inside[rows] & inside[edges.indices]
+    out = edges.copy()
+    out.data = edges.data - np.where(free, bend.data, 0.0)
+    return out
 
 
 def _outward(

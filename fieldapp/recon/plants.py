@@ -59,6 +59,8 @@ def assign_by_settings(
         s.inward_penalty,
         s.bend_penalty_m,
         s.sheet_aware,
+        s.collar_radius_m,
+        s.collar_height_m,
     )
 
 

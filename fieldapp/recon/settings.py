@@ -127,6 +127,11 @@ class StemSettings(_Section):
     path is on, not the voxels' normals blurred from both (``geodesic.sheet_graph``); only in
     the parts of the plot where two stems' canopies are joined (nothing runs on a seedling
     plot)."""
+    collar_radius_m: float = Field(default=0.0, ge=0.0)
+    """A path pays no bend cost while it stays within this (plan view) of its *own* stem and
+    no higher than ``collar_height_m`` above the top of its foot: the turn from a stem onto
+    its own leaf is free, a neighbour's path turning there still pays (0: off)."""
+    collar_height_m: float = Field(default=0.0, ge=0.0)
     reach_m: float = Field(default=1.0, gt=0.0)
     """How far (plan view) from its stem a plant's leaves may reach."""
     ambiguity_margin_m: float = Field(default=0.15, ge=0.0)
