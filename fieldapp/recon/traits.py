@@ -13,12 +13,13 @@
 
 from __future__ import annotations
 
-import heapq
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 STEM_CELL_M = 0.01
@@ -162,38 +163,28 @@ def robust_top_z_m(
     ``reach_m`` tall), the highest point with at least ``support_points`` other points within
     ``radius_m``; the highest point of all when none has such support."""
     order = np.argsort(points_m[:, 2])[::-1][:TOP_CANDIDATES]
-    low = points_m[order[-1], 2] - max(reach_m, radius_m)
-    reach_index = np.flatnonzero(points_m[:, 2] >= low)
-    near = points_m[reach_index]
+    low = points_m[order[-1], 2] - reach_m - max(link_m, radius_m)
+    near_index = np.flatnonzero(points_m[:, 2] >= low)
+    near = points_m[near_index]
     tree = cKDTree(near)
+    pairs = tree.query_pairs(link_m, output_type="ndarray")
+    graph = coo_matrix(
+        (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(len(near),) * 2
+    )
+    components, labels = connected_components(graph, directed=False)
+    lowest = np.full(components, np.inf)
+    np.minimum.at(lowest, labels, near[:, 2])
     local = np.empty(len(points_m), dtype=np.intp)
-    local[reach_index] = np.arange(len(reach_index))
-    for candidate in order:
-        if _leads_down(near, tree, int(local[candidate]), link_m, reach_m):
-            return float(points_m[candidate, 2])
+    local[near_index] = np.arange(len(near))
+    # a chain from a candidate first goes below ``reach_m`` under it inside this slab: it leads
+    # down as far when the lowest point of its component is
+    leads = lowest[labels[local[order]]] <= points_m[order, 2] - reach_m
+    if leads.any():
+        return float(points_m[order[int(np.argmax(leads))], 2])
     counts = tree.query_ball_point(points_m[order], radius_m, return_length=True)
     supported = np.flatnonzero(counts - 1 >= support_points)
     chosen = order[supported[0]] if len(supported) else order[0]
     return float(points_m[chosen, 2])
-
-
-def _leads_down(
-    points_m: NDArray[np.float64], tree: cKDTree, start: int, link_m: float, reach_m: float
-) -> bool:
-    """Whether a chain of ``points_m``, each within ``link_m`` of the next, leads from point
-    ``start`` to ``reach_m`` below it: a search that always extends the lowest point reached."""
-    floor = points_m[start, 2] - reach_m
-    seen = {start}
-    frontier = [(float(points_m[start, 2]), start)]
-    while frontier:
-        z, index = heapq.heappop(frontier)
-        if z <= floor:
-            return True
-        for neighbour in tree.query_ball_point(points_m[index], link_m):
-            if neighbour not in seen:
-                seen.add(neighbour)
-                heapq.heappush(frontier, (float(points_m[neighbour, 2]), neighbour))
-    return False
 
 
 def measure_plant(
