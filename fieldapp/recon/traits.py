@@ -3,8 +3,10 @@
 - **base**: the foot of the stem: the column of points standing at the most heights in the
   plant's lower half (leaf tips droop low but lie flat), its lowest ``base_slice_m``;
 - **local ground**: the median height of the soil points around the base;
-- **top**, taken robustly: the highest point that has at least ``top_support_points`` other
-  plant points within ``top_support_radius_m`` (a stray point left by the filters has none);
+- **top**, taken robustly: the highest point joined to the plant's body, from which a chain of
+  plant points, each within ``TOP_LINK_M`` of the next, leads down ``TOP_REACH_M`` (a leaf tip
+  sampled one point wide has one; a stray point or a speck of flying pixels left by the filters
+  above the plant has none);
 - **width**: the diameter of the smallest circle enclosing the plant's projection on the ground
   (Welzl's algorithm on the convex hull of the projection).
 """
@@ -16,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 STEM_CELL_M = 0.01
@@ -27,6 +31,14 @@ in; a leaf tip resting on the soil a leaf length away is not)."""
 
 TOP_CANDIDATES = 200
 """Only this many of the highest points are tested as the top."""
+
+TOP_LINK_M = 0.008
+"""The longest step of the chain that leads from the top down into the plant: 2-4 times the
+points' spacing on a leaf (the last centimetre of a pointed tip is sampled a point every
+5-8 mm on the simulated plots), under the 1 cm a stray point stands off the plant."""
+
+TOP_REACH_M = 0.02
+"""How far below the top that chain must lead: more than a speck of flying pixels is tall."""
 
 
 @dataclass(frozen=True)
@@ -136,14 +148,40 @@ def local_ground_z_m(
     return float(np.median(soil_m[near, 2])) if near.any() else 0.0
 
 
-def robust_top_z_m(points_m: NDArray[np.float64], support_points: int, radius_m: float) -> float:
-    """The z of the highest point with at least ``support_points`` other points within
-    ``radius_m``; the highest point of all when none has such support. Only the points that
-    can lie within ``radius_m`` of a candidate (no lower than the lowest candidate less
-    ``radius_m``) are searched."""
+def robust_top_z_m(
+    points_m: NDArray[np.float64],
+    support_points: int,
+    radius_m: float,
+    link_m: float = TOP_LINK_M,
+    reach_m: float = TOP_REACH_M,
+) -> float:
+    """The z of the highest point from which a chain of points, each within ``link_m`` of the
+    next, leads ``reach_m`` below it: connectivity, not density. A pointed leaf tip sampled one
+    point wide continues its leaf point by point and is the top; a stray point, or a cluster of
+    flying pixels under ``reach_m`` tall, more than ``link_m`` from the plant, is not. Only the
+    :data:`TOP_CANDIDATES` highest points are tested; when none leads down (a plant under
+    ``reach_m`` tall), the highest point with at least ``support_points`` other points within
+    ``radius_m``; the highest point of all when none has such support."""
     order = np.argsort(points_m[:, 2])[::-1][:TOP_CANDIDATES]
-    reach = points_m[points_m[:, 2] >= points_m[order[-1], 2] - radius_m]
-    counts = cKDTree(reach).query_ball_point(points_m[order], radius_m, return_length=True)
+    low = points_m[order[-1], 2] - reach_m - max(link_m, radius_m)
+    near_index = np.flatnonzero(points_m[:, 2] >= low)
+    near = points_m[near_index]
+    tree = cKDTree(near)
+    pairs = tree.query_pairs(link_m, output_type="ndarray")
+    graph = coo_matrix(
+        (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(len(near),) * 2
+    )
+    components, labels = connected_components(graph, directed=False)
+    lowest = np.full(components, np.inf)
+    np.minimum.at(lowest, labels, near[:, 2])
+    local = np.empty(len(points_m), dtype=np.intp)
+    local[near_index] = np.arange(len(near))
+    # a chain from a candidate first goes below ``reach_m`` under it inside this slab: it leads
+    # down as far when the lowest point of its component is
+    leads = lowest[labels[local[order]]] <= points_m[order, 2] - reach_m
+    if leads.any():
+        return float(points_m[order[int(np.argmax(leads))], 2])
+    counts = tree.query_ball_point(points_m[order], radius_m, return_length=True)
     supported = np.flatnonzero(counts - 1 >= support_points)
     chosen = order[supported[0]] if len(supported) else order[0]
     return float(points_m[chosen, 2])
@@ -156,11 +194,15 @@ def measure_plant(
     ground_radius_m: float,
     top_support_points: int,
     top_support_radius_m: float,
+    top_link_m: float = TOP_LINK_M,
+    top_reach_m: float = TOP_REACH_M,
 ) -> PlantTraits:
     """Traits of one plant from its points (N, 3) and the soil around it (M, 3), field frame."""
     base = base_xy_m(points_m, base_slice_m)
     ground_z = local_ground_z_m(soil_m, base, ground_radius_m)
-    top_z = robust_top_z_m(points_m, top_support_points, top_support_radius_m)
+    top_z = robust_top_z_m(
+        points_m, top_support_points, top_support_radius_m, top_link_m, top_reach_m
+    )
     circle = smallest_enclosing_circle(points_m[:, :2])
     return PlantTraits(
         x_m=float(base[0]),

@@ -69,6 +69,56 @@ def test_robust_top_ignores_a_stray_point_above_the_plant() -> None:
     assert top == pytest.approx(0.25, abs=1e-9)
 
 
+def _stem(seed: int = 1) -> np.ndarray:
+    """A 25 cm stem (2 cm radius, points every 1-2 mm) with its top disc."""
+    return cylinder(np.random.default_rng(seed), 0.0, 0.0, 0.02, 0.25, 6000)
+
+
+def test_robust_top_reaches_a_pointed_tip_sampled_one_point_wide() -> None:
+    """The irregular model's top is a pointed leaf tip: above the dense part of the leaf, one or
+    two points a few millimetres apart, none with 3 others within 6 mm. Each leads down into the
+    plant point by point: the top is the tip."""
+    tip = np.array([[0.02, 0.0, 0.255], [0.021, 0.001, 0.261], [0.022, 0.0, 0.268]])
+    top = robust_top_z_m(np.concatenate([_stem(), tip]), support_points=3, radius_m=0.006)
+    assert top == pytest.approx(0.268, abs=1e-9)
+
+
+@pytest.mark.parametrize("above_m", [0.01, 0.02, 0.03])
+@pytest.mark.parametrize("x_m", [0.0, 0.02])  # over the middle, over the edge
+def test_robust_top_ignores_a_stray_point_1_to_3_cm_above(above_m: float, x_m: float) -> None:
+    stray = np.array([[x_m, 0.0, 0.25 + above_m]])
+    top = robust_top_z_m(np.concatenate([_stem(), stray]), support_points=3, radius_m=0.006)
+    assert top == pytest.approx(0.25, abs=1e-9)
+
+
+@pytest.mark.parametrize("above_m", [0.01, 0.02, 0.03])
+def test_robust_top_ignores_a_speck_of_flying_pixels_above(above_m: float) -> None:
+    """Eight points within 3 mm of each other, 1-3 cm above the plant: each has support (the
+    density rule took them for the top); none leads down into the plant."""
+    rng = np.random.default_rng(3)
+    speck = np.array([0.01, 0.0, 0.25 + above_m]) + rng.uniform(-0.0015, 0.0015, (8, 3))
+    top = robust_top_z_m(np.concatenate([_stem(), speck]), support_points=3, radius_m=0.006)
+    assert top == pytest.approx(0.25, abs=1e-9)
+
+
+@pytest.mark.parametrize("background_m", [0.02, 0.25])  # a leaf just behind; the soil
+def test_robust_top_ignores_mixed_pixels_trailing_from_a_leaf_edge(background_m: float) -> None:
+    """Kinect mixed pixels: the pixels across a leaf's edge measure depths between the leaf and
+    what lies behind it, a streak of points trailing away from the edge along the camera ray
+    (here a camera 1.8 m away and 1.2 m up, looking down on the plant's top edge). Four such
+    points, a step a pixel (3.5 mm) to the side each, leave the edge down the ray: the top stays
+    the edge, however close the background (a leaf 2 cm behind: steps of 4 mm, a dense streak)."""
+    edge = np.array([0.02, 0.0, 0.25])
+    camera = np.array([1.8, 0.0, 1.2])
+    ray = (edge - camera) / np.linalg.norm(edge - camera)
+    side = np.array([0.0, 1.0, 0.0])
+    steps = np.arange(1, 5)[:, None]
+    streak = edge + steps * (background_m / 5) * ray + steps * 0.0035 * side
+    points = np.concatenate([_stem(), streak])
+    top = robust_top_z_m(points, support_points=3, radius_m=0.006)
+    assert top == pytest.approx(0.25, abs=1e-9)
+
+
 def test_robust_top_counts_support_below_the_candidates() -> None:
     """The lowest point tested as the top (the last of :data:`TOP_CANDIDATES`) is the only one
     with support, and its support lies below every candidate: it is the top."""
