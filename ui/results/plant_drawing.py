@@ -49,9 +49,13 @@ def leaf_rgb(leaf_id: int) -> tuple[float, float, float]:
 
 
 def height_definition(settings: PlantSettings) -> str:
+    """How the height is measured (``fieldapp.recon.traits.robust_top_z_m``), for the caption."""
+    from fieldapp.recon.traits import TOP_LINK_M, TOP_REACH_M
+
     return (
-        f"highest point with {settings.top_support_points} other points within "
-        f"{1000 * settings.top_support_radius_m:g} mm, above the local ground at the foot"
+        f"highest point from which a chain of points, each within {1000 * TOP_LINK_M:g} mm of "
+        f"the next, leads {100 * TOP_REACH_M:g} cm down into the plant, above the local ground "
+        "at the foot"
     )
 
 

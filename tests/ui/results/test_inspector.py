@@ -61,7 +61,7 @@ def test_the_inspector_follows_and_drives_the_selection(panel, plot_results: Pat
     panel.table.selectRow(1)  # the plant table -> the inspector
     chosen = panel.selected
     assert inspector.drawing.plant == chosen
-    assert "highest point with 3 other points within 6 mm" in inspector.caption.text()
+    assert "each within 8 mm of the next, leads 2 cm down" in inspector.caption.text()
     assert "smallest circle" in inspector.caption.text()
     panel.map.plant_clicked.emit(plants[-1])  # the map -> the inspector
     assert inspector.drawing.plant == plants[-1] == inspector.plants.currentData()
