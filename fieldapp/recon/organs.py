@@ -194,7 +194,7 @@ def segment_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -
     leaves = _leaves_from_components(
         points_m, outside, _LeafGraph.of(points_m[outside]), radial, cut
     )
-    leaves = _grow_into_shell(points_m, leaves, radial, stem_radius + SHELL_GAP_M, cut)
+    leaves = _grow_into_shell(points_m, leaves, along, radial, stem_radius + SHELL_GAP_M, cut)
     starts = [float(along[leaf][np.argmin(radial[leaf])]) for leaf in leaves]
     leaves = [leaves[i] for i in np.argsort(starts, kind="stable")]
     organ = np.where(radial <= cut, ORGAN_STEM, ORGAN_NONE).astype(np.uint8)
@@ -211,14 +211,20 @@ def segment_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -
 def _grow_into_shell(
     points_m: NDArray[np.float64],
     leaves: list[NDArray[np.intp]],
+    along: NDArray[np.float64],
     radial: NDArray[np.float64],
     inner_m: float,
     cut_m: float,
 ) -> list[NDArray[np.intp]]:
     """Leaves grown back into the stem's cylinder down to ``inner_m`` from the axis: each point
     of that shell joins the leaf it is nearest to along :data:`SHELL_LINK_M` links (within
-    :data:`SHELL_REACH_M`). A leaf standing up beside the whorl runs for centimetres inside the
-    cylinder before it leaves it."""
+    :data:`SHELL_REACH_M`), if it lies no higher up the stem (``along``) than the middle (median
+    height) of where that leaf crosses the cylinder's surface (its points within
+    :data:`TOUCH_M` outside it). A leaf standing up beside the whorl runs for centimetres inside
+    the cylinder before it leaves it; it leaves the stem upwards, so its part inside lies below
+    its crossing. Above it, the shell's points are the stem's surface, a sheath or the base of
+    the leaf above, reached along the stem: on the touching plots they pulled the collar up
+    (docs/TRAITS.md, "Leaves lying over each other")."""
     if not leaves:
         return leaves
     shell = np.flatnonzero((radial > inner_m) & (radial <= cut_m))
@@ -239,9 +245,14 @@ def _grow_into_shell(
     grown = list(leaves)
     in_shell = np.arange(len(region)) >= len(region) - len(shell)
     reached = in_shell & (distance <= SHELL_REACH_M)
-    for k in range(len(leaves)):
-        joined = region[reached & (owner[np.maximum(source, 0)] == k)]
-        grown[k] = np.unique(np.concatenate([leaves[k], joined]))
+    nearest = owner[np.maximum(source, 0)]
+    for k, leaf in enumerate(leaves):
+        crossing = leaf[radial[leaf] <= cut_m + TOUCH_M]
+        if len(crossing) == 0:
+            continue
+        joined = region[reached & (nearest == k)]
+        joined = joined[along[joined] <= np.median(along[crossing])]
+        grown[k] = np.unique(np.concatenate([leaf, joined]))
     return grown
 
 

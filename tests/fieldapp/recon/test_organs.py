@@ -305,3 +305,23 @@ def test_two_leaves_stacked_on_the_same_side_are_two(gap_m: float) -> None:
         assert counts.max() >= 0.7 * len(leaf)
         assert traits.max_width_m < 0.04  # 3 cm wide; the two taken for one: 5.6-6.5 cm
     assert sorted(majority) == [0, 1, 2]
+
+
+def test_a_leaf_does_not_grow_up_the_stem_above_where_it_leaves_it() -> None:
+    """A leaf leaving the stem 10 cm up at 40 degrees from it, and over its base a strip inside
+    the stem's cylinder (the sheath of the leaf above, or the stem's surface wider than its
+    foot) that runs up the stem to the leaf above, 12 cm higher. Grown back into the cylinder
+    along the strip, the lower leaf took its part up to where the two leaves' growths met and
+    its collar was found on it: angle from the stem 67 degrees for 40, collar 2.9 cm high."""
+    rng = np.random.default_rng(0)
+    angle, height = rng.uniform(0, 2 * np.pi, 6000), rng.uniform(0.0, 0.4, 6000)
+    stem = np.c_[0.008 * np.cos(angle), 0.008 * np.sin(angle), height]
+    low = _ribbon([(0.008, 0.1), (0.05, 0.15), (0.2, 0.25)], 0, rng)
+    strip = _ribbon([(0.016, 0.1), (0.016, 0.22)], 0, rng)
+    high = _ribbon([(0.016, 0.22), (0.05, 0.26), (0.2, 0.36)], 20, rng)
+    other = _ribbon([(0.008, 0.05), (0.06, 0.09), (0.2, 0.12)], 180, rng)
+    organs = measure_organs(np.concatenate([stem, low, strip, high, other]), np.zeros(3))
+    assert organs.leaf_count == 3
+    lower = organs.leaves[1]  # 1: the leaf opposite, 5 cm up
+    assert lower.angle_from_stem_deg == pytest.approx(40.0, abs=6.0)
+    assert lower.insertion_height_m == pytest.approx(0.1, abs=0.015)
