@@ -181,9 +181,13 @@ def _stem_like(points_m: NDArray[np.float64]) -> NDArray[np.bool_]:
     return (count >= 6) & (linearity > MIN_LINEARITY) & upright  # type: ignore[no-any-return]
 
 
-def segment_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -> Organs:
+def segment_organs(
+    points_m: NDArray[np.float64], foot_m: NDArray[np.float64], split_forks: bool = True
+) -> Organs:
     """Split a plant's points (N, 3) into stem, whorl and leaves, given a first guess of the
-    stem's foot (3,) (base xy, local ground z)."""
+    stem's foot (3,) (base xy, local ground z). ``split_forks``: a branch forking into
+    leaf-sized arms is one leaf per arm (two leaves lying over each other near the stem);
+    without it such a branch is one leaf, as the plants step's ribbons trace it."""
     axis = fit_stem_axis(points_m, foot_m)
     along, radial = axis.split(points_m)
     foot_ring = (along > 0.005) & (along < FOOT_HEIGHT_M) & (radial < FOOT_SEARCH_M)
@@ -192,7 +196,7 @@ def segment_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -
     cut = max(stem_radius + CUT_MARGIN_M, MIN_CUT_RADIUS_M)
     outside = np.flatnonzero(radial > cut)
     leaves = _leaves_from_components(
-        points_m, outside, _LeafGraph.of(points_m[outside]), radial, cut
+        points_m, outside, _LeafGraph.of(points_m[outside]), radial, cut, split_forks
     )
     leaves = _grow_into_shell(points_m, leaves, along, radial, stem_radius + SHELL_GAP_M, cut)
     starts = [float(along[leaf][np.argmin(radial[leaf])]) for leaf in leaves]
@@ -529,11 +533,12 @@ def _leaves_from_components(
     graph: _LeafGraph,
     radial: NDArray[np.float64],
     cut_m: float,
+    split_forks: bool = True,
 ) -> list[NDArray[np.intp]]:
     """Leaves (indices into ``points_m``): the components of the points ``outside`` the
     cylinder (their ``graph``) that reach the stem and are large enough, split where they
-    leave the stem at two places and where they fork; the other large pieces join the
-    nearest such leaf."""
+    leave the stem at two places and (``split_forks``) where they fork; the other large
+    pieces join the nearest such leaf."""
     labels = graph.component[graph.voxel]
     point_voxel = np.full(len(points_m), -1, dtype=np.intp)
     point_voxel[outside] = graph.voxel
@@ -551,7 +556,8 @@ def _leaves_from_components(
             pieces.append(members)
     if not leaves:
         return leaves
-    leaves = _split_forks(leaves, graph, point_voxel, radial, cut_m)
+    if split_forks:
+        leaves = _split_forks(leaves, graph, point_voxel, radial, cut_m)
     if not pieces:
         return leaves
     leaf_of = np.repeat(np.arange(len(leaves)), [len(leaf) for leaf in leaves])

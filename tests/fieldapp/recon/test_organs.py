@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from devices.sim.organ_truth import organ_truth
 from devices.sim.plants import STEM_PART, PlantMesh, make_plant
 from fieldapp.evaluate.organs import azimuth_difference_deg, pair_leaves
+from fieldapp.recon import ribbons
 from fieldapp.recon.leaf_traits import measure_leaf, measure_leaves, section_widths_m
 from fieldapp.recon.organ_traits import measure_organs, projected_area_m2
 from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_STEM, ORGAN_WHORL, StemAxis
@@ -305,6 +306,39 @@ def test_two_leaves_stacked_on_the_same_side_are_two(gap_m: float) -> None:
         assert counts.max() >= 0.7 * len(leaf)
         assert traits.max_width_m < 0.04  # 3 cm wide; the two taken for one: 5.6-6.5 cm
     assert sorted(majority) == [0, 1, 2]
+
+
+def test_the_plants_steps_ribbons_trace_stacked_leaves_as_one_branch() -> None:
+    """The organ step splits two leaves stacked on the same side at their fork; the plants
+    step's ribbons (``ribbons.follow_leaves``) trace them as one branch, as they were measured
+    with (split, their arms' traces took a neighbour's leaf on touching seed 10)."""
+    from fieldapp.recon.organs import segment_organs
+
+    rng = np.random.default_rng(0)
+    angle, height = rng.uniform(0, 2 * np.pi, 6000), rng.uniform(0.0, 0.35, 6000)
+    stem = np.c_[0.008 * np.cos(angle), 0.008 * np.sin(angle), height]
+    z = 0.15
+    low = _ribbon([(0.008, 0.1), (0.03, z + 0.005), (0.1, z + 0.075), (0.18, z + 0.17)], 0, rng)
+    high = _ribbon(
+        [(0.008, z), (0.03, z + 0.009), (0.1, z + 0.079), (0.16, z + 0.05), (0.2, z - 0.02)],
+        10,
+        rng,
+    )
+    points = np.concatenate([stem, low, high])
+    assert len(segment_organs(points, np.zeros(3)).leaves) == 2
+    assert len(segment_organs(points, np.zeros(3), split_forks=False).leaves) == 1
+    calls: list[bool] = []
+    original = ribbons.segment_organs
+
+    def recording(points_m, foot_m, split_forks=True):  # type: ignore[no-untyped-def]
+        calls.append(split_forks)
+        return original(points_m, foot_m, split_forks)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(ribbons, "segment_organs", recording)
+        labels = np.zeros(len(points), dtype=np.intp)
+        ribbons.follow_leaves(points, labels, np.ones(len(points), dtype=bool), np.zeros((1, 3)))
+    assert calls and not any(calls)
 
 
 def test_a_leaf_does_not_grow_up_the_stem_above_where_it_leaves_it() -> None:
