@@ -278,13 +278,12 @@ def _ribbon(
     return points + rng.normal(0.0, 0.001, points.shape)
 
 
-@pytest.mark.parametrize("gap_m", [0.03, 0.05, 0.08])
-def test_two_leaves_stacked_on_the_same_side_are_two(gap_m: float) -> None:
-    """Leaves k and k + 2 on the same side (10 degrees apart), inserted ``gap_m`` apart: the
-    lower rises along the stem and leaves the stem's cylinder where the upper does, the two
-    run 4-5 mm apart (closer than the leaves' links) for 7 cm, then one rises and the other
-    droops. Taken for one leaf 5.6-6.5 cm wide (of 3) before the fork split."""
-    rng = np.random.default_rng(0)
+def _stacked_pair(
+    gap_m: float, rng: np.random.Generator
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """A stem and leaves k and k + 2 on its same side, 10 degrees apart, inserted ``gap_m``
+    apart: the lower rises along the stem and leaves the cylinder where the upper does, the
+    two run 4-5 mm apart for 7 cm, then one rises and the other droops."""
     angle, height = rng.uniform(0, 2 * np.pi, 6000), rng.uniform(0.0, 0.35, 6000)
     stem = np.c_[0.008 * np.cos(angle), 0.008 * np.sin(angle), height]
     z = 0.1 + gap_m
@@ -294,6 +293,17 @@ def test_two_leaves_stacked_on_the_same_side_are_two(gap_m: float) -> None:
         10,
         rng,
     )
+    return stem, low, high
+
+
+@pytest.mark.parametrize("gap_m", [0.03, 0.05, 0.08])
+def test_two_leaves_stacked_on_the_same_side_are_two(gap_m: float) -> None:
+    """Leaves k and k + 2 on the same side (10 degrees apart), inserted ``gap_m`` apart: the
+    lower rises along the stem and leaves the stem's cylinder where the upper does, the two
+    run 4-5 mm apart (closer than the leaves' links) for 7 cm, then one rises and the other
+    droops. Taken for one leaf 5.6-6.5 cm wide (of 3) before the fork split."""
+    rng = np.random.default_rng(0)
+    stem, low, high = _stacked_pair(gap_m, rng)
     other = _ribbon([(0.008, 0.05), (0.06, 0.09), (0.2, 0.12)], 180, rng)
     points = np.concatenate([stem, low, high, other])
     truth = np.repeat([-1, 0, 1, 2], [len(stem), len(low), len(high), len(other)])
@@ -314,17 +324,7 @@ def test_the_plants_steps_ribbons_trace_stacked_leaves_as_one_branch() -> None:
     with (split, their arms' traces took a neighbour's leaf on touching seed 10)."""
     from fieldapp.recon.organs import segment_organs
 
-    rng = np.random.default_rng(0)
-    angle, height = rng.uniform(0, 2 * np.pi, 6000), rng.uniform(0.0, 0.35, 6000)
-    stem = np.c_[0.008 * np.cos(angle), 0.008 * np.sin(angle), height]
-    z = 0.15
-    low = _ribbon([(0.008, 0.1), (0.03, z + 0.005), (0.1, z + 0.075), (0.18, z + 0.17)], 0, rng)
-    high = _ribbon(
-        [(0.008, z), (0.03, z + 0.009), (0.1, z + 0.079), (0.16, z + 0.05), (0.2, z - 0.02)],
-        10,
-        rng,
-    )
-    points = np.concatenate([stem, low, high])
+    points = np.concatenate(_stacked_pair(0.05, np.random.default_rng(0)))
     assert len(segment_organs(points, np.zeros(3)).leaves) == 2
     assert len(segment_organs(points, np.zeros(3), split_forks=False).leaves) == 1
     calls: list[bool] = []
