@@ -172,17 +172,28 @@ def _pair_agreement(job: AgreementJob) -> list[tuple[float, float]]:
     the other side's tree built here, once for the pair, in whichever process runs it."""
     overlap, sides, cap = job
     clouds = (overlap.points_a_m, overlap.points_b_m)
-    answers = []
-    for side, T_before, T_after in sides:
-        mine = clouds[side][:: guards.SAMPLE_STRIDE]
-        theirs = cKDTree(clouds[1 - side])
-        answers.append(
-            (
-                guards.overlap_disagreement(mine, theirs, T_before, cap),
-                guards.overlap_disagreement(mine, theirs, T_after, cap),
-            )
-        )
-    return answers
+    return [
+        _side_terms(overlap, side, cKDTree(clouds[1 - side]), T_before, T_after, cap)
+        for side, T_before, T_after in sides
+    ]
+
+
+def _side_terms(
+    overlap: Overlap,
+    side: int,
+    theirs: cKDTree,
+    T_before: Matrix4,
+    T_after: Matrix4,
+    cap: float,
+) -> tuple[float, float]:
+    """The guards' (before, after) overlap disagreement of side ``side`` of ``overlap`` (every
+    :data:`guards.SAMPLE_STRIDE`-th point) moved by ``T_before`` and ``T_after`` onto the other
+    side's points (``theirs``)."""
+    mine = (overlap.points_a_m, overlap.points_b_m)[side][:: guards.SAMPLE_STRIDE]
+    return (
+        guards.overlap_disagreement(mine, theirs, T_before, cap),
+        guards.overlap_disagreement(mine, theirs, T_after, cap),
+    )
 
 
 def _first_solution(
@@ -421,16 +432,13 @@ class _Plot:
         before = after = 0.0
         for k in self.kept_fits(station):
             side = 0 if self.overlaps[k].a == station else 1
-            if (k, side) in self.terms:
-                term_before, term_after = self.terms[(k, side)]
-            else:
-                T_before, T_after = self._moves(k, side)
-                overlap = self.overlaps[k]
-                mine = (overlap.points_a_m, overlap.points_b_m)[side][:: guards.SAMPLE_STRIDE]
-                theirs = self.tree(k, 1 - side)
-                cap = self.settings.max_correspondence_m
-                term_before = guards.overlap_disagreement(mine, theirs, T_before, cap)
-                term_after = guards.overlap_disagreement(mine, theirs, T_after, cap)
+            term_before, term_after = self.terms.get((k, side)) or _side_terms(
+                self.overlaps[k],
+                side,
+                self.tree(k, 1 - side),
+                *self._moves(k, side),
+                self.settings.max_correspondence_m,
+            )
             before += term_before
             after += term_after
         return before, after

@@ -57,15 +57,20 @@ def test_the_stations_reader_starts_before_scipy_and_small_gicp_load(
     small_session: Path, tmp_path: Path
 ) -> None:
     """The reader forked at start-up overlaps the imports only if it starts before them."""
+    assert _last_line(EARLY_READER, small_session, tmp_path / "out") == "0 [[]]"
+    assert (tmp_path / "out" / "plants.csv").is_file()
+
+
+def _last_line(script: str, session: Path, out: Path) -> str:
+    """The last line ``script`` prints, run in a fresh interpreter on ``session`` and ``out``."""
     done = subprocess.run(
-        [sys.executable, "-c", EARLY_READER, str(small_session), str(tmp_path / "out")],
+        [sys.executable, "-c", script, str(session), str(out)],
         capture_output=True,
         text=True,
         timeout=120,
     )
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip().splitlines()[-1] == "0 [[]]"
-    assert (tmp_path / "out" / "plants.csv").is_file()
+    return done.stdout.strip().splitlines()[-1]
 
 
 FROZEN_AT_EXIT = textwrap.dedent(
@@ -86,11 +91,4 @@ def test_the_objects_are_frozen_only_when_the_process_exits(
 ) -> None:
     """The exit's last collection skips the imports' objects (0.1 s of a run); a caller that
     runs the command in its own process keeps collecting until it exits."""
-    done = subprocess.run(
-        [sys.executable, "-c", FROZEN_AT_EXIT, str(small_session), str(tmp_path / "out")],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip().splitlines()[-1] == "0 0 True"
+    assert _last_line(FROZEN_AT_EXIT, small_session, tmp_path / "out") == "0 0 True"
