@@ -101,21 +101,37 @@ def test_robust_top_ignores_a_speck_of_flying_pixels_above(above_m: float) -> No
     assert top == pytest.approx(0.25, abs=1e-9)
 
 
-@pytest.mark.parametrize("background_m", [0.02, 0.25])  # a leaf just behind; the soil
-def test_robust_top_ignores_mixed_pixels_trailing_from_a_leaf_edge(background_m: float) -> None:
+@pytest.mark.parametrize(
+    "background_m",
+    [
+        pytest.param(
+            0.02,
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="a leaf 2 cm behind: the streak's steps (5 mm) chain to the edge and "
+                "raise the top by 4 mm; this rig's camera (1.30 m up) is above every plant's "
+                "top, so its streaks run down (RECONSTRUCTION.md 'Traits')",
+            ),
+        ),
+        0.25,  # a leaf 25 cm behind: steps of 5 cm, no chain
+    ],
+)
+def test_robust_top_ignores_mixed_pixels_rising_from_a_leaf_edge(background_m: float) -> None:
     """Kinect mixed pixels: the pixels across a leaf's edge measure depths between the leaf and
-    what lies behind it, a streak of points trailing away from the edge along the camera ray
-    (here a camera 1.8 m away and 1.2 m up, looking down on the plant's top edge). Four such
-    points, a step a pixel (3.5 mm) to the side each, leave the edge down the ray: the top stays
-    the edge, however close the background (a leaf 2 cm behind: steps of 4 mm, a dense streak)."""
+    what lies behind it, a streak of points trailing away from the edge along the camera ray.
+    Seen from below the plant's top (a camera 1.8 m away, 20 cm under the ground's level),
+    the streak rises from the top edge: four points, a pixel (3.5 mm) to the side each, the
+    last ``background_m`` up the ray. None of them is the top. (Seen from above, as this rig
+    sees every plant, a streak runs down from the edge and cannot raise the top under any
+    rule.)"""
     edge = np.array([0.02, 0.0, 0.25])
-    camera = np.array([1.8, 0.0, 1.2])
+    camera = np.array([1.8, 0.0, -0.2])
     ray = (edge - camera) / np.linalg.norm(edge - camera)
     side = np.array([0.0, 1.0, 0.0])
     steps = np.arange(1, 5)[:, None]
     streak = edge + steps * (background_m / 5) * ray + steps * 0.0035 * side
-    points = np.concatenate([_stem(), streak])
-    top = robust_top_z_m(points, support_points=3, radius_m=0.006)
+    assert streak[:, 2].min() > 0.25  # the streak rises above the edge
+    top = robust_top_z_m(np.concatenate([_stem(), streak]), support_points=3, radius_m=0.006)
     assert top == pytest.approx(0.25, abs=1e-9)
 
 
