@@ -41,6 +41,7 @@ from devices.sim.plants import (
     STEM_PART,
     Part,
     PlantMesh,
+    _offset_triangles,
     _strip,
     growth_factor,
     leaves_on_day,
@@ -95,7 +96,7 @@ def make_irregular_plant(
     top = float(nodes[count - 1]) + 0.04 * height_m
     parts.insert(0, _stem(top, 0.5 * stem_diameter_m, ellipse, azimuth0))
     vertices = np.concatenate([p[0] for p in parts])
-    triangles = np.concatenate(_offset([p[1] for p in parts])).astype(np.int32)
+    triangles = np.concatenate(_offset_triangles([p[1] for p in parts])).astype(np.int32)
     albedo = np.concatenate([p[2] for p in parts])
     ir = np.concatenate([np.full(len(p[0]), 0.5 + 0.1 * rng.random()) for p in parts])
     organ = np.concatenate(
@@ -123,14 +124,6 @@ def make_irregular_plant(
 def _normal(u: float) -> float:
     """A standard normal deviate from a uniform draw (each leaf's draws are all uniform)."""
     return NormalDist().inv_cdf(min(max(u, 1e-6), 1 - 1e-6))
-
-
-def _offset(parts: list[NDArray[np.int64]]) -> list[NDArray[np.int64]]:
-    out, offset = [], 0
-    for triangles in parts:
-        out.append(triangles + offset)
-        offset += int(triangles.max()) + 1
-    return out
 
 
 def _stem(top_m: float, radius_m: float, ellipse: float, azimuth: float) -> Part:
