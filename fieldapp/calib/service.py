@@ -29,6 +29,7 @@ from fieldapp.io.calibration import (
     Calibration,
     DepthCamera,
     Ground,
+    StationPose,
     Stations,
     ViewStep,
     load_calibration,
@@ -135,7 +136,14 @@ def stations_job(
 
 def merge_stations(base: Calibration, result: StationsResult, serial: str | None) -> Calibration:
     """``base`` with the solved ``stations`` and its ``view_step`` refined with them."""
-    stations = Stations(reference=result.reference, to_reference=result.T_reference_station)
+    base_poses = {
+        s: StationPose(x=x, y=y, yaw_deg=yaw) for s, (x, y, yaw) in result.base_poses.items()
+    }
+    stations = Stations(
+        reference=result.reference,
+        to_reference=result.T_reference_station,
+        base_poses=base_poses or None,
+    )
     stations.calibrated = provenance(
         serial,
         method="checkerboards between stations: spanning tree, then joint refinement",

@@ -24,7 +24,7 @@ from fieldapp.calib.rigid import RigidFit, fit_rigid_weighted
 from fieldapp.calib.sightings import BoardGroup, board_groups
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import ViewStep
-from fieldapp.io.session import Session
+from fieldapp.io.session import Session, reported_base_poses
 
 MATCH_M = 0.4
 """Boards of two stations closer than this after the prior are the same board: a base stops
@@ -59,6 +59,9 @@ class StationsResult:
     """Each station's parent on the way to the reference (the starting point)."""
     bundle: BundleResult
     warnings: list[str] = field(default_factory=list)
+    base_poses: dict[int, tuple[float, float, float]] = field(default_factory=dict)
+    """Where the base reported standing at each station while the boards were captured (map
+    frame: x_m, y_m, yaw_deg); empty when the captures carry no ``base_pose``."""
 
 
 def matches(
@@ -235,4 +238,9 @@ def calibrate_stations(
         bundle,
     )
     result.warnings = [f"pair not used: {reason}" for reason in refused]
+    result.base_poses = {
+        s: pose
+        for s, pose in reported_base_poses(session).items()
+        if s in result.T_reference_station
+    }
     return result

@@ -140,12 +140,26 @@ class ViewStep(SpecModel):
         return T_view0_view(self.matrix, view)
 
 
+class StationPose(SpecModel):
+    """Where the base stood at a station (map frame, metres, degrees), as it reported it."""
+
+    x: FiniteFloat
+    y: FiniteFloat
+    yaw_deg: FiniteFloat
+
+
 class Stations(SpecModel):
+    """``to_reference[s]`` maps view 0 of station s into the reference frame. ``base_poses``
+    (optional; fieldapp writes it when the calibration's captures carry ``base_pose``): where
+    the base reported standing at each station while the boards were captured, so that a
+    session's reported poses can move the stations from there (``fieldapp/recon/arrival.py``)."""
+
     reference: StrictInt
     to_reference: dict[int, RigidMatrix]
+    base_poses: dict[int, StationPose] | None = None
     calibrated: Provenance | None = None
 
-    @field_validator("to_reference", mode="before")
+    @field_validator("to_reference", "base_poses", mode="before")
     @classmethod
     def _station_keys(cls, value: Any) -> Any:
         if isinstance(value, dict):
@@ -181,9 +195,11 @@ class Calibration(SpecModel):
     def to_document(self) -> dict[str, Any]:
         document: dict[str, Any] = self.model_dump(mode="json", exclude_none=True)
         if self.stations is not None:  # JSON object keys are strings
-            document["stations"]["to_reference"] = {
-                str(k): v for k, v in document["stations"]["to_reference"].items()
-            }
+            for key in ("to_reference", "base_poses"):
+                if key in document["stations"]:
+                    document["stations"][key] = {
+                        str(k): v for k, v in document["stations"][key].items()
+                    }
         return document
 
 

@@ -305,3 +305,20 @@ def document_of(session: Session) -> dict[str, Any]:
 def now_iso() -> str:
     """The current local time with its UTC offset, ISO 8601, seconds."""
     return datetime.now().astimezone().isoformat(timespec="seconds")
+
+
+def reported_base_poses(session: Session) -> dict[int, tuple[float, float, float]]:
+    """Per station, the mean of the map poses (x_m, y_m, yaw_deg) the base reported at its
+    captures (the yaw's mean on the circle)."""
+    reported: dict[int, list[tuple[float, float, float]]] = {}
+    for capture in session.captures:
+        pose = capture.base_pose
+        if pose is not None:
+            reported.setdefault(capture.station, []).append((pose.x, pose.y, pose.yaw_deg))
+    poses: dict[int, tuple[float, float, float]] = {}
+    for station, values in reported.items():
+        array = np.asarray(values, dtype=np.float64)
+        yaw = np.radians(array[:, 2])
+        mean_yaw = float(np.degrees(np.arctan2(np.sin(yaw).mean(), np.cos(yaw).mean())))
+        poses[station] = (float(array[:, 0].mean()), float(array[:, 1].mean()), mean_yaw)
+    return poses

@@ -11,14 +11,13 @@ on the ground). With one station only, its yaw is used: view 0 looks along the b
 
 from __future__ import annotations
 
-from collections import defaultdict
 from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from devices.geometry import Matrix4, make_transform, rotation_z, transform_points
-from fieldapp.io.session import Session
+from fieldapp.io.session import Session, reported_base_poses
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.grid import GridNodes, plan_nodes
 from fieldapp.recon.register import StationRegistration
@@ -27,15 +26,7 @@ from fieldapp.recon.register import StationRegistration
 def station_map_poses(session: Session) -> dict[int, tuple[float, float, float]]:
     """Per station, the map pose (x_m, y_m, yaw_deg) the base reported at it (mean over its
     captures), else the plan's pose for it; empty when the session has neither."""
-    reported: dict[int, list[tuple[float, float, float]]] = defaultdict(list)
-    for capture in session.captures:
-        pose = capture.base_pose
-        if pose is not None:
-            reported[capture.station].append((pose.x, pose.y, pose.yaw_deg))
-    poses: dict[int, tuple[float, float, float]] = {}
-    for station, values in reported.items():
-        x, y, yaw = np.mean(values, axis=0)
-        poses[station] = (float(x), float(y), float(yaw))
+    poses = reported_base_poses(session)
     plan = session.document.plan
     if plan is not None:
         for planned in plan.stations:

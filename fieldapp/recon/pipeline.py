@@ -19,6 +19,7 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Stations, ViewStep
 from fieldapp.io.session import Session
 from fieldapp.recon import stages
+from fieldapp.recon.arrival import base_moves
 from fieldapp.recon.backproject import ray_table
 from fieldapp.recon.early import EarlyStations, StationRead, read_arguments
 from fieldapp.recon.filters import FilteredStation
@@ -59,7 +60,14 @@ def reconstruct(
     reference = stages.anchor(stations.reference, local.value.scans, stations.to_reference)
     # 3. Levelling: coarse placement by the pre-calibration, each station on its own ground.
     with timer.stage("levelling"):
-        levelled = stages.level(local.value, session.calibration, reference.value, settings.ground)
+        levelled = stages.level(
+            local.value,
+            session.calibration,
+            reference.value,
+            settings.ground,
+            base_moves(session),
+            settings.registration,
+        )
     yield progress("levelling", 1.0, "stations levelled")
     # 4. Plant filtering per station: pass-through above the ground, voxel means.
     filtered = yield from _filtering(local.value.scans, levelled.value, settings, timer)

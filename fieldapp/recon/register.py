@@ -52,6 +52,20 @@ class StationRegistration:
     limit_deg: float | None = None
 
 
+BEYOND_ARRIVAL = "of the expected arrival error"
+NO_OVERLAP = "no overlap registered"
+
+
+def beyond_arrival(registration: StationRegistration) -> bool:
+    """Whether the station was kept at its coarse pose because its correction, or every pair
+    it has, lay beyond its expected arrival error (not because the correction failed to make
+    its overlaps agree)."""
+    if registration.verdict not in (guards.COARSE_KEPT, guards.UNRELIABLE):
+        return False
+    message = registration.message
+    return BEYOND_ARRIVAL in message or message.startswith(NO_OVERLAP)
+
+
 def ground_centre_m(
     T_field_station: Matrix4, axis_point_station_m: NDArray[np.float64]
 ) -> NDArray[np.float64]:
@@ -422,7 +436,7 @@ class _Plot:
         limit_m, limit_deg = self.limits(station)
         return sigmas, (
             f"correction {1000 * shift_m:.0f} mm / {turn_deg:.2f} deg is {sigmas:.1f} sigma "
-            f"of the expected arrival error (limit {self.settings.guard_sigmas:g} sigma: "
+            f"{BEYOND_ARRIVAL} (limit {self.settings.guard_sigmas:g} sigma: "
             f"about {1000 * limit_m:.0f} mm / {limit_deg:.2f} deg here)"
         )
 
@@ -522,7 +536,7 @@ class _Plot:
             sigma_m, sigma_deg = guards.sigma_m_deg(self.priors[station])
             return replace(
                 coarse,
-                message=f"{fixed_reason or 'no overlap registered'}: coarse pose kept",
+                message=f"{fixed_reason or NO_OVERLAP}: coarse pose kept",
                 verdict=guards.COARSE_KEPT
                 if self._within(sigma_m, sigma_deg)
                 else guards.UNRELIABLE,

@@ -60,9 +60,22 @@ class RegistrationSettings(_Section):
     fine over ``voxel_sizes_m``, the sizes at or below ``shared_cloud_m`` on the finest
     size's points, each with its own reach); an edge disagreeing with the solution by more than
     ``edge_tolerance_m``/``_deg`` is dropped. A station whose estimated uncertainty exceeds
-    ``max_uncertainty_m``/``_deg`` is reported unreliable."""
+    ``max_uncertainty_m``/``_deg`` is reported unreliable.
+
+    ``use_base_poses``: where the captures carry the base's reported pose, each station's coarse
+    pose is first moved by how far the base reported standing from where it stood when
+    calibrated (``fieldapp/recon/arrival.py``; a move beyond ``max_base_move_m``/``_deg`` is
+    not used). The arrival uncertainty is then the error of the base's reported pose (its
+    localisation), not of its stopping on the goal."""
 
     enabled: bool = True
+    retry_arrival_factor: float = Field(default=2.0, ge=1.0)
+    """When stations are kept coarse because their corrections lie beyond the expected arrival
+    error, registration runs once more with the arrival uncertainty this many times wider and
+    keeps that run, with a warning, if it refines more stations (1: never)."""
+    use_base_poses: bool = True
+    max_base_move_m: float = Field(default=0.5, gt=0.0)
+    max_base_move_deg: float = Field(default=20.0, gt=0.0)
     method: Literal["GICP", "PLANE_ICP"] = "GICP"
     voxel_sizes_m: tuple[float, ...] = (0.1, 0.05, 0.02, 0.008)
     shared_cloud_m: float = Field(default=0.02, ge=0.0)

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from devices.geometry import Matrix4, invert, transform_points
 from fieldapp.io.calibration import Calibration, ViewStep
 from fieldapp.io.session import Capture, Session
+from fieldapp.recon.arrival import BaseMoves, move_coarse
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
 from fieldapp.recon.forkmap import ForkedMap
@@ -33,7 +34,7 @@ from fieldapp.recon.mapframe import (
 )
 from fieldapp.recon.organ_traits import PlantOrgans, foot_m, measure_organs
 from fieldapp.recon.plants import Plant, PlantSearch, search_plants
-from fieldapp.recon.register import StationRegistration, register_stations
+from fieldapp.recon.register import StationRegistration, beyond_arrival, register_stations
 from fieldapp.recon.scans import StationScan, read_station, turntable_axis_point
 from fieldapp.recon.settings import (
     CropSettings,
@@ -174,19 +175,41 @@ def anchor(reference: int, scans: Collection[int], to_reference: dict[int, Matri
 
 
 def level(
-    local: LocalScans, calibration: Calibration, reference: int, ground: GroundSettings
+    local: LocalScans,
+    calibration: Calibration,
+    reference: int,
+    ground: GroundSettings,
+    moves: BaseMoves | None = None,
+    registration: RegistrationSettings | None = None,
 ) -> Staged[dict[int, Matrix4]]:
     """Step 3: each station's ``T_field_station``. Placed coarsely (the turntable's own
     frame; else the ground calibration, or the reference station's own ground, and the
-    station calibration), then corrected onto the ground it sees."""
+    station calibration, each station moved by where the base reported it stopped when
+    ``moves`` are given and ``registration.use_base_poses``), then corrected onto the ground
+    it sees."""
+    warnings: list[str] = []
     if local.T_field_view0 is not None:
         coarse = {reference: local.T_field_view0}
     else:
         to_reference = calibration.stations.to_reference if calibration.stations else {}
         T_field_ref = T_field_reference_initial(calibration, local.scans[reference], ground)
         coarse = {s: T_field_ref @ to_reference[s] for s in local.scans}
-    levelled, warnings = level_stations(local.scans, coarse, ground)
-    return Staged(levelled, tuple(warnings))
+        if moves is not None and registration is not None and registration.use_base_poses:
+            assert calibration.view_step is not None  # a plot's calibration has one
+            moved = move_coarse(
+                coarse,
+                reference,
+                moves,
+                turntable_axis_point(
+                    calibration.view_step.matrix, calibration.view_step.views_per_turn
+                ),
+                turntable_axis_direction(calibration.view_step.matrix),
+                registration,
+            )
+            coarse = moved.T_field_station
+            warnings.extend(moved.warnings)
+    levelled, level_warnings = level_stations(local.scans, coarse, ground)
+    return Staged(levelled, (*warnings, *level_warnings))
 
 
 def filter_plants(
@@ -231,21 +254,60 @@ def join_stations(
 ) -> Generator[tuple[float, str], None, Staged[dict[int, StationRegistration]]]:
     """Step 5: one pose graph of every overlapping pair, the levelled poses as its prior;
     yields (fraction done, message) per pair registered. A warning per station whose
-    refinement was refused or is unreliable."""
+    refinement was refused or is unreliable.
+
+    When stations are kept coarse because their corrections lie beyond the expected arrival
+    error (``arrival_sigma_*`` understating the base's), the graph is registered once more with
+    that uncertainty ``retry_arrival_factor`` times wider, and the second run is kept, with a
+    warning, if it leaves fewer stations coarse. Its guards still hold (``guard_sigmas`` of the
+    wider prior, and every correction must make its overlaps agree better), and a station kept
+    coarse because its correction did not improve its overlaps never starts a second run."""
+    points = _registration_points(filtered, T_field_levelled, settings.include_soil)
+    axis = turntable_axis_point(view_step.matrix, view_step.views_per_turn)
     registrations = yield from register_stations(
-        _registration_points(filtered, T_field_levelled, settings.include_soil),
-        T_field_levelled,
-        turntable_axis_point(view_step.matrix, view_step.views_per_turn),
-        reference,
-        settings,
-        threads,
+        points, T_field_levelled, axis, reference, settings, threads
     )
+    notes: tuple[str, ...] = ()
+    factor = settings.retry_arrival_factor
+    if settings.enabled and factor > 1.0 and any(map(beyond_arrival, registrations.values())):
+        wider = settings.model_copy(
+            update={
+                "arrival_sigma_m": factor * settings.arrival_sigma_m,
+                "arrival_sigma_deg": factor * settings.arrival_sigma_deg,
+            }
+        )
+        again = yield from register_stations(
+            points, T_field_levelled, axis, reference, wider, threads
+        )
+        before, after = _kept_coarse(registrations), _kept_coarse(again)
+        if len(after) < len(before):
+            notes = (
+                f"registration: with the arrival uncertainty of the settings "
+                f"({_sigmas(settings)}) {_listed(before)} kept at coarse poses; registered again "
+                f"with {_sigmas(wider)}, {len(before) - len(after)} of them refined. The base "
+                "errs more than registration.arrival_sigma_m / _deg say: set them to match it",
+            )
+            registrations = again
     warnings = tuple(
         f"station {station} {r.verdict}: {r.message}"
         for station, r in registrations.items()
         if r.verdict in (COARSE_KEPT, UNRELIABLE) and settings.enabled
     )
-    return Staged(registrations, warnings)
+    return Staged(registrations, notes + warnings)
+
+
+def _kept_coarse(registrations: dict[int, StationRegistration]) -> list[int]:
+    return [s for s, r in registrations.items() if r.verdict in (COARSE_KEPT, UNRELIABLE)]
+
+
+def _listed(stations: list[int]) -> str:
+    if len(stations) == 1:
+        return f"station {stations[0]} was"
+    return f"stations {', '.join(map(str, stations))} were"
+
+
+def _sigmas(settings: RegistrationSettings) -> str:
+    return f"{100 * settings.arrival_sigma_m:g} cm / {settings.arrival_sigma_deg:g} deg"
 
 
 def _registration_points(
