@@ -81,6 +81,13 @@ def test_stations_within_5_mm_and_0_3_degrees(boards_session, truth):
     assert all(p.fit.rmse_m < 0.01 for p in result.pairs)
     # the nominal calibration, which the base never matches, is visibly worse
     assert pose_error(prior[4], _relative_truth(truth, 4))[0] > 0.02
+    # where the base reported standing while the boards were captured, for later sessions'
+    # reported stops to be measured from (recon/arrival.py)
+    reported = {c.station: c.base_pose for c in session.captures if c.base_pose is not None}
+    assert sorted(result.base_poses) == [4, 5, 6]
+    for station, (x, y, yaw_deg) in result.base_poses.items():
+        pose = reported[station]
+        assert (x, y, yaw_deg) == pytest.approx((pose.x, pose.y, pose.yaw_deg), abs=1e-9)
 
 
 def test_the_commands_chain_into_a_usable_calibration(boards_session, tmp_path, capsys, truth):
@@ -138,6 +145,8 @@ def test_the_commands_chain_into_a_usable_calibration(boards_session, tmp_path, 
     assert "above the ground" in text
     calibration = load_calibration(out)
     assert calibration.view_step.calibrated["rig_serial"] == "SIM-1"  # type: ignore[union-attr]
+    assert calibration.stations is not None and calibration.stations.base_poses is not None
+    assert sorted(calibration.stations.base_poses) == [4, 5, 6]
     assert len(list(tmp_path.glob("rig.previous-*.json"))) == 2
     T_field_camera5 = np.array(truth["T_field_camera"]["5"])
     assert calibration.ground is not None
