@@ -34,7 +34,12 @@ from fieldapp.recon.mapframe import (
 )
 from fieldapp.recon.organ_traits import PlantOrgans, foot_m, measure_organs
 from fieldapp.recon.plants import Plant, PlantSearch, search_plants
-from fieldapp.recon.register import StationRegistration, beyond_arrival, register_stations
+from fieldapp.recon.register import (
+    RegistrationSteps,
+    StationRegistration,
+    beyond_arrival,
+    register_stations,
+)
 from fieldapp.recon.scans import StationScan, read_station, turntable_axis_point
 from fieldapp.recon.settings import (
     CropSettings,
@@ -276,8 +281,9 @@ def join_stations(
                 "arrival_sigma_deg": factor * settings.arrival_sigma_deg,
             }
         )
-        again = yield from register_stations(
-            points, T_field_levelled, axis, reference, wider, threads
+        again = yield from _done_already(
+            register_stations(points, T_field_levelled, axis, reference, wider, threads),
+            f"registering again with {_sigmas(wider)}: ",
         )
         before, after = _kept_coarse(registrations), _kept_coarse(again)
         if len(after) < len(before):
@@ -294,6 +300,16 @@ def join_stations(
         if r.verdict in (COARSE_KEPT, UNRELIABLE) and settings.enabled
     )
     return Staged(registrations, notes + warnings)
+
+
+def _done_already(steps: RegistrationSteps, prefix: str) -> RegistrationSteps:
+    """``steps`` with every progress event at 1.0 (the stage's bar has run once already)."""
+    while True:
+        try:
+            _, message = next(steps)
+        except StopIteration as done:
+            return done.value  # type: ignore[no-any-return]
+        yield 1.0, prefix + message
 
 
 def _kept_coarse(registrations: dict[int, StationRegistration]) -> list[int]:

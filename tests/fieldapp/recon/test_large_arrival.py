@@ -20,6 +20,7 @@ from devices.geometry import invert, pose_error
 from fieldapp.cli import main
 from fieldapp.io.session import load_session
 from fieldapp.recon.pipeline import run_reconstruction
+from fieldapp.recon.progress import Progress
 from fieldapp.recon.result import Reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
 
@@ -45,7 +46,11 @@ def _errors(result: Reconstruction, folder: Path) -> dict[int, tuple[float, floa
 
 
 def test_every_station_is_placed_despite_arrivals_beyond_the_settings(block: Path) -> None:
-    result = run_reconstruction(load_session(block), ReconstructionSettings())
+    events: list[Progress] = []
+    result = run_reconstruction(load_session(block), ReconstructionSettings(), events.append)
+    fractions = [e.fraction for e in events]
+    assert fractions == sorted(fractions)  # the second run does not send the bar back
+    assert any(e.message.startswith("registering again with 6 cm / 3 deg") for e in events)
     for station, (shift_m, turn_deg) in _errors(result, block).items():
         assert shift_m < 0.005 and turn_deg < 0.2, (station, shift_m, turn_deg)
     assert all(r.verdict in ("refined", "reference") for r in result.registrations.values())
