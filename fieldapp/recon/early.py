@@ -38,6 +38,7 @@ import queue
 import signal
 import struct
 import threading
+import time
 import warnings
 from collections.abc import Callable, Generator
 from dataclasses import dataclass
@@ -56,6 +57,14 @@ log = logging.getLogger(__name__)
 
 StationRead = tuple[StationScan | None, list[str]]
 """What :func:`~fieldapp.recon.scans.read_station` returns: the scan and its warnings."""
+
+READER_STALL_S = 30.0
+"""How long this process, with nothing left to read itself, waits for the reader's next
+station before it takes the reader for hung (a lock some thread held when it was forked, a file
+that does not answer) and kills it: its stations are then read here. A station takes 0.1-0.5 s
+to read on the machines measured."""
+POLL_S = 0.05
+"""How often the wait for the reader looks at the clock."""
 
 
 def can_fork_a_reader() -> bool:
@@ -151,6 +160,9 @@ class EarlyStations:
         self.arguments = arguments
         self._rays = rays
         self._left = False  # the reader's end of the pipe has closed: it is leaving
+        self._messages = 0  # stations the reader has sent (read or failed)
+        self.clock: Callable[[], float] = time.monotonic
+        self.stall_s = READER_STALL_S
 
     @classmethod
     def start(
@@ -238,7 +250,7 @@ class EarlyStations:
             except Exception as error:  # raised below, in station order
                 failed[index] = error
             yield self._stations[index][0]
-        yield from self._receive(done, wait=True)  # until the reader has sent all and left
+        yield from self._await_reader(done)  # until it has sent all and left, or stalls
         self.close()
         for index in range(len(self._stations)):
             if index in failed:
@@ -262,12 +274,35 @@ class EarlyStations:
             threads,
         )
 
+    def _await_reader(self, done: dict[int, StationRead]) -> Generator[int, None, None]:
+        """The reader's stations until its pipe closes, into ``done``; yields each received.
+        When none comes for ``stall_s`` (by ``clock``) the reader is taken for hung: the wait
+        ends (:meth:`close` kills it) and what it had not sent is read here."""
+        last = self.clock()
+        while True:
+            received = self._messages
+            yield from self._receive(done, wait=False)
+            if self._left:
+                return
+            if self._messages > received:
+                last = self.clock()
+            elif self.clock() - last > self.stall_s:
+                log.warning(
+                    "the station reader (pid %s) sent nothing for %.0f s: stopped; its "
+                    "stations are read here",
+                    self._pid,
+                    self.stall_s,
+                )
+                return
+            self._connection.poll(POLL_S)
+
     def _receive(self, done: dict[int, StationRead], wait: bool) -> Generator[int, None, None]:
         """The reader's stations waiting on the pipe (``wait``: until it closes), into ``done``;
         yields each station received."""
         try:
             while wait or self._connection.poll(0):
                 index, read = pickle.loads(self._connection.recv_bytes())
+                self._messages += 1
                 if read is not None:
                     done[index] = read
                     yield self._stations[index][0]

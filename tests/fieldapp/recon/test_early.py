@@ -3,8 +3,10 @@ read here, a reader that dies or fails has its stations read here, errors raised
 
 from __future__ import annotations
 
+import itertools
 import os
 import shutil
+import threading
 from pathlib import Path
 
 import pytest
@@ -96,6 +98,30 @@ def test_a_reader_that_dies_has_its_stations_read_here(
     read, reported = _read_all(reader)
     assert sorted(reported) == [4, 5]
     _assert_same(read, _here(session))
+
+
+def test_a_reader_that_hangs_is_stopped_and_its_stations_read_here(
+    small_session: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    session, parent = load_session(small_session), os.getpid()
+
+    def hangs_in_the_reader(s: Session, station: int, *args: object) -> StationRead:
+        if os.getpid() != parent:
+            threading.Event().wait()  # a lock that is never released
+        return read_station(s, station, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(early, "read_station", hangs_in_the_reader)
+    reader = start_reading(session, SETTINGS)
+    assert reader is not None
+    _wait_for_the_reader_to_take_the_first(reader)
+    ticks = itertools.count()
+    reader.clock = lambda: 10.0 * next(ticks)  # 10 s pass at every look at the clock
+    pid = reader.pid
+    read, reported = _read_all(reader)
+    assert sorted(reported) == [4, 5] and reader.pid is None
+    _assert_same(read, _here(session))
+    with pytest.raises(ChildProcessError):  # killed and reaped
+        os.waitpid(pid, os.WNOHANG)  # type: ignore[arg-type]
 
 
 def test_a_corrupt_frame_read_by_the_reader_is_reported_as_here(
