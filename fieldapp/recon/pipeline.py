@@ -60,22 +60,18 @@ def reconstruct(
     reference = stages.anchor(stations.reference, local.value.scans, stations.to_reference)
     # 3. Levelling: coarse placement by the pre-calibration, each station on its own ground.
     with timer.stage("levelling"):
-        levelled = stages.level(
-            local.value,
-            session.calibration,
-            reference.value,
-            settings.ground,
-            base_moves(session),
-            settings.registration,
-        )
+        levelled = stages.level(local.value, session.calibration, reference.value, settings.ground)
     yield progress("levelling", 1.0, "stations levelled")
     # 4. Plant filtering per station: pass-through above the ground, voxel means.
     filtered = yield from _filtering(local.value.scans, levelled.value, settings, timer)
     scanned = stages.summarise(local, filtered)
     del local  # the station clouds are no longer needed
     # 5. Stations joined: one pose graph of every overlap, the levelled poses as its prior.
+    start = stages.starting_poses(
+        levelled.value, reference.value, view_step, base_moves(session), settings.registration
+    )
     joined = yield from _registration(
-        filtered, levelled.value, view_step, reference.value, settings, timer
+        filtered, levelled.value, start.value, view_step, reference.value, settings, timer
     )
     # 6. One cloud of the plot; outliers removed where every station's view is together.
     with timer.stage("outlier removal"):
@@ -93,7 +89,11 @@ def reconstruct(
     yield progress("traits", 1.0, f"{len(found.value.plants)} plants")
     warnings = [
         *stages.missing_captures(session.missing()),
-        *(w for step in (scanned, reference, levelled, joined, grid, found) for w in step.warnings),
+        *(
+            w
+            for step in (scanned, reference, levelled, start, joined, grid, found)
+            for w in step.warnings
+        ),
     ]
     plot = _Plot(reference.value, scanned.value, fused, placed, grid.value, found.value, organs)
     return _result(session.id, plot, settings, timer, warnings)
@@ -226,6 +226,7 @@ def _filtering(
 def _registration(
     filtered: dict[int, FilteredStation],
     T_field_levelled: dict[int, Matrix4],
+    T_field_moved: dict[int, Matrix4],
     view_step: ViewStep,
     reference: int,
     settings: ReconstructionSettings,
@@ -239,6 +240,7 @@ def _registration(
         reference,
         settings.registration,
         settings.threads,
+        T_field_moved,
     )
     joined = yield from _timed_steps(timer, "registration", steps)
     yield progress("registration", 1.0, f"{len(joined.value)} stations placed")

@@ -54,16 +54,17 @@ class StationRegistration:
 
 BEYOND_ARRIVAL = "of the expected arrival error"
 NO_OVERLAP = "no overlap registered"
+NO_BETTER_AGREEMENT = "does not make the overlaps agree better"
 
 
 def beyond_arrival(registration: StationRegistration) -> bool:
-    """Whether the station was kept at its coarse pose because its correction, or every pair
-    it has, lay beyond its expected arrival error (not because the correction failed to make
-    its overlaps agree)."""
+    """Whether the station may have been left coarse or unreliable by an arrival error larger
+    than the settings expect: its correction, or every pair it has, lay beyond it, or too few
+    pairs were kept to place it. Not when its correction failed to make its overlaps agree
+    better: a fit in the wrong place, which a wider prior would not mend."""
     if registration.verdict not in (guards.COARSE_KEPT, guards.UNRELIABLE):
         return False
-    message = registration.message
-    return BEYOND_ARRIVAL in message or message.startswith(NO_OVERLAP)
+    return NO_BETTER_AGREEMENT not in registration.message
 
 
 def ground_centre_m(
@@ -418,7 +419,7 @@ class _Plot:
         before, after = self.agreement(station)
         if self.kept_fits(station) and after >= before:
             return 0.0, (
-                "the correction does not make the overlaps agree better (RMS "
+                f"the correction {NO_BETTER_AGREEMENT} (RMS "
                 f"{1000 * np.sqrt(after):.1f} mm corrected, {1000 * np.sqrt(before):.1f} mm coarse)"
             )
         return None

@@ -10,7 +10,7 @@ plan (the planting grid) is the only input they do.
 from __future__ import annotations
 
 from collections.abc import Collection, Generator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Generic, Literal, TypeVar
 
 import numpy as np
@@ -180,41 +180,44 @@ def anchor(reference: int, scans: Collection[int], to_reference: dict[int, Matri
 
 
 def level(
-    local: LocalScans,
-    calibration: Calibration,
-    reference: int,
-    ground: GroundSettings,
-    moves: BaseMoves | None = None,
-    registration: RegistrationSettings | None = None,
+    local: LocalScans, calibration: Calibration, reference: int, ground: GroundSettings
 ) -> Staged[dict[int, Matrix4]]:
     """Step 3: each station's ``T_field_station``. Placed coarsely (the turntable's own
     frame; else the ground calibration, or the reference station's own ground, and the
-    station calibration, each station moved by where the base reported it stopped when
-    ``moves`` are given and ``registration.use_base_poses``), then corrected onto the ground
-    it sees."""
-    warnings: list[str] = []
+    station calibration), then corrected onto the ground it sees."""
     if local.T_field_view0 is not None:
         coarse = {reference: local.T_field_view0}
     else:
         to_reference = calibration.stations.to_reference if calibration.stations else {}
         T_field_ref = T_field_reference_initial(calibration, local.scans[reference], ground)
         coarse = {s: T_field_ref @ to_reference[s] for s in local.scans}
-        if moves is not None and registration is not None and registration.use_base_poses:
-            assert calibration.view_step is not None  # a plot's calibration has one
-            moved = move_coarse(
-                coarse,
-                reference,
-                moves,
-                turntable_axis_point(
-                    calibration.view_step.matrix, calibration.view_step.views_per_turn
-                ),
-                turntable_axis_direction(calibration.view_step.matrix),
-                registration,
-            )
-            coarse = moved.T_field_station
-            warnings.extend(moved.warnings)
-    levelled, level_warnings = level_stations(local.scans, coarse, ground)
-    return Staged(levelled, (*warnings, *level_warnings))
+    levelled, warnings = level_stations(local.scans, coarse, ground)
+    return Staged(levelled, tuple(warnings))
+
+
+def starting_poses(
+    T_field_levelled: dict[int, Matrix4],
+    reference: int,
+    view_step: ViewStep,
+    moves: BaseMoves | None,
+    settings: RegistrationSettings,
+) -> Staged[dict[int, Matrix4]]:
+    """Where registration starts each station: its levelled pose, moved by where the base
+    reported it stopped (``recon/arrival.py``) when ``moves`` are given and
+    ``settings.use_base_poses``. The stations' filtered points stay as levelling placed
+    them (their voxel means unchanged): :func:`join_stations` maps each correction back onto
+    the levelled pose."""
+    if moves is None or not settings.use_base_poses or len(T_field_levelled) < 2:
+        return Staged(dict(T_field_levelled))
+    moved = move_coarse(
+        T_field_levelled,
+        reference,
+        moves,
+        turntable_axis_point(view_step.matrix, view_step.views_per_turn),
+        turntable_axis_direction(view_step.matrix),
+        settings,
+    )
+    return Staged(moved.T_field_station, moved.warnings)
 
 
 def filter_plants(
@@ -256,50 +259,76 @@ def join_stations(
     reference: int,
     settings: RegistrationSettings,
     threads: int,
+    T_field_moved: dict[int, Matrix4] | None = None,
 ) -> Generator[tuple[float, str], None, Staged[dict[int, StationRegistration]]]:
     """Step 5: one pose graph of every overlapping pair, the levelled poses as its prior;
     yields (fraction done, message) per pair registered. A warning per station whose
-    refinement was refused or is unreliable.
+    refinement was refused or is unreliable. Each registration's ``T_correction`` maps the
+    station's levelled placement (where its filtered points are) onto the final one.
 
     When stations are kept coarse because their corrections lie beyond the expected arrival
-    error (``arrival_sigma_*`` understating the base's), the graph is registered once more with
-    that uncertainty ``retry_arrival_factor`` times wider, and the second run is kept, with a
-    warning, if it leaves fewer stations coarse. Its guards still hold (``guard_sigmas`` of the
-    wider prior, and every correction must make its overlaps agree better), and a station kept
-    coarse because its correction did not improve its overlaps never starts a second run."""
+    error, the base erred more than the settings say, and registration runs again: first from
+    ``T_field_moved`` (the levelled poses moved by where the base reported it stopped,
+    :func:`starting_poses`), then, if stations are still beyond it, with the arrival
+    uncertainty ``retry_arrival_factor`` times wider. The run leaving the fewest stations
+    coarse is kept (the first on a tie), with a warning saying how it was placed. Every run
+    keeps its guards (``guard_sigmas`` of its prior, and every correction must make its
+    overlaps agree better), and a station kept coarse because its correction did not improve
+    its overlaps starts no second run. A plot registered the first time is registered exactly
+    as before: on touching canopies a millimetre of registration decides some leaf tips
+    (RECONSTRUCTION.md, "Touching canopies"), so the first run does not change with the
+    reports."""
     points = _registration_points(filtered, T_field_levelled, settings.include_soil)
     axis = turntable_axis_point(view_step.matrix, view_step.views_per_turn)
     registrations = yield from register_stations(
         points, T_field_levelled, axis, reference, settings, threads
     )
-    notes: tuple[str, ...] = ()
-    factor = settings.retry_arrival_factor
-    if settings.enabled and factor > 1.0 and any(map(beyond_arrival, registrations.values())):
+    start, notes = T_field_levelled, ""
+    runs: list[tuple[dict[int, Matrix4], RegistrationSettings, str]] = []
+    moved, from_reports = T_field_levelled, ""
+    if T_field_moved is not None and any(
+        not np.array_equal(T_field_moved[s], T_field_levelled[s]) for s in T_field_levelled
+    ):
+        moved, from_reports = T_field_moved, "from where the base reported each stop"
+        runs.append((moved, settings, from_reports))
+    if settings.retry_arrival_factor > 1.0:
+        factor = settings.retry_arrival_factor
         wider = settings.model_copy(
             update={
                 "arrival_sigma_m": factor * settings.arrival_sigma_m,
                 "arrival_sigma_deg": factor * settings.arrival_sigma_deg,
             }
         )
+        how = " and ".join(filter(None, [from_reports, f"with {_sigmas(wider)}"]))
+        runs.append((moved, wider, how))
+    first = _kept_coarse(registrations)
+    for run_start, run_settings, how in runs:
+        if not settings.enabled or not any(map(beyond_arrival, registrations.values())):
+            break
         again = yield from _done_already(
-            register_stations(points, T_field_levelled, axis, reference, wider, threads),
-            f"registering again with {_sigmas(wider)}: ",
+            register_stations(points, run_start, axis, reference, run_settings, threads),
+            f"registering again {how}: ",
         )
-        before, after = _kept_coarse(registrations), _kept_coarse(again)
-        if len(after) < len(before):
-            notes = (
-                f"registration: with the arrival uncertainty of the settings "
-                f"({_sigmas(settings)}) {_listed(before)} kept at coarse poses; registered again "
-                f"with {_sigmas(wider)}, {len(before) - len(after)} of them refined. The base "
-                "errs more than registration.arrival_sigma_m / _deg say: set them to match it",
-            )
-            registrations = again
+        if len(_kept_coarse(again)) < len(_kept_coarse(registrations)):
+            registrations, start = again, run_start
+            notes = f"registered again {how}"
+    if notes:
+        notes = (
+            f"registration: with the arrival uncertainty of the settings ({_sigmas(settings)}) "
+            f"{_listed(first)} kept at coarse poses; {notes}, "
+            f"{len(first) - len(_kept_coarse(registrations))} of them are refined. The base "
+            "errs more than registration.arrival_sigma_m / _deg say: set them to match it"
+        )
+    registrations = {
+        s: replace(r, T_correction=r.T_correction @ start[s] @ invert(T_field_levelled[s]))
+        for s, r in registrations.items()
+    }
     warnings = tuple(
         f"station {station} {r.verdict}: {r.message}"
         for station, r in registrations.items()
         if r.verdict in (COARSE_KEPT, UNRELIABLE) and settings.enabled
     )
-    return Staged(registrations, notes + warnings)
+    return Staged(registrations, (notes,) * bool(notes) + warnings)
 
 
 def _done_already(steps: RegistrationSteps, prefix: str) -> RegistrationSteps:

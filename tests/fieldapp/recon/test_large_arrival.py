@@ -50,13 +50,13 @@ def test_every_station_is_placed_despite_arrivals_beyond_the_settings(block: Pat
     result = run_reconstruction(load_session(block), ReconstructionSettings(), events.append)
     fractions = [e.fraction for e in events]
     assert fractions == sorted(fractions)  # the second run does not send the bar back
-    assert any(e.message.startswith("registering again with 6 cm / 3 deg") for e in events)
+    assert any(e.message.startswith("registering again from where the base") for e in events)
     for station, (shift_m, turn_deg) in _errors(result, block).items():
         assert shift_m < 0.005 and turn_deg < 0.2, (station, shift_m, turn_deg)
     assert all(r.verdict in ("refined", "reference") for r in result.registrations.values())
     assert len(result.plants) == 16
     widened = [w for w in result.warnings if w.startswith("registration: with the arrival")]
-    assert len(widened) == 1 and "registered again with 6 cm / 3 deg" in widened[0]
+    assert len(widened) == 1 and "registered again from where the base reported" in widened[0]
 
 
 def test_without_the_reported_stops_and_the_second_run_the_stations_are_flagged(
