@@ -6,10 +6,13 @@
 to. A base never stops on its goal: it stops within its goal tolerance, *by its own estimate*,
 and a session's captures carry that estimate (``base_pose``, map frame). The difference
 between where the base reported standing and where it stood when calibrated is the part of its
-arrival error the base knows; what is left is its localisation error. So each station's coarse
-pose is moved by that difference before levelling, and registration starts from the
-localisation error instead of the whole arrival error (the simulator splits a 10 cm / 5 degree
-arrival into 8 cm / 4 degrees of stopping, reported, and 6 cm / 3 degrees of localisation).
+arrival error the base knows; what is left is its localisation error. So when a first
+registration leaves stations coarse (``stages.join_stations``), it runs again with each
+station's levelled pose moved by that difference: from the localisation error instead of the
+whole arrival error (the simulator splits a 10 cm / 5 degree arrival into 8 cm / 4 degrees of
+stopping, reported, and 6 cm / 3 degrees of localisation). Not in the first run: it places the
+stations as well, but not identically, and on touching canopies a millimetre decides some leaf
+tips; a plot that registers the first time is registered as before.
 
 The move is a planar one (a turn about the vertical and a shift) in the map frame, taken into
 the field frame by the 2-D fit of the calibrated stations' turntable axes onto their

@@ -62,17 +62,15 @@ class RegistrationSettings(_Section):
     ``edge_tolerance_m``/``_deg`` is dropped. A station whose estimated uncertainty exceeds
     ``max_uncertainty_m``/``_deg`` is reported unreliable.
 
-    ``use_base_poses``: where the captures carry the base's reported pose, each station's coarse
-    pose is first moved by how far the base reported standing from where it stood when
-    calibrated (``fieldapp/recon/arrival.py``; a move beyond ``max_base_move_m``/``_deg`` is
-    not used). The arrival uncertainty is then the error of the base's reported pose (its
-    localisation), not of its stopping on the goal."""
+    When a first run leaves stations coarse (``stages.join_stations``), registration runs
+    again: with ``use_base_poses``, from the poses moved by how far the base reported standing
+    from where it stood when calibrated (``fieldapp/recon/arrival.py``; a report beyond
+    ``max_base_move_m``/``_deg`` is not used), then with the arrival uncertainty
+    ``retry_arrival_factor`` times wider; the run leaving the fewest stations coarse is kept."""
 
     enabled: bool = True
     retry_arrival_factor: float = Field(default=2.0, ge=1.0)
-    """When stations are kept coarse because their corrections lie beyond the expected arrival
-    error, registration runs once more with the arrival uncertainty this many times wider and
-    keeps that run, with a warning, if it refines more stations (1: never)."""
+    """How much wider the arrival uncertainty of the last run after the first (1: no such run)."""
     use_base_poses: bool = True
     max_base_move_m: float = Field(default=0.5, gt=0.0)
     max_base_move_deg: float = Field(default=20.0, gt=0.0)
