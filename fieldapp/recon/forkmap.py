@@ -53,6 +53,11 @@ STOP_WAIT_S = 5.0
 """How long closing waits for the worker to finish its item before killing it."""
 EXIT_POLL_S = 0.001
 """How often closing checks that a worker whose pipe has closed has been reaped."""
+WORKER_STALL_S = 120.0
+"""How long this process, with nothing left to run itself, waits for the worker's item before
+it takes the worker for hung (a lock some thread held when it was forked) and kills it: the
+item then runs here, and so does every later item of the stage. A registration pair or a
+plant's organs take well under a second on the plots measured, a 9 x 9 plot's pairs a few."""
 
 
 def can_fork_a_worker() -> bool:
@@ -69,6 +74,8 @@ class ForkedMap:
         self._threads = threads
         self._worker: _Worker | None = None
         self._local: Executor | None = None
+        self.clock: Callable[[], float] = time.monotonic
+        self.stall_s = WORKER_STALL_S
         if threads >= 2 and fork():
             self._worker = _Worker.start()
         if self._worker is None and threads >= 2:
@@ -136,13 +143,24 @@ class ForkedMap:
         done: dict[int, R] = {}
         front, back = 0, len(items) - 1
         busy: int | None = None  # the item the worker holds
+        sent_at = self.clock()
         for i in range(len(items)):
             while i not in done:
                 if busy is None and worker.alive and front <= back:
                     busy, front = order[front], front + 1
                     worker.send(function, items[busy])
+                    sent_at = self.clock()
                 if busy is not None and (front > back or worker.ready()):
                     outcome = worker.receive(POLL_S if front > back else 0.0)
+                    if outcome is _PENDING and self.clock() - sent_at > self.stall_s:
+                        log.warning(
+                            "the worker process (pid %d) has held one item for %.0f s: "
+                            "stopped; its items go on here",
+                            worker.pid,
+                            self.stall_s,
+                        )
+                        worker.kill()
+                        outcome = _DIED
                     if outcome is _PENDING:
                         continue
                     if outcome is _DIED:
@@ -253,6 +271,14 @@ class _Worker:
             raise payload
         return payload
 
+    def kill(self) -> None:
+        """Kill the worker now and reap it (it holds nothing to clean up)."""
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self._pid, signal.SIGKILL)
+        with contextlib.suppress(ChildProcessError):
+            os.waitpid(self._pid, 0)
+        self._ended, self.alive = True, False
+
     def stop(self, wait_s: float = STOP_WAIT_S) -> None:
         """Ask the worker to end after its item; kill it if it has not within ``wait_s`` (it
         holds nothing to clean up); reap it either way. The wait ends when the worker's end of
@@ -270,11 +296,7 @@ class _Worker:
         while self._is_alive() and time.monotonic() < deadline:  # closed its pipe: exiting
             time.sleep(EXIT_POLL_S)
         if self._is_alive():
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(self._pid, signal.SIGKILL)
-            with contextlib.suppress(ChildProcessError):
-                os.waitpid(self._pid, 0)
-            self._ended = True
+            self.kill()
 
 
 def _serve(connection: Connection) -> None:

@@ -3,9 +3,11 @@ process's, and the work goes on here when no worker can be started or the worker
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import os
 import signal
+import threading
 from typing import Any
 
 import pytest
@@ -77,6 +79,29 @@ def test_the_pairs_go_on_here_when_the_worker_dies() -> None:
         os.kill(pid, signal.SIGKILL)
         results = list(runner.map(_square_and_pid, range(6)))
     assert results == [(x * x, os.getpid()) for x in range(6)]
+
+
+def _hang_in_the_worker(parent_and_x: tuple[int, int]) -> tuple[int, int]:
+    parent, x = parent_and_x
+    if os.getpid() != parent:
+        threading.Event().wait()  # a lock that is never released
+    return x * x, os.getpid()
+
+
+def test_a_worker_that_hangs_is_stopped_and_its_items_go_on_here() -> None:
+    with ForkedMap(2) as runner:
+        pid = runner.worker_pid
+        assert pid is not None
+        ticks = itertools.count()
+        runner.clock = lambda: 10.0 * next(ticks)  # 10 s pass at every look at the clock
+        items = [(os.getpid(), x) for x in range(6)]
+        results = list(runner.map(_hang_in_the_worker, items))
+        assert not runner._worker.alive  # type: ignore[union-attr]
+        later = list(runner.map(_square_and_pid, range(3)))  # the stage's later items: here
+        assert later == [(x * x, os.getpid()) for x in range(3)]
+    assert results == [(x * x, os.getpid()) for x in range(6)]
+    with pytest.raises(ChildProcessError):  # killed and reaped
+        os.waitpid(pid, os.WNOHANG)
 
 
 def test_closing_the_results_early_drops_the_pairs_not_started() -> None:
