@@ -170,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
                 about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
             if args.depth_only:
                 about["depth_only"] = True
-            plan = simulated_plan(rig) if args.scene == "plot" else None
+            plan = simulated_plan(rig, sown=args.scene == "plot")
             count = write_session(args.out, world, stations, views, seed, about, errors, plan)
         if args.scene == "checkerboard" and shots:
             write_intrinsics_images(args.out, seed, shots)
@@ -220,26 +220,30 @@ def build_world(
     return SimWorld(scene, rig, seed=seed)
 
 
-def simulated_plan(rig: RigGeometry) -> dict[str, Any]:
+def simulated_plan(rig: RigGeometry, sown: bool = True) -> dict[str, Any]:
     """The session's ``plan`` as a mission would write it (session-format spec, map frame): the
-    stations' nominal map poses, the views, and the planting grid the plot was sown on (rows
-    along the map's x axis, row 1 column 1 at the plants' lowest x and y; the simulated plants
-    stand within a few cm of its nodes)."""
+    stations' nominal map poses, the views, and (``sown``) the planting grid the plot was sown
+    on (rows along the map's x axis, row 1 column 1 at the plants' lowest x and y; the
+    simulated plants stand within a few cm of its nodes)."""
     import numpy as np
 
     from devices.sim.scene import PlotLayout
 
-    layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
-    T_map_field = np.linalg.inv(rig.T_field_map)
-    first_field = -np.array([layout.cols - 1, layout.rows - 1]) * layout.spacing_m / 2
-    origin = T_map_field[:2, :2] @ first_field + T_map_field[:2, 3]
     stations = [
         {"number": s, "x_m": p.x_m, "y_m": p.y_m, "yaw_deg": p.yaw_deg}
         for s, p in ((s, rig.station_pose(s)) for s in rig.stations)
     ]
-    return {
+    plan: dict[str, Any] = {
         "stations": stations,
         "views": {"count": rig.views, "step_deg": rig.view_step_deg},
+    }
+    if not sown:
+        return plan
+    layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
+    T_map_field = np.linalg.inv(rig.T_field_map)
+    first_field = -np.array([layout.cols - 1, layout.rows - 1]) * layout.spacing_m / 2
+    origin = T_map_field[:2, :2] @ first_field + T_map_field[:2, 3]
+    return plan | {
         "planting_grid": {
             "rows": layout.rows,
             "columns": layout.cols,
