@@ -266,43 +266,24 @@ def join_stations(
     refinement was refused or is unreliable. Each registration's ``T_correction`` maps the
     station's levelled placement (where its filtered points are) onto the final one.
 
-    When stations are kept coarse because their corrections lie beyond the expected arrival
-    error, the base erred more than the settings say, and registration runs again: first from
-    ``T_field_moved`` (the levelled poses moved by where the base reported it stopped,
-    :func:`starting_poses`), then, if stations are still beyond it, with the arrival
-    uncertainty ``retry_arrival_factor`` times wider. The run leaving the fewest stations
-    coarse is kept (the first on a tie), with a warning saying how it was placed. Every run
-    keeps its guards (``guard_sigmas`` of its prior, and every correction must make its
-    overlaps agree better), and a station kept coarse because its correction did not improve
-    its overlaps starts no second run. A plot registered the first time is registered exactly
-    as before: on touching canopies a millimetre of registration decides some leaf tips
-    (RECONSTRUCTION.md, "Touching canopies"), so the first run does not change with the
-    reports."""
+    When the first run leaves stations coarse or unreliable (:func:`beyond_arrival`: for any
+    reason but a correction that does not make its overlaps agree better, a fit in the wrong
+    place that nothing here would mend), the base probably erred more than the settings say,
+    and registration runs again (:func:`_later_runs`): from ``T_field_moved`` (the levelled
+    poses moved by where the base reported it stopped, :func:`starting_poses`), then, if
+    stations are still left, with the arrival uncertainty ``retry_arrival_factor`` times
+    wider. The run leaving the fewest stations coarse is kept (the first on a tie), with a
+    warning saying how it was placed. Every run keeps its guards. A plot registered the first
+    time is registered exactly as before: on touching canopies a millimetre of registration
+    decides some leaf tips (RECONSTRUCTION.md, "Touching canopies"), so the first run does
+    not change with the reports."""
     points = _registration_points(filtered, T_field_levelled, settings.include_soil)
     axis = turntable_axis_point(view_step.matrix, view_step.views_per_turn)
     registrations = yield from register_stations(
         points, T_field_levelled, axis, reference, settings, threads
     )
-    start, notes = T_field_levelled, ""
-    runs: list[tuple[dict[int, Matrix4], RegistrationSettings, str]] = []
-    moved, from_reports = T_field_levelled, ""
-    if T_field_moved is not None and any(
-        not np.array_equal(T_field_moved[s], T_field_levelled[s]) for s in T_field_levelled
-    ):
-        moved, from_reports = T_field_moved, "from where the base reported each stop"
-        runs.append((moved, settings, from_reports))
-    if settings.retry_arrival_factor > 1.0:
-        factor = settings.retry_arrival_factor
-        wider = settings.model_copy(
-            update={
-                "arrival_sigma_m": factor * settings.arrival_sigma_m,
-                "arrival_sigma_deg": factor * settings.arrival_sigma_deg,
-            }
-        )
-        how = " and ".join(filter(None, [from_reports, f"with {_sigmas(wider)}"]))
-        runs.append((moved, wider, how))
-    first = _kept_coarse(registrations)
-    for run_start, run_settings, how in runs:
+    first, start, how_placed = _kept_coarse(registrations), T_field_levelled, ""
+    for run_start, run_settings, how in _later_runs(settings, T_field_levelled, T_field_moved):
         if not settings.enabled or not any(map(beyond_arrival, registrations.values())):
             break
         again = yield from _done_already(
@@ -310,16 +291,16 @@ def join_stations(
             f"registering again {how}: ",
         )
         if len(_kept_coarse(again)) < len(_kept_coarse(registrations)):
-            registrations, start = again, run_start
-            notes = f"registered again {how}"
-    if notes:
+            registrations, start, how_placed = again, run_start, how
+    notes: tuple[str, ...] = ()
+    if how_placed:
         notes = (
             f"registration: with the arrival uncertainty of the settings ({_sigmas(settings)}) "
-            f"{_listed(first)} kept at coarse poses; {notes}, "
+            f"{_listed(first)} kept at coarse poses; registered again {how_placed}, "
             f"{len(first) - len(_kept_coarse(registrations))} of them are refined. The base "
-            "errs more than registration.arrival_sigma_m / _deg say: set them to match it"
+            "errs more than registration.arrival_sigma_m / _deg say: set them to match it",
         )
-    registrations = {
+    registrations = {  # each correction from where the station's filtered points are
         s: replace(r, T_correction=r.T_correction @ start[s] @ invert(T_field_levelled[s]))
         for s, r in registrations.items()
     }
@@ -328,7 +309,34 @@ def join_stations(
         for station, r in registrations.items()
         if r.verdict in (COARSE_KEPT, UNRELIABLE) and settings.enabled
     )
-    return Staged(registrations, (notes,) * bool(notes) + warnings)
+    return Staged(registrations, notes + warnings)
+
+
+def _later_runs(
+    settings: RegistrationSettings,
+    T_field_levelled: dict[int, Matrix4],
+    T_field_moved: dict[int, Matrix4] | None,
+) -> list[tuple[dict[int, Matrix4], RegistrationSettings, str]]:
+    """The registrations to try after the first, in order: (starting poses, settings, how
+    they differ): from the moved poses when any station moved, then with the wider prior."""
+    runs: list[tuple[dict[int, Matrix4], RegistrationSettings, str]] = []
+    moved, from_reports = T_field_levelled, ""
+    if T_field_moved is not None and any(
+        not np.array_equal(T_field_moved[s], T_field_levelled[s]) for s in T_field_levelled
+    ):
+        moved, from_reports = T_field_moved, "from where the base reported each stop"
+        runs.append((moved, settings, from_reports))
+    factor = settings.retry_arrival_factor
+    if factor > 1.0:
+        wider = settings.model_copy(
+            update={
+                "arrival_sigma_m": factor * settings.arrival_sigma_m,
+                "arrival_sigma_deg": factor * settings.arrival_sigma_deg,
+            }
+        )
+        how = " and ".join(filter(None, [from_reports, f"with {_sigmas(wider)}"]))
+        runs.append((moved, wider, how))
+    return runs
 
 
 def _done_already(steps: RegistrationSteps, prefix: str) -> RegistrationSteps:
