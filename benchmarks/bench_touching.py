@@ -152,13 +152,15 @@ def evaluate(inputs: dict[str, Any], truth_path: Path, settings: Any) -> dict[st
     }
 
 
+def _shifted(inputs: dict[str, Any], shift_mm: tuple[float, float, float]) -> dict[str, Any]:
+    """The whole cloud and soil shifted by ``shift_mm``: nothing a plant is moves, only where
+    the plants step's voxel grid cuts it."""
+    shift = np.array(shift_mm) / 1000.0
+    return {**inputs, "points": inputs["points"] + shift, "soil_m": inputs["soil_m"] + shift}
+
+
 def _perturbed(inputs: dict[str, Any], seed: int) -> dict[str, Any]:
-    """Input ``seed`` 1, 2, ...: a random 3 % of the points dropped; ``-k``: the whole cloud
-    (and soil) shifted by the k-th of :data:`SHIFTS_MM`, which moves nothing a plant is but
-    where the plants step's voxel grid cuts it."""
-    if seed < 0:
-        shift = np.array(SHIFTS_MM[(-seed - 1) % len(SHIFTS_MM)]) / 1000.0
-        return {**inputs, "points": inputs["points"] + shift, "soil_m": inputs["soil_m"] + shift}
+    """A random 3 % of the points dropped (``seed`` 1, 2, ...)."""
     rng = np.random.default_rng(seed)
     keep = rng.random(len(inputs["points"])) >= DROP_SHARE
     return {**inputs, "points": inputs["points"][keep], "colors": inputs["colors"][keep]}
@@ -182,10 +184,9 @@ def run(
         inputs = pickle.loads((folder / f"{name}.pkl").read_bytes())
         truth = folder / name / "truth.json"
         f = evaluate(inputs, truth, settings)
-        spread = [
-            evaluate(_perturbed(inputs, s), truth, settings)["width_rmse"]
-            for s in [*range(1, perturb + 1), *range(-1, -shift - 1, -1)]
-        ]
+        variants = [_perturbed(inputs, s) for s in range(1, perturb + 1)]
+        variants += [_shifted(inputs, mm) for mm in SHIFTS_MM[:shift]]
+        spread = [evaluate(v, truth, settings)["width_rmse"] for v in variants]
         worst = f"{f['errors'][0][1]} {f['errors'][0][0]:+.1f}" if f["errors"] else "-"
         extra = ""
         if spread:

@@ -45,14 +45,14 @@ class _Version(argparse.Action):
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """The command line's parser; given the arguments, only what parsing them needs: the one
     core subcommand they name (:func:`_named_module`), else every subcommand."""
-    only = _named_module(argv)
+    modules = sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_"))
+    command = _command(argv)
+    only = _named_module(command, modules)
     if only is not None:
         parser = _parser([only], plugins=False)
-        command = _command(argv)
         if command in _subcommands(parser):
             return parser
-    modules = [info.name for info in pkgutil.iter_modules(__path__)]
-    return _parser(sorted(m for m in modules if not m.startswith("_")), plugins=True)
+    return _parser(modules, plugins=True)
 
 
 def _parser(modules: list[str], plugins: bool) -> argparse.ArgumentParser:
@@ -83,18 +83,14 @@ def _command(argv: Sequence[str] | None) -> str | None:
     return None
 
 
-def _named_module(argv: Sequence[str] | None) -> str | None:
-    """The core module that may hold the subcommand named in ``argv``: ``sim-base`` ->
+def _named_module(command: str | None, modules: list[str]) -> str | None:
+    """The core module (of ``modules``) that may hold ``command``: ``sim-base`` ->
     ``sim_base``, ``import`` -> ``import_``; ``None`` when there is none (``--help``, a
     plugin's command, a mistake)."""
-    command = _command(argv)
     if command is None:
         return None
-    modules = {info.name for info in pkgutil.iter_modules(__path__)}
-    for name in (command.replace("-", "_"), command.replace("-", "_") + "_"):
-        if name in modules and not name.startswith("_"):
-            return name
-    return None
+    name = command.replace("-", "_")
+    return next((m for m in (name, name + "_") if m in modules), None)
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> set[str]:

@@ -55,11 +55,10 @@ class BaseMoves:
 
 @dataclass(frozen=True)
 class Moved:
-    """The coarse poses after the moves, the stations moved with how far each base reported
-    standing from its calibration pose (m, degrees), and the warnings."""
+    """The coarse poses after the moves, the stations moved, and the warnings."""
 
     T_field_station: dict[int, Matrix4]
-    moves: dict[int, tuple[float, float]]
+    moved: frozenset[int]
     warnings: tuple[str, ...]
 
 
@@ -102,7 +101,7 @@ def move_coarse(
     placed = {s: T for s, T in T_field_coarse.items() if s in moves.calibrated}
     T_map_field = map_alignment(moves.calibrated, placed, axis_point_camera, axis_direction_camera)
     if T_map_field is None:
-        return Moved(dict(T_field_coarse), {}, ())
+        return Moved(dict(T_field_coarse), frozenset(), ())
     usable, warnings = {}, []
     for station in sorted(set(placed) & set(moves.reported)):
         shift_m, turn_deg = _size(moves, station)
@@ -116,15 +115,14 @@ def move_coarse(
             "deg, so its report is not used"
         )
     if reference not in usable:
-        return Moved(dict(T_field_coarse), {}, tuple(warnings))
+        return Moved(dict(T_field_coarse), frozenset(), tuple(warnings))
     T_field_map = invert(T_map_field)
     D_reference_inv = invert(usable[reference])
-    moved, sizes = dict(T_field_coarse), {}
-    for station in sorted(set(usable) - {reference}):
+    moved = dict(T_field_coarse)
+    for station in set(usable) - {reference}:
         E = D_reference_inv @ usable[station]
         moved[station] = T_field_map @ E @ T_map_field @ T_field_coarse[station]
-        sizes[station] = _size(moves, station)
-    return Moved(moved, sizes, tuple(warnings))
+    return Moved(moved, frozenset(usable) - {reference}, tuple(warnings))
 
 
 def _move(moves: BaseMoves, station: int) -> Matrix4:

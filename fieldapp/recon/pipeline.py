@@ -19,7 +19,7 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Stations, ViewStep
 from fieldapp.io.session import Session
 from fieldapp.recon import stages
-from fieldapp.recon.arrival import base_moves
+from fieldapp.recon.arrival import BaseMoves, base_moves
 from fieldapp.recon.backproject import ray_table
 from fieldapp.recon.early import EarlyStations, StationRead, read_arguments
 from fieldapp.recon.filters import FilteredStation
@@ -67,11 +67,8 @@ def reconstruct(
     scanned = stages.summarise(local, filtered)
     del local  # the station clouds are no longer needed
     # 5. Stations joined: one pose graph of every overlap, the levelled poses as its prior.
-    start = stages.starting_poses(
-        levelled.value, reference.value, view_step, base_moves(session), settings.registration
-    )
     joined = yield from _registration(
-        filtered, levelled.value, start.value, view_step, reference.value, settings, timer
+        filtered, levelled.value, base_moves(session), view_step, reference.value, settings, timer
     )
     # 6. One cloud of the plot; outliers removed where every station's view is together.
     with timer.stage("outlier removal"):
@@ -89,11 +86,7 @@ def reconstruct(
     yield progress("traits", 1.0, f"{len(found.value.plants)} plants")
     warnings = [
         *stages.missing_captures(session.missing()),
-        *(
-            w
-            for step in (scanned, reference, levelled, start, joined, grid, found)
-            for w in step.warnings
-        ),
+        *(w for step in (scanned, reference, levelled, joined, grid, found) for w in step.warnings),
     ]
     plot = _Plot(reference.value, scanned.value, fused, placed, grid.value, found.value, organs)
     return _result(session.id, plot, settings, timer, warnings)
@@ -226,7 +219,7 @@ def _filtering(
 def _registration(
     filtered: dict[int, FilteredStation],
     T_field_levelled: dict[int, Matrix4],
-    T_field_moved: dict[int, Matrix4],
+    moves: BaseMoves | None,
     view_step: ViewStep,
     reference: int,
     settings: ReconstructionSettings,
@@ -240,7 +233,7 @@ def _registration(
         reference,
         settings.registration,
         settings.threads,
-        T_field_moved,
+        moves,
     )
     joined = yield from _timed_steps(timer, "registration", steps)
     yield progress("registration", 1.0, f"{len(joined.value)} stations placed")

@@ -50,21 +50,18 @@ class StationRegistration:
     uncertainty_deg: float | None = None
     limit_m: float | None = None
     limit_deg: float | None = None
-
-
-BEYOND_ARRIVAL = "of the expected arrival error"
-NO_OVERLAP = "no overlap registered"
-NO_BETTER_AGREEMENT = "does not make the overlaps agree better"
+    misfit: bool = False
+    """Kept coarse because its correction did not make its overlaps agree better."""
 
 
 def beyond_arrival(registration: StationRegistration) -> bool:
     """Whether the station may have been left coarse or unreliable by an arrival error larger
     than the settings expect: its correction, or every pair it has, lay beyond it, or too few
-    pairs were kept to place it. Not when its correction failed to make its overlaps agree
-    better: a fit in the wrong place, which a wider prior would not mend."""
-    if registration.verdict not in (guards.COARSE_KEPT, guards.UNRELIABLE):
-        return False
-    return NO_BETTER_AGREEMENT not in registration.message
+    pairs were kept to place it. Not a :attr:`~StationRegistration.misfit`: a fit in the wrong
+    place, which a wider prior would not mend."""
+    return registration.verdict in (guards.COARSE_KEPT, guards.UNRELIABLE) and not (
+        registration.misfit
+    )
 
 
 def ground_centre_m(
@@ -336,6 +333,7 @@ def _solve_plot(
     tolerance = posegraph.Tolerance(settings.edge_tolerance_m, settings.edge_tolerance_deg)
     graph = {MAP_NODE: np.eye(4)} | nodes
     fixed: dict[int, str] = {}  # stations kept at their coarse pose, with the reason
+    misfits: set[int] = set()  # those kept because the correction did not improve overlaps
     trees: dict[tuple[int, int], cKDTree] = {}  # overlap points, shared by every solution
     while True:
         chosen = [k for k in usable if not {fits[k].a, fits[k].b} & set(fixed)]
@@ -352,9 +350,15 @@ def _solve_plot(
         failure = plot.worst_failure()
         if failure is None:
             break
-        fixed[failure[0]] = failure[1]
-        log.info("station %d kept at its coarse pose: %s", *failure)
-    return {s: plot.registration(s, fixed.get(s), T_field_station_coarse[s]) for s in sorted(nodes)}
+        station, reason, misfit = failure
+        fixed[station] = reason
+        if misfit:
+            misfits.add(station)
+        log.info("station %d kept at its coarse pose: %s", station, reason)
+    return {
+        s: plot.registration(s, fixed.get(s), T_field_station_coarse[s], s in misfits)
+        for s in sorted(nodes)
+    }
 
 
 @dataclass
@@ -398,30 +402,33 @@ class _Plot:
         sigma_m, sigma_deg = guards.sigma_m_deg(self.priors[station])
         return self.settings.guard_sigmas * sigma_m, self.settings.guard_sigmas * sigma_deg
 
-    def worst_failure(self) -> tuple[int, str] | None:
-        """The free station failing its guards worst, with the reason; ``None`` when all pass.
-        An implausible correction counts before one that does not improve the overlaps."""
-        failures: list[tuple[float, int, str]] = []
+    def worst_failure(self) -> tuple[int, str, bool] | None:
+        """The free station failing its guards worst: (station, reason, whether the correction
+        failed to improve its overlaps); ``None`` when all pass. An implausible correction counts
+        before one that does not improve the overlaps."""
+        failures: list[tuple[float, int, str, bool]] = []
         for station in sorted(set(self.nodes) - set(self.fixed) - {self.reference}):
             problem = self.guard_problem(station)
             if problem is not None:
-                failures.append((problem[0], station, problem[1]))
+                failures.append((problem[0], station, problem[1], problem[2]))
         if not failures:
             return None
-        _, station, reason = max(failures, key=lambda f: (f[0], -f[1]))
-        return station, reason
+        _, station, reason, misfit = max(failures, key=lambda f: (f[0], -f[1]))
+        return station, reason, misfit
 
-    def guard_problem(self, station: int) -> tuple[float, str] | None:
-        """(severity, reason) when the station's correction fails a guard."""
+    def guard_problem(self, station: int) -> tuple[float, str, bool] | None:
+        """(severity, reason, whether the correction failed to improve the overlaps) when the
+        station's correction fails a guard."""
         implausible = self._implausible(station)
         if implausible is not None:
-            return implausible
+            return (*implausible, False)
         before, after = self.agreement(station)
         if self.kept_fits(station) and after >= before:
-            return 0.0, (
-                f"the correction {NO_BETTER_AGREEMENT} (RMS "
+            reason = (
+                "the correction does not make the overlaps agree better (RMS "
                 f"{1000 * np.sqrt(after):.1f} mm corrected, {1000 * np.sqrt(before):.1f} mm coarse)"
             )
+            return 0.0, reason, True
         return None
 
     def _implausible(self, station: int) -> tuple[float, str] | None:
@@ -437,7 +444,7 @@ class _Plot:
         limit_m, limit_deg = self.limits(station)
         return sigmas, (
             f"correction {1000 * shift_m:.0f} mm / {turn_deg:.2f} deg is {sigmas:.1f} sigma "
-            f"{BEYOND_ARRIVAL} (limit {self.settings.guard_sigmas:g} sigma: "
+            f"of the expected arrival error (limit {self.settings.guard_sigmas:g} sigma: "
             f"about {1000 * limit_m:.0f} mm / {limit_deg:.2f} deg here)"
         )
 
@@ -509,9 +516,10 @@ class _Plot:
         return self.trees[key]
 
     def registration(
-        self, station: int, fixed_reason: str | None, T_coarse: Matrix4
+        self, station: int, fixed_reason: str | None, T_coarse: Matrix4, misfit: bool = False
     ) -> StationRegistration:
-        """The verdict on ``station`` and how it is placed."""
+        """The verdict on ``station`` and how it is placed (``fixed_reason``: why it was kept
+        at its coarse pose; ``misfit``: because its correction did not improve its overlaps)."""
         kept = self.kept_fits(station)
         linked = {self.fits[k].a for k in kept} | {self.fits[k].b for k in kept}
         coarse = StationRegistration(
@@ -537,7 +545,8 @@ class _Plot:
             sigma_m, sigma_deg = guards.sigma_m_deg(self.priors[station])
             return replace(
                 coarse,
-                message=f"{fixed_reason or NO_OVERLAP}: coarse pose kept",
+                message=f"{fixed_reason or 'no overlap registered'}: coarse pose kept",
+                misfit=misfit,
                 verdict=guards.COARSE_KEPT
                 if self._within(sigma_m, sigma_deg)
                 else guards.UNRELIABLE,

@@ -202,11 +202,11 @@ def starting_poses(
     moves: BaseMoves | None,
     settings: RegistrationSettings,
 ) -> Staged[dict[int, Matrix4]]:
-    """Where registration starts each station: its levelled pose, moved by where the base
-    reported it stopped (``recon/arrival.py``) when ``moves`` are given and
-    ``settings.use_base_poses``. The stations' filtered points stay as levelling placed
-    them (their voxel means unchanged): :func:`join_stations` maps each correction back onto
-    the levelled pose."""
+    """Where a later registration run starts each station (:func:`join_stations`): its
+    levelled pose, moved by where the base reported it stopped (``recon/arrival.py``) when
+    ``moves`` are given and ``settings.use_base_poses``. The stations' filtered points stay as
+    levelling placed them (their voxel means unchanged): :func:`join_stations` maps each
+    correction back onto the levelled pose."""
     if moves is None or not settings.use_base_poses or len(T_field_levelled) < 2:
         return Staged(dict(T_field_levelled))
     moved = move_coarse(
@@ -259,7 +259,7 @@ def join_stations(
     reference: int,
     settings: RegistrationSettings,
     threads: int,
-    T_field_moved: dict[int, Matrix4] | None = None,
+    moves: BaseMoves | None = None,
 ) -> Generator[tuple[float, str], None, Staged[dict[int, StationRegistration]]]:
     """Step 5: one pose graph of every overlapping pair, the levelled poses as its prior;
     yields (fraction done, message) per pair registered. A warning per station whose
@@ -269,8 +269,8 @@ def join_stations(
     When the first run leaves stations coarse or unreliable (:func:`beyond_arrival`: for any
     reason but a correction that does not make its overlaps agree better, a fit in the wrong
     place that nothing here would mend), the base probably erred more than the settings say,
-    and registration runs again (:func:`_later_runs`): from ``T_field_moved`` (the levelled
-    poses moved by where the base reported it stopped, :func:`starting_poses`), then, if
+    and registration runs again (:func:`_later_runs`): from the levelled poses moved by where
+    the base reported it stopped (``moves``, :func:`starting_poses`), then, if
     stations are still left, with the arrival uncertainty ``retry_arrival_factor`` times
     wider. The run leaving the fewest stations coarse is kept (the first on a tie), with a
     warning saying how it was placed. Every run keeps its guards. A plot registered the first
@@ -283,7 +283,10 @@ def join_stations(
         points, T_field_levelled, axis, reference, settings, threads
     )
     first, start, how_placed = _kept_coarse(registrations), T_field_levelled, ""
-    for run_start, run_settings, how in _later_runs(settings, T_field_levelled, T_field_moved):
+    moved: Staged[dict[int, Matrix4]] = Staged(T_field_levelled)
+    if settings.enabled and any(map(beyond_arrival, registrations.values())):
+        moved = starting_poses(T_field_levelled, reference, view_step, moves, settings)
+    for run_start, run_settings, how in _later_runs(settings, T_field_levelled, moved.value):
         if not settings.enabled or not any(map(beyond_arrival, registrations.values())):
             break
         again = yield from _done_already(
@@ -309,21 +312,19 @@ def join_stations(
         for station, r in registrations.items()
         if r.verdict in (COARSE_KEPT, UNRELIABLE) and settings.enabled
     )
-    return Staged(registrations, notes + warnings)
+    return Staged(registrations, notes + moved.warnings + warnings)
 
 
 def _later_runs(
     settings: RegistrationSettings,
     T_field_levelled: dict[int, Matrix4],
-    T_field_moved: dict[int, Matrix4] | None,
+    T_field_moved: dict[int, Matrix4],
 ) -> list[tuple[dict[int, Matrix4], RegistrationSettings, str]]:
     """The registrations to try after the first, in order: (starting poses, settings, how
     they differ): from the moved poses when any station moved, then with the wider prior."""
     runs: list[tuple[dict[int, Matrix4], RegistrationSettings, str]] = []
     moved, from_reports = T_field_levelled, ""
-    if T_field_moved is not None and any(
-        not np.array_equal(T_field_moved[s], T_field_levelled[s]) for s in T_field_levelled
-    ):
+    if any(not np.array_equal(T_field_moved[s], T_field_levelled[s]) for s in T_field_levelled):
         moved, from_reports = T_field_moved, "from where the base reported each stop"
         runs.append((moved, settings, from_reports))
     factor = settings.retry_arrival_factor

@@ -148,20 +148,16 @@ def local_ground_z_m(
     return float(np.median(soil_m[near, 2])) if near.any() else 0.0
 
 
-def robust_top_z_m(
-    points_m: NDArray[np.float64],
-    support_points: int,
-    radius_m: float,
-    link_m: float = TOP_LINK_M,
-    reach_m: float = TOP_REACH_M,
-) -> float:
-    """The z of the highest point from which a chain of points, each within ``link_m`` of the
-    next, leads ``reach_m`` below it: connectivity, not density. A pointed leaf tip sampled one
-    point wide continues its leaf point by point and is the top; a stray point, or a cluster of
-    flying pixels under ``reach_m`` tall, more than ``link_m`` from the plant, is not. Only the
-    :data:`TOP_CANDIDATES` highest points are tested; when none leads down (a plant under
-    ``reach_m`` tall), the highest point with at least ``support_points`` other points within
-    ``radius_m``; the highest point of all when none has such support."""
+def robust_top_z_m(points_m: NDArray[np.float64], support_points: int, radius_m: float) -> float:
+    """The z of the highest point from which a chain of points, each within
+    :data:`TOP_LINK_M` of the next, leads :data:`TOP_REACH_M` below it: connectivity, not
+    density. A pointed leaf tip sampled one point wide continues its leaf point by point and is
+    the top; a stray point, or a cluster of flying pixels under ``TOP_REACH_M`` tall, more than
+    ``TOP_LINK_M`` from the plant, is not. Only the :data:`TOP_CANDIDATES` highest points are
+    tested; when none leads down (a plant under ``TOP_REACH_M`` tall), the highest point with
+    at least ``support_points`` other points within ``radius_m``; the highest point of all when
+    none has such support."""
+    link_m, reach_m = TOP_LINK_M, TOP_REACH_M
     order = np.argsort(points_m[:, 2])[::-1][:TOP_CANDIDATES]
     low = points_m[order[-1], 2] - reach_m - max(link_m, radius_m)
     near_index = np.flatnonzero(points_m[:, 2] >= low)
@@ -194,15 +190,11 @@ def measure_plant(
     ground_radius_m: float,
     top_support_points: int,
     top_support_radius_m: float,
-    top_link_m: float = TOP_LINK_M,
-    top_reach_m: float = TOP_REACH_M,
 ) -> PlantTraits:
     """Traits of one plant from its points (N, 3) and the soil around it (M, 3), field frame."""
     base = base_xy_m(points_m, base_slice_m)
     ground_z = local_ground_z_m(soil_m, base, ground_radius_m)
-    top_z = robust_top_z_m(
-        points_m, top_support_points, top_support_radius_m, top_link_m, top_reach_m
-    )
+    top_z = robust_top_z_m(points_m, top_support_points, top_support_radius_m)
     circle = smallest_enclosing_circle(points_m[:, :2])
     return PlantTraits(
         x_m=float(base[0]),

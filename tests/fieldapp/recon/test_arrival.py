@@ -82,7 +82,7 @@ def test_the_reported_stops_move_every_station_where_it_stood(seed: int) -> None
     coarse = _field_cameras(_plan(), _plan()[REFERENCE])
     np.testing.assert_array_equal(moved.T_field_station[REFERENCE], coarse[REFERENCE])
     assert max(np.linalg.norm(coarse[s][:3, 3] - truth[s][:3, 3]) for s in truth) > 0.1
-    assert set(moved.moves) == set(truth) - {REFERENCE}
+    assert moved.moved == set(truth) - {REFERENCE}
 
 
 def test_a_base_reporting_in_another_frame_moves_the_stations_the_same() -> None:
@@ -95,7 +95,7 @@ def test_a_base_reporting_in_another_frame_moves_the_stations_the_same() -> None
 
     elsewhere = {s: shifted(p) for s, p in reported.items()}
     moved = _move(elsewhere)
-    assert not moved.warnings and len(moved.moves) == 8
+    assert not moved.warnings and len(moved.moved) == 8
     _assert_poses_equal(moved.T_field_station, _move(reported).T_field_station)
 
 
@@ -128,7 +128,7 @@ def test_a_base_reporting_far_from_every_station_moves_none() -> None:
     far = make_transform(rotation_z(-20.0), np.array([12.0, -3.0, 0.0]))  # odometry's frame
     reported = {s: (*(far @ T_map_base(p))[:2, 3], p[2] - 20.0) for s, p in _plan().items()}
     moved = _move(reported)
-    assert len(moved.warnings) == 9 and not moved.moves
+    assert len(moved.warnings) == 9 and not moved.moved
     _assert_poses_equal(moved.T_field_station, _field_cameras(_plan(), _plan()[REFERENCE]))
 
 

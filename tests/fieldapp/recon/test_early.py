@@ -7,6 +7,7 @@ import itertools
 import os
 import shutil
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -81,20 +82,31 @@ def test_the_reader_and_this_process_share_the_stations_into_the_same_scans(
     _assert_same(read, _here(session))
 
 
-def test_a_reader_that_dies_has_its_stations_read_here(
-    small_session: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    session, parent = load_session(small_session), os.getpid()
+def _reader_that(
+    fails: Callable[[], object], session: Session, monkeypatch: pytest.MonkeyPatch
+) -> EarlyStations:
+    """A reader of ``session`` whose reading calls ``fails`` (in the reader only), started
+    and holding its first station."""
+    parent = os.getpid()
 
-    def dies_in_the_reader(s: Session, station: int, *args: object) -> StationRead:
+    def read_in_the_reader(s: Session, station: int, *args: object) -> StationRead:
         if os.getpid() != parent:
-            os._exit(3)  # killed mid-read: no answer, no clean exit
+            fails()
         return read_station(s, station, *args)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(early, "read_station", dies_in_the_reader)
+    monkeypatch.setattr(early, "read_station", read_in_the_reader)
     reader = start_reading(session, SETTINGS)
     assert reader is not None
     _wait_for_the_reader_to_take_the_first(reader)
+    return reader
+
+
+def test_a_reader_that_dies_has_its_stations_read_here(
+    small_session: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    session = load_session(small_session)
+    # killed mid-read: no answer, no clean exit
+    reader = _reader_that(lambda: os._exit(3), session, monkeypatch)
     read, reported = _read_all(reader)
     assert sorted(reported) == [4, 5]
     _assert_same(read, _here(session))
@@ -103,17 +115,9 @@ def test_a_reader_that_dies_has_its_stations_read_here(
 def test_a_reader_that_hangs_is_stopped_and_its_stations_read_here(
     small_session: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    session, parent = load_session(small_session), os.getpid()
-
-    def hangs_in_the_reader(s: Session, station: int, *args: object) -> StationRead:
-        if os.getpid() != parent:
-            threading.Event().wait()  # a lock that is never released
-        return read_station(s, station, *args)  # type: ignore[arg-type]
-
-    monkeypatch.setattr(early, "read_station", hangs_in_the_reader)
-    reader = start_reading(session, SETTINGS)
-    assert reader is not None
-    _wait_for_the_reader_to_take_the_first(reader)
+    session = load_session(small_session)
+    # a lock that is never released
+    reader = _reader_that(threading.Event().wait, session, monkeypatch)
     ticks = itertools.count()
     reader.clock = lambda: 10.0 * next(ticks)  # 10 s pass at every look at the clock
     pid = reader.pid
