@@ -29,6 +29,9 @@ OUTLIER_QUERY_BLOCK = 16_384
 block's arrays (5 MB) small: with 65 536 the first query's fresh 20-40 MB arrays, which numpy
 asks the kernel to back with huge pages, cost 0.3-0.4 s of system time in page faults
 (compaction), as much as the rest of the stage."""
+ROR_SPARE = 3
+"""The radius filter keeps this many of each point's neighbours within its radius beyond the
+count it asks for (:func:`outlier_inliers`)."""
 
 
 def pass_through(height_m: NDArray[np.float64], min_m: float, max_m: float) -> NDArray[np.bool_]:
@@ -171,9 +174,12 @@ def outlier_inliers(
     masks as the two filters run one after the other, from one tree and one query.
 
     The ``neighbors`` + 1 nearest points, sorted by distance, give each point's mean distance
-    (SOR) and every statistical inlier within ``radius_m`` (ROR) whenever the farthest of them
-    lies beyond ``radius_m``; the few points where it does not, and that have fewer than
-    ``min_points`` inliers among them, are counted again by a radius query among the inliers.
+    (SOR) and its nearest neighbours within ``radius_m`` (ROR). Of those only the nearest
+    ``min_points`` + :data:`ROR_SPARE` are kept, with how many there are: a point that has
+    ``min_points`` statistical inliers among the kept ones passes; one whose neighbours within
+    the radius were all kept fails; the few others (a point among outliers, or whose every one
+    of the nearest lies within the radius) are counted again by a radius query among the
+    inliers. The same masks, for a sixth of the memory.
     """
     n = len(points)
     if n == 0:
@@ -181,28 +187,36 @@ def outlier_inliers(
     tree = _Neighbours(points, workers)
     k = min(neighbors + 1, n)
     # The query in blocks, keeping of each block only what the filters need: the mean
-    # distance, and the neighbours within the radius as int32 (-1 beyond it, and for the
-    # point itself). Whole, the (N, k) distances and int64 indices were 576 bytes per point,
-    # the peak of a large plot's run.
+    # distance, and the nearest neighbours within the radius as int32 (-1 beyond it, and for
+    # the point itself). Whole, the (N, k) distances and int64 indices were 576 bytes per
+    # point, the peak of a large plot's run; all k neighbours within the radius, 144.
+    kept = min(k, min_points + ROR_SPARE + 1)  # one more: the point itself is among them
     mean_distance = np.empty(n)
-    near_index = np.empty((n, k), dtype=np.int32)
+    near_index = np.empty((n, kept), dtype=np.int32)
+    within = np.empty(n, dtype=np.int32)  # neighbours within the radius, among the k
     full = np.empty(n, dtype=bool)  # every one of the k within the radius: count unsure
     for start in range(0, n, OUTLIER_QUERY_BLOCK):
         block = slice(start, min(start + OUTLIER_QUERY_BLOCK, n))
         distances, index = tree.query(points[block], k)
         mean_distance[block] = distances[:, 1:].mean(axis=1) if k > 1 else 0.0
         itself = index == np.arange(block.start, block.stop)[:, None]
-        near_index[block] = np.where((distances <= radius_m) & ~itself, index, -1)
+        near = (distances <= radius_m) & ~itself
+        within[block] = near.sum(axis=1)
+        near_index[block] = np.where(near, index, -1)[:, :kept]  # nearest first
         full[block] = distances[:, -1] <= radius_m
     statistical = np.ones(n, dtype=bool)
     if n > neighbors:
         statistical = mean_distance <= mean_distance.mean() + std_ratio * mean_distance.std()
     count = np.zeros(n, dtype=np.int64)
+    every_one_kept = np.zeros(n, dtype=bool)
     for start in range(0, n, OUTLIER_QUERY_BLOCK):
         rows = near_index[start : start + OUTLIER_QUERY_BLOCK]
-        count[start : start + len(rows)] = ((rows >= 0) & statistical[rows]).sum(axis=1)
-    unsure = np.flatnonzero(statistical & (count < min_points) & full)
-    if k < n and len(unsure):
+        stop = start + len(rows)
+        count[start:stop] = ((rows >= 0) & statistical[rows]).sum(axis=1)
+        every_one_kept[start:stop] = (rows >= 0).sum(axis=1) == within[start:stop]
+    beyond = full if k < n else np.zeros(n, dtype=bool)  # neighbours beyond the k nearest
+    unsure = np.flatnonzero(statistical & (count < min_points) & (beyond | ~every_one_kept))
+    if len(unsure):
         inliers = cKDTree(points[statistical])
         count[unsure] = inliers.query_ball_point(points[unsure], radius_m, return_length=True) - 1
     return statistical, statistical & (count >= min_points)

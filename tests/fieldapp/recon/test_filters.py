@@ -89,18 +89,20 @@ def _sor_then_ror(
     return statistical, radius
 
 
-@pytest.mark.parametrize("block", [65_536, 1000, 7])
+@pytest.mark.parametrize(("block", "spare"), [(65_536, 3), (1000, 3), (7, 3), (1000, 0)])
 @pytest.mark.parametrize(
     ("neighbors", "radius_m", "min_points"),
     [(35, 0.008, 1), (35, 0.008, 5), (8, 0.02, 12), (3, 0.05, 40), (35, 0.001, 1)],
 )
 def test_one_query_gives_the_masks_of_sor_then_ror(
-    neighbors: int, radius_m: float, min_points: int, block: int, monkeypatch
+    neighbors: int, radius_m: float, min_points: int, block: int, spare: int, monkeypatch
 ) -> None:
     """Whatever the radius and the count asked (beyond the neighbours searched, too: the
-    points left unsure are counted again), duplicates and strays included, and however the
-    query is cut into blocks."""
+    points left unsure are counted again), duplicates and strays included, however the
+    query is cut into blocks and however few of the neighbours within the radius are kept
+    (none spare: every point short of its count among them is counted again)."""
     monkeypatch.setattr(filters, "OUTLIER_QUERY_BLOCK", block)
+    monkeypatch.setattr(filters, "ROR_SPARE", spare)
     rng = np.random.default_rng(neighbors + min_points)
     surface = ground_patch(rng, 0.05, 3000, noise_m=0.0005)
     blobs = rng.normal(0.0, 0.004, (6, 30, 3)) + rng.uniform(-0.2, 0.2, (6, 1, 3))
@@ -113,6 +115,24 @@ def test_one_query_gives_the_masks_of_sor_then_ror(
     np.testing.assert_array_equal(statistical, expected_statistical)
     np.testing.assert_array_equal(radius, expected_radius)
     assert 0 < radius.sum() < len(points)  # not all kept, not all dropped
+
+
+@pytest.mark.parametrize("spare", [0, 3])
+@pytest.mark.parametrize("min_points", [1, 5, 20])
+def test_one_query_where_inliers_and_outliers_interleave(
+    spare: int, min_points: int, monkeypatch
+) -> None:
+    """With no spread allowed (std_ratio 0) about half the points are statistical outliers,
+    interleaved with the inliers: the nearest neighbours kept of a point are often outliers
+    while inliers lie farther within the radius, and it must be counted again."""
+    monkeypatch.setattr(filters, "ROR_SPARE", spare)
+    rng = np.random.default_rng(min_points)
+    points = ground_patch(rng, 0.05, 4000, noise_m=0.001)
+    statistical, radius = outlier_inliers(points, 35, 0.0, 0.004, min_points)
+    expected_statistical, expected_radius = _sor_then_ror(points, 35, 0.0, 0.004, min_points)
+    assert 0.3 < statistical.mean() < 0.7
+    np.testing.assert_array_equal(statistical, expected_statistical)
+    np.testing.assert_array_equal(radius, expected_radius)
 
 
 @pytest.mark.parametrize("n", [0, 1, 2, 5])
