@@ -160,6 +160,7 @@ class EarlyStations:
         self.arguments = arguments
         self._rays = rays
         self._left = False  # the reader's end of the pipe has closed: it is leaving
+        self._keep: Callable[[StationScan], StationScan] | None = None
         self._messages = 0  # stations the reader has sent (read or failed)
         self.clock: Callable[[], float] = time.monotonic
         self.stall_s = READER_STALL_S
@@ -233,12 +234,17 @@ class EarlyStations:
             and list(captures_by_station(session).items()) == self._stations
         )
 
-    def read(self, threads: int) -> Generator[int, None, dict[int, StationRead]]:
+    def read(
+        self, threads: int, keep: Callable[[StationScan], StationScan] | None = None
+    ) -> Generator[int, None, dict[int, StationRead]]:
         """Every station read, by station in order: those the reader sends, the others read
         here from the back (on one thread while the reader runs), then those the reader did
         not deliver (it failed or died; on ``threads`` threads). Yields each station as it is
-        done (for progress). Raises the first station's exception, in station order."""
+        done (for progress). Raises the first station's exception, in station order. ``keep``:
+        what is kept of each scan, called as it arrives (the pipeline levels and filters it
+        there and keeps it without its green points)."""
         done: dict[int, StationRead] = {}
+        self._keep = keep
         failed: dict[int, Exception] = {}
         while True:
             yield from self._receive(done, wait=False)
@@ -246,9 +252,11 @@ class EarlyStations:
             if index is None:
                 break
             try:
-                done[index] = self._read_here(index, 1)
+                read = self._read_here(index, 1)
             except Exception as error:  # raised below, in station order
                 failed[index] = error
+            else:
+                done[index] = self._kept(read)
             yield self._stations[index][0]
         yield from self._await_reader(done)  # until it has sent all and left, or stalls
         self.close()
@@ -256,9 +264,16 @@ class EarlyStations:
             if index in failed:
                 raise failed[index]
             if index not in done:  # the reader could not read it, or died holding it
-                done[index] = self._read_here(index, threads)
+                done[index] = self._kept(self._read_here(index, threads))
                 yield self._stations[index][0]
         return {self._stations[index][0]: done[index] for index in range(len(self._stations))}
+
+    def _kept(self, read: StationRead) -> StationRead:
+        """What is kept of a station read: its scan passed through :meth:`read`'s ``keep``."""
+        scan, warnings = read
+        if self._keep is None or scan is None:
+            return read
+        return self._keep(scan), warnings
 
     def _read_here(self, index: int, threads: int) -> StationRead:
         station, captures = self._stations[index]
@@ -304,7 +319,7 @@ class EarlyStations:
                 index, read = pickle.loads(self._connection.recv_bytes())
                 self._messages += 1
                 if read is not None:
-                    done[index] = read
+                    done[index] = self._kept(read)
                     yield self._stations[index][0]
         except (EOFError, OSError):  # the reader has left (or died): nothing more comes
             self._left = True

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Generator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TypeVar
 
 from devices.geometry import Matrix4
@@ -21,8 +21,10 @@ from fieldapp.io.session import Session
 from fieldapp.recon import stages
 from fieldapp.recon.arrival import BaseMoves, base_moves
 from fieldapp.recon.backproject import ray_table
+from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.early import EarlyStations, StationRead, read_arguments
 from fieldapp.recon.filters import FilteredStation
+from fieldapp.recon.levelling import T_field_reference_initial, level_stations
 from fieldapp.recon.mapframe import station_map_poses
 from fieldapp.recon.organ_traits import PlantOrgans
 from fieldapp.recon.plants import PlantSearch
@@ -52,18 +54,31 @@ def reconstruct(
     (:func:`fieldapp.recon.early.start_reading`), closed here in any case."""
     try:
         timer, (view_step, stations) = StageTimer(), _joinable(session)
-        # 1-2. Depth to points, every view of a station into its view 0 (Eq. 9).
-        local = yield from _local_reconstruction(session, settings, stations, timer, early)
+        # 1-2. Depth to points, every view of a station into its view 0 (Eq. 9); steps 3-4
+        # for each station as soon as it is read (_Streaming), its green points dropped then.
+        stream = None if carries_plant(session) else _Streaming(session, settings, timer)
+        local = yield from _local_reconstruction(session, settings, stations, timer, early, stream)
     finally:
         if early is not None:
             early.close()
     reference = stages.anchor(stations.reference, local.value.scans, stations.to_reference)
     # 3. Levelling: coarse placement by the pre-calibration, each station on its own ground.
-    with timer.stage("levelling"):
-        levelled = stages.level(local.value, session.calibration, reference.value, settings.ground)
-    yield progress("levelling", 1.0, "stations levelled")
     # 4. Plant filtering per station: pass-through above the ground, voxel means.
-    filtered = yield from _filtering(local.value.scans, levelled.value, settings, timer)
+    if stream is None:  # a plant on a turntable: one station, placed by the table's axis
+        with timer.stage("levelling"):
+            levelled = stages.level(
+                local.value, session.calibration, reference.value, settings.ground
+            )
+        with timer.stage("filtering"):
+            filtered = {
+                s: stages.filter_plants(scan, levelled.value[s], settings.filters, settings.ground)
+                for s, scan in local.value.scans.items()
+            }
+    else:
+        levelled, filtered = stream.placed(reference.value, local.value.scans)
+    yield progress("levelling", 1.0, "stations levelled")
+    for index, station in enumerate(filtered):
+        yield progress("filtering", (index + 1) / len(filtered), f"station {station} filtered")
     scanned = stages.summarise(local, filtered)
     del local  # the station clouds are no longer needed
     # 5. Stations joined: one pose graph of every overlap, the levelled poses as its prior.
@@ -136,27 +151,34 @@ def _local_reconstruction(
     stations: Stations,
     timer: StageTimer,
     early: EarlyStations | None,
+    stream: _Streaming | None,
 ) -> Generator[Progress, None, stages.Staged[stages.LocalScans]]:
     """Steps 1-2, a progress event per station (one for a plant on a turntable);
-    :class:`NothingUsable` when no capture could be read."""
+    :class:`NothingUsable` when no capture could be read. Each station read goes through
+    ``stream`` when given."""
     if carries_plant(session):  # camera fixed, plant turning: the room masked
         with timer.stage("local reconstruction"):
             crop, top_m = settings.crop, settings.filters.pass_through_max_m
             local = stages.turntable_scan(session, crop, top_m, settings.registration.enabled)
         yield progress("local reconstruction", 1.0, "turntable views joined")
     elif early is not None and early.serves(session, read_arguments(settings)):
-        local = yield from _early_scans(early, settings, stations, timer)
+        local = yield from _early_scans(early, settings, stations, timer, stream)
     else:
-        local = yield from _station_scans(session, settings, stations, timer)
+        local = yield from _station_scans(session, settings, stations, timer, stream)
     if not local.value.scans:
         raise NothingUsable(f"{session.folder}: no capture could be read")
     return local
 
 
 def _station_scans(
-    session: Session, settings: ReconstructionSettings, stations: Stations, timer: StageTimer
+    session: Session,
+    settings: ReconstructionSettings,
+    stations: Stations,
+    timer: StageTimer,
+    stream: _Streaming | None,
 ) -> Generator[Progress, None, stages.Staged[stages.LocalScans]]:
     """Steps 1-2 station by station, a progress event after each."""
+    keep = stream.take if stream is not None else _as_read
     with timer.stage("local reconstruction"):
         rays = ray_table(session.calibration.depth_camera.intrinsics())
         grouped = captures_by_station(session)
@@ -164,15 +186,18 @@ def _station_scans(
         timer,
         "local reconstruction",
         grouped,
-        lambda station, captures: stages.station_scan(
-            session,
-            station,
-            captures,
-            rays,
-            settings.crop,
-            settings.filters.exg_threshold,
-            settings.ground.soil_pixel_stride,
-            settings.threads,
+        lambda station, captures: _kept(
+            stages.station_scan(
+                session,
+                station,
+                captures,
+                rays,
+                settings.crop,
+                settings.filters.exg_threshold,
+                settings.ground.soil_pixel_stride,
+                settings.threads,
+            ),
+            keep,
         ),
         lambda index, _: f"station {index + 1} of {len(grouped)}",
     )
@@ -180,10 +205,14 @@ def _station_scans(
 
 
 def _early_scans(
-    early: EarlyStations, settings: ReconstructionSettings, stations: Stations, timer: StageTimer
+    early: EarlyStations,
+    settings: ReconstructionSettings,
+    stations: Stations,
+    timer: StageTimer,
+    stream: _Streaming | None,
 ) -> Generator[Progress, None, stages.Staged[stages.LocalScans]]:
     """Steps 1-2 shared with the early reader, a progress event per station as it is done."""
-    reads, count = early.read(settings.threads), 0
+    reads, count = early.read(settings.threads, stream.take if stream else None), 0
     while True:
         try:
             with timer.stage("local reconstruction"):
@@ -196,24 +225,6 @@ def _early_scans(
         yield progress("local reconstruction", count / early.station_count, message)
     staged = {station: stages.Staged(scan, tuple(w)) for station, (scan, w) in read.items()}
     return stages.calibrated_scans(staged, stations.to_reference)
-
-
-def _filtering(
-    scans: dict[int, StationScan],
-    T_field_levelled: dict[int, Matrix4],
-    settings: ReconstructionSettings,
-    timer: StageTimer,
-) -> Generator[Progress, None, dict[int, FilteredStation]]:
-    """Step 4 station by station, a progress event after each."""
-    return _per_station(
-        timer,
-        "filtering",
-        scans,
-        lambda station, scan: stages.filter_plants(
-            scan, T_field_levelled[station], settings.filters, settings.ground
-        ),
-        lambda _, station: f"station {station} filtered",
-    )
 
 
 def _registration(
@@ -238,6 +249,87 @@ def _registration(
     joined = yield from _timed_steps(timer, "registration", steps)
     yield progress("registration", 1.0, f"{len(joined.value)} stations placed")
     return joined
+
+
+def _as_read(scan: StationScan) -> StationScan:
+    return scan
+
+
+def _kept(
+    read: stages.Staged[StationScan | None], keep: Callable[[StationScan], StationScan]
+) -> stages.Staged[StationScan | None]:
+    """What is kept of a station read: its scan passed through ``keep``."""
+    if read.value is None:
+        return read
+    return stages.Staged(keep(read.value), read.warnings)
+
+
+class _Streaming:
+    """Steps 3-4 for each station as soon as it is read (:meth:`take`): levelled on its own
+    ground and filtered, then kept without its green points, so that memory does not grow
+    with every station's full cloud until all are read (a depth-only session's "green"
+    points are every point it measured: 30 MB a station).
+
+    A station is placed once the field frame is known: at once when the calibration has a
+    ground transform, else when the reference station, whose ground gives it, is read. The
+    stations read before it wait whole until then; when the reference has no usable
+    capture, until the end (:meth:`placed`), where the station anchoring the plot instead
+    gives it. Each station is levelled and filtered exactly as all together would be."""
+
+    def __init__(self, session: Session, settings: ReconstructionSettings, timer: StageTimer):
+        self._calibration = session.calibration
+        stations = session.calibration.stations
+        self._to_reference = stations.to_reference if stations is not None else {}
+        self._reference = stations.reference if stations is not None else None
+        ground = session.calibration.ground
+        self._T_field_ref: Matrix4 | None = ground.matrix if ground is not None else None
+        self._settings = settings
+        self._timer = timer
+        self._waiting: dict[int, StationScan] = {}
+        self._levelled: dict[int, stages.Staged[Matrix4]] = {}
+        self._filtered: dict[int, FilteredStation] = {}
+
+    def take(self, scan: StationScan) -> StationScan:
+        """``scan`` without its green points, levelled and filtered now or when it can be."""
+        if scan.station not in self._to_reference:  # skipped with a warning: nothing to place
+            return scan
+        self._waiting[scan.station] = scan
+        if self._T_field_ref is None and scan.station == self._reference:
+            self._T_field_ref = self._field_frame(scan)
+        if self._T_field_ref is not None:
+            for station in list(self._waiting):
+                self._place(station)
+        return replace(scan, green=Cloud.empty())
+
+    def placed(
+        self, reference: int, scans: dict[int, StationScan]
+    ) -> tuple[stages.Staged[dict[int, Matrix4]], dict[int, FilteredStation]]:
+        """Every station of ``scans`` levelled (with the warnings, station by station) and
+        filtered, in their order; those still waiting placed now, the field frame from the
+        ``reference`` (the station anchoring the plot) if it is not known yet."""
+        if self._T_field_ref is None and self._waiting:
+            self._T_field_ref = self._field_frame(self._waiting[reference])
+        for station in list(self._waiting):
+            self._place(station)
+        levelled = {s: self._levelled[s].value for s in scans}
+        warnings = tuple(w for s in scans for w in self._levelled[s].warnings)
+        return stages.Staged(levelled, warnings), {s: self._filtered[s] for s in scans}
+
+    def _field_frame(self, scan: StationScan) -> Matrix4:
+        with self._timer.stage("levelling"):
+            return T_field_reference_initial(self._calibration, scan, self._settings.ground)
+
+    def _place(self, station: int) -> None:
+        scan, ground = self._waiting.pop(station), self._settings.ground
+        assert self._T_field_ref is not None
+        coarse = {station: self._T_field_ref @ self._to_reference[station]}
+        with self._timer.stage("levelling"):
+            levelled, warnings = level_stations({station: scan}, coarse, ground)
+        self._levelled[station] = stages.Staged(levelled[station], tuple(warnings))
+        with self._timer.stage("filtering"):
+            self._filtered[station] = stages.filter_plants(
+                scan, levelled[station], self._settings.filters, ground
+            )
 
 
 def _per_station(

@@ -39,19 +39,33 @@ def progress(stage: str, done: float, message: str) -> Progress:
 class StageTimer:
     """Wall time and CPU time (all threads of the process, and of the child processes a stage
     started and waited for: registration's worker) per stage in seconds, accumulated over
-    every call of :meth:`stage`. On a shared machine the CPU time is the steadier figure."""
+    every call of :meth:`stage`. On a shared machine the CPU time is the steadier figure. A
+    stage run inside another (a station levelled and filtered as soon as it is read) counts
+    only as itself: the outer stage's clock stops meanwhile."""
 
     seconds: dict[str, float] = field(default_factory=dict)
     cpu_seconds: dict[str, float] = field(default_factory=dict)
+    _open: list[str] = field(default_factory=list, repr=False)
+    _since: tuple[float, float] = field(default=(0.0, 0.0), repr=False)
 
     @contextmanager
     def stage(self, name: str) -> Iterator[None]:
-        start, start_cpu = time.perf_counter(), cpu_seconds()
+        self._lap()
+        self._open.append(name)
         try:
             yield
         finally:
-            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - start
-            self.cpu_seconds[name] = self.cpu_seconds.get(name, 0.0) + cpu_seconds() - start_cpu
+            self._lap()
+            self._open.pop()
+
+    def _lap(self) -> None:
+        """The time since the last lap to the stage running (if any); a new lap starts."""
+        now = (time.perf_counter(), cpu_seconds())
+        if self._open:
+            name = self._open[-1]
+            self.seconds[name] = self.seconds.get(name, 0.0) + now[0] - self._since[0]
+            self.cpu_seconds[name] = self.cpu_seconds.get(name, 0.0) + now[1] - self._since[1]
+        self._since = now
 
 
 def cpu_seconds() -> float:

@@ -192,7 +192,15 @@ def test_closing_the_generator_after_any_event_runs_no_further_stage(
             break
         called_before.append(len(calls))
     everything = list(calls)
-    assert everything[:3] == ["station_scan", "station_scan", "calibrated_scans"]
+    # each station levelled and filtered as soon as it is read (the simulator calibrates the
+    # ground, so the field frame is known from the start: test_streaming.py)
+    assert everything[:5] == [
+        "station_scan",
+        "filter_plants",
+        "station_scan",
+        "filter_plants",
+        "calibrated_scans",
+    ]
     assert everything[-1] == "organs" and result.plants
     order = list(STAGES)
     assert [order.index(e.stage) for e in events] == sorted(order.index(e.stage) for e in events)
@@ -224,9 +232,9 @@ def test_closing_the_generator_after_any_event_runs_no_further_stage(
 def _expected_calls(events: list[Progress]) -> list[list[str]]:
     """The stages that run before each event, when every step reports as soon as it is done."""
     before = {
-        "local reconstruction": ["station_scan"],
-        "levelling": ["calibrated_scans", "anchor", "level"],
-        "filtering": ["filter_plants"],
+        "local reconstruction": ["station_scan", "filter_plants"],
+        "levelling": ["calibrated_scans", "anchor"],
+        "filtering": [],
         "registration": ["summarise", "join_stations"],
         "plants": ["fuse"],
         "traits": ["on_map", "planting_grid", "find_plants", "organs"],
