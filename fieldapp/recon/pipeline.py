@@ -95,13 +95,25 @@ def reconstruct(
         grid = stages.planting_grid(session, placed.T_map_field)
         ground_radius_m = settings.ground.local_ground_radius_m
         found = stages.find_plants(placed, settings.plants, ground_radius_m, grid.value.nodes)
+        covered = stages.coverage(
+            placed,
+            found.value.plants,
+            stations.to_reference,
+            reference.value,
+            scanned.value,
+            view_step,
+        )
     # Beyond the paper: each plant's organs (stem, whorl, each leaf) and their traits.
     with timer.stage("organs"):
         organs = stages.organs(found.value.plants, settings.threads)
     yield progress("traits", 1.0, f"{len(found.value.plants)} plants")
     warnings = [
         *stages.missing_captures(session.missing()),
-        *(w for step in (scanned, reference, levelled, joined, grid, found) for w in step.warnings),
+        *(
+            w
+            for step in (scanned, reference, levelled, joined, grid, found, covered)
+            for w in step.warnings
+        ),
     ]
     plot = _Plot(reference.value, scanned.value, fused, placed, grid.value, found.value, organs)
     return _result(session.id, plot, settings, timer, warnings)

@@ -21,6 +21,7 @@ from fieldapp.io.calibration import Calibration, ViewStep
 from fieldapp.io.session import Capture, Session
 from fieldapp.recon.arrival import BaseMoves, move_coarse
 from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.coverage import coverage_warnings, station_axes_xy
 from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
 from fieldapp.recon.forkmap import ForkedMap
 from fieldapp.recon.grid import GridNodes
@@ -76,12 +77,14 @@ class LocalScans:
 class ScanSummary:
     """What ``report.json`` keeps of the scans once their clouds are dropped: how each
     station told plants from soil, its excess-green threshold (colour only), the points kept
-    (pixels measured, then by each filter of step 4, summed over the stations)."""
+    (pixels measured, then by each filter of step 4, summed over the stations), and how many
+    views of each station were read."""
 
     separation: dict[int, str]
     exg_thresholds: dict[int, float]
     kept: dict[str, int]
     turntable: dict[str, object] | None
+    views: dict[int, int]
 
 
 @dataclass(frozen=True)
@@ -248,6 +251,7 @@ def summarise(
         },
         kept=measured | _kept_by_filters(filtered),
         turntable=local.value.turntable,
+        views={scan.station: len(scan.views) for scan in scans},
     )
     return Staged(summary, local.warnings)
 
@@ -442,6 +446,30 @@ def planting_grid(session: Session, T_map_field: Matrix4 | None) -> Staged[GridP
     warnings: list[str] = []  # mapframe.session_grid reports into a list it is handed
     nodes, expected = session_grid(session, T_map_field, warnings)
     return Staged(GridPrior(nodes, expected), tuple(warnings))
+
+
+def coverage(
+    placed: Placed,
+    plants: list[Plant],
+    to_reference: dict[int, Matrix4],
+    reference: int,
+    scanned: ScanSummary,
+    view_step: ViewStep,
+) -> Staged[None]:
+    """Warns of the plants the captures did not cover as planned (``recon/coverage.py``): the
+    station nearest each has no usable capture or turned through fewer views than a turn.
+    Nothing for a plant on a turntable (one station, placed by the table)."""
+    if scanned.turntable is not None:
+        return Staged(None)
+    stations_xy = station_axes_xy(
+        {s: r.T_field_station for s, r in placed.registrations.items()},
+        to_reference,
+        reference,
+        turntable_axis_point(view_step.matrix, view_step.views_per_turn),
+    )
+    plants_xy = {p.id: np.array([p.traits.x_m, p.traits.y_m]) for p in plants}
+    warnings = coverage_warnings(plants_xy, stations_xy, scanned.views, view_step.views_per_turn)
+    return Staged(None, tuple(warnings))
 
 
 def find_plants(
