@@ -72,7 +72,13 @@ class ResultsPanel(QtWidgets.QWidget):
 
     def open_results(self, folder: Path) -> None:
         """Show a results folder written earlier (no reconstruction)."""
-        self.show_results(load_results_dir(folder))
+        results = load_results_dir(folder)
+        self.show_results(results)
+        if self.session is None:  # not "No session open." above the results shown
+            self.session_label.setText(
+                f"results of session {results.session_id} (its session is not open: open it "
+                "to reconstruct again)"
+            )
 
     def reconstruct(self) -> None:
         """Start reconstructing the open session in a worker."""

@@ -53,6 +53,15 @@ def test_each_plant_is_drawn_with_its_organs_height_and_width(plot_results: Path
     assert len({leaf_rgb(k) for k in range(1, 9)}) == 8  # each leaf its own colour
 
 
+def test_results_opened_without_their_session_say_whose_they_are(panel, plot_results: Path) -> None:
+    assert panel.session is None and panel.session_label.text() == "No session open."
+    panel.open_results(plot_results)
+    assert panel.session_label.text() == (
+        f"results of session {panel.results.session_id} (its session is not open: open it to "
+        "reconstruct again)"
+    )
+
+
 def test_the_inspector_follows_and_drives_the_selection(panel, plot_results: Path) -> None:
     panel.open_results(plot_results)
     plants = [p.plant for p in panel.results.plants]
