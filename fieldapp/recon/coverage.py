@@ -3,10 +3,11 @@
 The stations stand so that every plant has one nearby that turns all the way round: its leaves
 are seen close up and from every side. When the station nearest a plant has no usable capture
 (a mission cut short, a station skipped) or turned through fewer views than a full turn, the
-plant was seen only from farther stations or from fewer sides, and its height and width come
-out low: on a simulated plot captured from 4 of its 9 stations, the plant in the far corner
-measured 17.8 cm wide for 41.9 and 5.8 cm short. Such plants are named in the warnings, so no
-one takes their traits for measured ones.
+plant was seen only from farther stations or from fewer sides, and its height and width may
+come out low: on a simulated plot captured from 4 of its 9 stations, the plant in the far
+corner measured 17.8 cm wide for 41.9 and 5.8 cm short (others so placed came out within 1 cm).
+Such plants are named in the warnings, so that no one takes their traits for as sure as the
+others'.
 """
 
 from __future__ import annotations
@@ -64,12 +65,12 @@ def coverage_warnings(
     warnings = []
     if unseen:
         warnings.append(
-            f"plants seen only from farther stations, their traits likely low: the station "
+            f"plants seen only from farther stations, their traits may be low: the station "
             f"nearest each has no usable capture: plant {', plant '.join(unseen)}"
         )
     if partial:
         warnings.append(
-            f"plants seen from fewer sides, their traits likely low: the station nearest each "
+            f"plants seen from fewer sides, their traits may be low: the station nearest each "
             f"turned through fewer than {views_per_turn} views: plant {', plant '.join(partial)}"
         )
     return warnings

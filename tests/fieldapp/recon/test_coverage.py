@@ -31,7 +31,7 @@ def test_a_plant_whose_nearest_station_was_not_read_is_named_with_the_distance_s
     read = {s: 8 for s in GRID if s != 9}
     warnings = coverage_warnings(plants, GRID, read, 8)
     assert warnings == [
-        "plants seen only from farther stations, their traits likely low: the station nearest "
+        "plants seen only from farther stations, their traits may be low: the station nearest "
         "each has no usable capture: plant 2 (station 9; nearest read 1.4 m)"
     ]
     assert coverage_warnings(plants, GRID, {s: 8 for s in GRID}, 8) == []
@@ -41,7 +41,7 @@ def test_a_plant_whose_nearest_station_turned_part_way_is_named() -> None:
     plants = {1: np.array([0.4, 0.4]), 2: np.array([3.0, 3.0])}
     read = {s: 8 for s in GRID} | {1: 4}
     assert coverage_warnings(plants, GRID, read, 8) == [
-        "plants seen from fewer sides, their traits likely low: the station nearest each "
+        "plants seen from fewer sides, their traits may be low: the station nearest each "
         "turned through fewer than 8 views: plant 1 (station 1: 4 views)"
     ]
 
