@@ -8,6 +8,12 @@ come out low: on a simulated plot captured from 4 of its 9 stations, the plant i
 corner measured 17.8 cm wide for 41.9 and 5.8 cm short (others so placed came out within 1 cm).
 Such plants are named in the warnings, so that no one takes their traits for as sure as the
 others'.
+
+The cameras look down at 45 degrees from 1.3 m: above a point a metre away they see up to
+about 1 m, and nothing above 1.5 m passes the filters. A plant taller than what any view sees
+above it is measured at that ceiling: simulated day-60 plants of 103-130 cm came out 104-114 cm
+with no flag. A plant whose highest point lies at the ceiling of every view that sees that
+spot (:func:`view_ceiling_m`) is named too.
 """
 
 from __future__ import annotations
@@ -18,6 +24,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.geometry import Matrix4
+from fieldapp.io.calibration import DepthCamera
+
+CEILING_MARGIN_M = 0.02
+"""A plant whose highest point is within this of the views' ceiling above it may be cut."""
 
 
 def station_axes_xy(
@@ -74,3 +84,62 @@ def coverage_warnings(
             f"turned through fewer than {views_per_turn} views: plant {', plant '.join(partial)}"
         )
     return warnings
+
+
+def view_ceiling_m(
+    xy_m: NDArray[np.float64],
+    T_out_camera: NDArray[np.float64],
+    camera: DepthCamera,
+    radius_m: float,
+    min_depth_m: float,
+) -> float:
+    """The highest point above ``xy_m`` (2,) (output frame, z up) that one of the views whose
+    poses are ``T_out_camera`` (V, 4, 4) sees: where the vertical through it leaves the image
+    at its top edge (OpenCV camera: y down the image), the crop sphere of ``radius_m`` around
+    the camera, or comes nearer than ``min_depth_m`` (a camera looking down: going up the
+    vertical comes nearer), whichever comes first, on an image column; -inf when no view sees
+    up that vertical."""
+    R, C = T_out_camera[:, :3, :3], T_out_camera[:, :3, 3]
+    ground = np.array([xy_m[0], xy_m[1], 0.0])
+    a = np.einsum("vji,vj->vi", R, ground - C)  # the vertical's foot in each camera's frame
+    b = R[:, 2, :]  # the vertical's direction (world z) in each camera's frame
+    k = camera.cy / camera.fy
+    rising = b[:, 1] + k * b[:, 2]  # how the top edge's test changes going up the vertical
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z_edge = np.where(rising < 0.0, -(a[:, 1] + k * a[:, 2]) / rising, np.inf)
+        across = np.hypot(*(ground[:2] - C[:, :2]).T)
+        z_sphere = C[:, 2] + np.sqrt(np.maximum(radius_m**2 - across**2, 0.0))
+        z_near = np.where(b[:, 2] < 0.0, (min_depth_m - a[:, 2]) / b[:, 2], np.inf)
+    z = np.minimum(np.minimum(z_edge, z_near), np.where(across < radius_m, z_sphere, -np.inf))
+    q = a + z[:, None] * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = camera.fx * q[:, 0] / q[:, 2] + camera.cx
+        v = camera.fy * q[:, 1] / q[:, 2] + camera.cy
+    seen = np.isfinite(z) & (q[:, 2] >= min_depth_m - 1e-9) & (u >= 0.0) & (u <= camera.width)
+    seen &= (v >= -1e-6) & (v <= camera.height) & (np.linalg.norm(q, axis=1) <= radius_m + 1e-9)
+    return float(z[seen].max()) if seen.any() else float("-inf")
+
+
+def cut_tops_warning(
+    tops_m: Mapping[int, NDArray[np.float64]],
+    T_out_camera: NDArray[np.float64],
+    camera: DepthCamera,
+    radius_m: float,
+    min_depth_m: float,
+    pass_through_max_m: float,
+) -> list[str]:
+    """One warning for the plants (id -> (3,) highest point) whose highest point lies within
+    :data:`CEILING_MARGIN_M` of the ceiling above it: the highest any view sees there
+    (:func:`view_ceiling_m`), or the filters' pass-through limit."""
+    cut = []
+    for plant, top in tops_m.items():
+        seen = view_ceiling_m(top[:2], T_out_camera, camera, radius_m, min_depth_m)
+        ceiling = min(seen, pass_through_max_m)
+        if top[2] >= ceiling - CEILING_MARGIN_M:
+            cut.append(f"{plant} (top {100 * top[2]:.0f} cm, views reach {100 * ceiling:.0f} cm)")
+    if not cut:
+        return []
+    return [
+        "plants that may be taller than measured: their highest point lies where the views "
+        f"stop seeing: plant {', plant '.join(cut)}"
+    ]

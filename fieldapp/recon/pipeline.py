@@ -102,6 +102,9 @@ def reconstruct(
             reference.value,
             scanned.value,
             view_step,
+            session.calibration.depth_camera,
+            settings.crop,
+            settings.filters.pass_through_max_m,
         )
     # Beyond the paper: each plant's organs (stem, whorl, each leaf) and their traits.
     with timer.stage("organs"):

@@ -17,11 +17,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.geometry import Matrix4, invert, transform_points
-from fieldapp.io.calibration import Calibration, ViewStep
+from fieldapp.io.calibration import Calibration, DepthCamera, T_view0_view, ViewStep
 from fieldapp.io.session import Capture, Session
 from fieldapp.recon.arrival import BaseMoves, move_coarse
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.coverage import coverage_warnings, station_axes_xy
+from fieldapp.recon.coverage import coverage_warnings, cut_tops_warning, station_axes_xy
 from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
 from fieldapp.recon.forkmap import ForkedMap
 from fieldapp.recon.grid import GridNodes
@@ -84,7 +84,7 @@ class ScanSummary:
     exg_thresholds: dict[int, float]
     kept: dict[str, int]
     turntable: dict[str, object] | None
-    views: dict[int, int]
+    views: dict[int, tuple[int, ...]]
 
 
 @dataclass(frozen=True)
@@ -251,7 +251,7 @@ def summarise(
         },
         kept=measured | _kept_by_filters(filtered),
         turntable=local.value.turntable,
-        views={scan.station: len(scan.views) for scan in scans},
+        views={scan.station: tuple(scan.views) for scan in scans},
     )
     return Staged(summary, local.warnings)
 
@@ -455,10 +455,15 @@ def coverage(
     reference: int,
     scanned: ScanSummary,
     view_step: ViewStep,
+    camera: DepthCamera,
+    crop: CropSettings,
+    pass_through_max_m: float,
 ) -> Staged[None]:
     """Warns of the plants the captures did not cover as planned (``recon/coverage.py``): the
-    station nearest each has no usable capture or turned through fewer views than a turn.
-    Nothing for a plant on a turntable (one station, placed by the table)."""
+    station nearest each has no usable capture or turned through fewer views than a turn; and
+    of those whose highest point lies where the views (``camera``, cropped to ``crop``) stop
+    seeing or at the filters' ``pass_through_max_m``. Nothing for a plant on a turntable (one
+    station, placed by the table)."""
     if scanned.turntable is not None:
         return Staged(None)
     stations_xy = station_axes_xy(
@@ -468,7 +473,20 @@ def coverage(
         turntable_axis_point(view_step.matrix, view_step.views_per_turn),
     )
     plants_xy = {p.id: np.array([p.traits.x_m, p.traits.y_m]) for p in plants}
-    warnings = coverage_warnings(plants_xy, stations_xy, scanned.views, view_step.views_per_turn)
+    views = {s: len(v) for s, v in scanned.views.items()}
+    warnings = coverage_warnings(plants_xy, stations_xy, views, view_step.views_per_turn)
+    cameras = np.array(
+        [
+            placed.registrations[s].T_field_station @ T_view0_view(view_step.matrix, view)
+            for s, read in scanned.views.items()
+            if s in placed.registrations
+            for view in read
+        ]
+    ).reshape(-1, 4, 4)
+    tops = {p.id: p.cloud.points[int(np.argmax(p.cloud.points[:, 2]))] for p in plants}
+    warnings += cut_tops_warning(
+        tops, cameras, camera, crop.radius_m, crop.min_depth_m, pass_through_max_m
+    )
     return Staged(None, tuple(warnings))
 
 

@@ -8,10 +8,17 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from devices.geometry import Matrix4
+from fieldapp.io.calibration import DepthCamera
 from fieldapp.io.session import load_session
-from fieldapp.recon.coverage import coverage_warnings, station_axes_xy
+from fieldapp.recon.coverage import (
+    coverage_warnings,
+    cut_tops_warning,
+    station_axes_xy,
+    view_ceiling_m,
+)
 from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
 
@@ -86,3 +93,52 @@ def test_a_mission_of_two_stations_names_every_plant_another_station_stands_near
     assert len(far) == 1 and len(few) == 1
     assert _named(far[0]) == {p for p, s in nearest.items() if s not in (4, 5)}
     assert _named(few[0]) == {p for p, s in nearest.items() if s in (4, 5)}
+
+
+KINECT = DepthCamera(width=512, height=424, fx=365.18, fy=364.49, cx=256.0, cy=209.59)
+
+
+def _looking_along_x(height_m: float, pitch_deg: float = 45.0) -> np.ndarray:
+    """(1, 4, 4) an OpenCV camera at (0, 0, ``height_m``) looking along +x, pitched down."""
+    p = np.radians(pitch_deg)
+    forward = np.array([np.cos(p), 0.0, -np.sin(p)])
+    right = np.array([0.0, -1.0, 0.0])
+    down = np.cross(forward, right)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([right, down, forward])
+    T[:3, 3] = 0.0, 0.0, height_m
+    return T[None]
+
+
+def test_the_ceiling_above_a_spot_is_where_the_view_stops_seeing_up_its_vertical() -> None:
+    camera = _looking_along_x(1.3)
+    above_axis = np.degrees(np.arctan(KINECT.cy / KINECT.fy))  # the top edge: 29.9 degrees
+    edge = 1.3 - 1.0 * np.tan(np.radians(45.0 - above_axis))  # a metre ahead: 1.03 m
+    assert view_ceiling_m(np.array([1.0, 0.0]), camera, KINECT, 2.25, 0.5) == pytest.approx(edge)
+    # 20 cm ahead the vertical comes within 0.5 m of the camera first (depth along its axis)
+    near = 1.3 + (0.2 * np.cos(np.radians(45.0)) - 0.5) / np.sin(np.radians(45.0))
+    assert view_ceiling_m(np.array([0.2, 0.0]), camera, KINECT, 2.25, 0.5) == pytest.approx(near)
+    # 2.2 m ahead the top edge (0.71 m) lies beyond the 2.25 m crop: nothing up there is kept
+    assert view_ceiling_m(np.array([2.2, 0.0]), camera, KINECT, 2.25, 0.5) == float("-inf")
+    assert view_ceiling_m(np.array([2.2, 0.0]), camera, KINECT, 2.5, 0.5) == pytest.approx(
+        1.3 - 2.2 * np.tan(np.radians(45.0 - above_axis))
+    )
+    assert view_ceiling_m(np.array([-1.0, 0.0]), camera, KINECT, 2.25, 0.5) == float("-inf")
+    assert view_ceiling_m(np.array([1.0, 1.5]), camera, KINECT, 2.25, 0.5) == float("-inf")
+    two = np.concatenate([camera, _looking_along_x(1.6)])  # the higher one sees higher
+    assert view_ceiling_m(np.array([1.0, 0.0]), two, KINECT, 2.25, 0.5) == pytest.approx(edge + 0.3)
+
+
+def test_a_plant_whose_top_is_at_the_ceiling_may_be_taller_than_measured() -> None:
+    camera = _looking_along_x(1.3)
+    tops = {1: np.array([1.0, 0.0, 1.025]), 2: np.array([1.0, 0.0, 0.95])}
+    assert cut_tops_warning(tops, camera, KINECT, 2.25, 0.5, 1.5) == [
+        "plants that may be taller than measured: their highest point lies where the views "
+        "stop seeing: plant 1 (top 102 cm, views reach 103 cm)"
+    ]
+    high = _looking_along_x(3.0)  # sees far above the filters' limit there
+    tops = {3: np.array([1.0, 0.0, 1.49]), 4: np.array([1.0, 0.0, 1.2])}
+    assert cut_tops_warning(tops, high, KINECT, 2.25, 0.5, 1.5) == [
+        "plants that may be taller than measured: their highest point lies where the views "
+        "stop seeing: plant 3 (top 149 cm, views reach 150 cm)"
+    ]
