@@ -64,18 +64,10 @@ def reconstruct(
     reference = stages.anchor(stations.reference, local.value.scans, stations.to_reference)
     # 3. Levelling: coarse placement by the pre-calibration, each station on its own ground.
     # 4. Plant filtering per station: pass-through above the ground, voxel means.
-    if stream is None:  # a plant on a turntable: one station, placed by the table's axis
-        with timer.stage("levelling"):
-            levelled = stages.level(
-                local.value, session.calibration, reference.value, settings.ground
-            )
-        with timer.stage("filtering"):
-            filtered = {
-                s: stages.filter_plants(scan, levelled.value[s], settings.filters, settings.ground)
-                for s, scan in local.value.scans.items()
-            }
-    else:
+    if stream is not None:
         levelled, filtered = stream.placed(reference.value, local.value.scans)
+    else:
+        levelled, filtered = _on_turntable(session, local.value, reference.value, settings, timer)
     yield progress("levelling", 1.0, "stations levelled")
     for index, station in enumerate(filtered):
         yield progress("filtering", (index + 1) / len(filtered), f"station {station} filtered")
@@ -95,16 +87,9 @@ def reconstruct(
         grid = stages.planting_grid(session, placed.T_map_field)
         ground_radius_m = settings.ground.local_ground_radius_m
         found = stages.find_plants(placed, settings.plants, ground_radius_m, grid.value.nodes)
+        seen = (session.calibration, reference.value, scanned.value, settings.crop)
         covered = stages.coverage(
-            placed,
-            found.value.plants,
-            stations.to_reference,
-            reference.value,
-            scanned.value,
-            view_step,
-            session.calibration.depth_camera,
-            settings.crop,
-            settings.filters.pass_through_max_m,
+            placed, found.value.plants, *seen, settings.filters.pass_through_max_m
         )
     # Beyond the paper: each plant's organs (stem, whorl, each leaf) and their traits.
     with timer.stage("organs"):
@@ -193,7 +178,7 @@ def _station_scans(
     stream: _Streaming | None,
 ) -> Generator[Progress, None, stages.Staged[stages.LocalScans]]:
     """Steps 1-2 station by station, a progress event after each."""
-    keep = stream.take if stream is not None else _as_read
+    keep = stream.take if stream is not None else None
     with timer.stage("local reconstruction"):
         rays = ray_table(session.calibration.depth_camera.intrinsics())
         grouped = captures_by_station(session)
@@ -266,17 +251,31 @@ def _registration(
     return joined
 
 
-def _as_read(scan: StationScan) -> StationScan:
-    return scan
-
-
 def _kept(
-    read: stages.Staged[StationScan | None], keep: Callable[[StationScan], StationScan]
+    read: stages.Staged[StationScan | None], keep: Callable[[StationScan], StationScan] | None
 ) -> stages.Staged[StationScan | None]:
-    """What is kept of a station read: its scan passed through ``keep``."""
-    if read.value is None:
+    """What is kept of a station read: its scan passed through ``keep`` when given."""
+    if read.value is None or keep is None:
         return read
     return stages.Staged(keep(read.value), read.warnings)
+
+
+def _on_turntable(
+    session: Session,
+    local: stages.LocalScans,
+    reference: int,
+    settings: ReconstructionSettings,
+    timer: StageTimer,
+) -> tuple[stages.Staged[dict[int, Matrix4]], dict[int, FilteredStation]]:
+    """Steps 3-4 for a plant on a turntable: its one station placed by the table's axis."""
+    with timer.stage("levelling"):
+        levelled = stages.level(local, session.calibration, reference, settings.ground)
+    with timer.stage("filtering"):
+        filtered = {
+            s: stages.filter_plants(scan, levelled.value[s], settings.filters, settings.ground)
+            for s, scan in local.scans.items()
+        }
+    return levelled, filtered
 
 
 class _Streaming:

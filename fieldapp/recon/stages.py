@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.geometry import Matrix4, invert, transform_points
-from fieldapp.io.calibration import Calibration, DepthCamera, T_view0_view, ViewStep
+from fieldapp.io.calibration import Calibration, T_view0_view, ViewStep
 from fieldapp.io.session import Capture, Session
 from fieldapp.recon.arrival import BaseMoves, move_coarse
 from fieldapp.recon.cloud import Cloud
@@ -451,21 +451,21 @@ def planting_grid(session: Session, T_map_field: Matrix4 | None) -> Staged[GridP
 def coverage(
     placed: Placed,
     plants: list[Plant],
-    to_reference: dict[int, Matrix4],
+    calibration: Calibration,
     reference: int,
     scanned: ScanSummary,
-    view_step: ViewStep,
-    camera: DepthCamera,
     crop: CropSettings,
     pass_through_max_m: float,
 ) -> Staged[None]:
     """Warns of the plants the captures did not cover as planned (``recon/coverage.py``): the
     station nearest each has no usable capture or turned through fewer views than a turn; and
-    of those whose highest point lies where the views (``camera``, cropped to ``crop``) stop
-    seeing or at the filters' ``pass_through_max_m``. Nothing for a plant on a turntable (one
-    station, placed by the table)."""
-    if scanned.turntable is not None:
+    of those whose highest point lies where the views (the calibration's camera, cropped to
+    ``crop``) stop seeing or at the filters' ``pass_through_max_m``. Nothing for a plant on a
+    turntable (one station, placed by the table)."""
+    view_step, stations = calibration.view_step, calibration.stations
+    if scanned.turntable is not None or view_step is None or stations is None:
         return Staged(None)
+    to_reference, camera = stations.to_reference, calibration.depth_camera
     stations_xy = station_axes_xy(
         {s: r.T_field_station for s, r in placed.registrations.items()},
         to_reference,
