@@ -18,7 +18,8 @@ spot (:func:`view_ceiling_m`) is named too.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,42 +49,88 @@ def station_axes_xy(
     return where
 
 
+@dataclass(frozen=True)
+class Caution:
+    """Why one plant's traits are less sure than the others': ``kind`` (one of
+    :data:`FARTHER`, :data:`FEWER_SIDES`, :data:`TALLER`) and the plant's figures."""
+
+    kind: str
+    detail: str
+
+    def note(self) -> str:
+        """The caution as one line for the plant's entry in ``report.json``."""
+        return f"{NOTES[self.kind]} ({self.detail})"
+
+
+FARTHER = "farther"
+FEWER_SIDES = "fewer sides"
+TALLER = "taller"
+HEADINGS = {
+    FARTHER: "plants seen only from farther stations, their traits may be low: the station "
+    "nearest each has no usable capture",
+    FEWER_SIDES: "plants seen from fewer sides, their traits may be low: the station nearest "
+    "each turned through fewer than {views} views",
+    TALLER: "plants that may be taller than measured: their highest point lies where the views "
+    "stop seeing",
+}
+NOTES = {
+    FARTHER: "seen only from farther stations, traits may be low",
+    FEWER_SIDES: "seen from fewer sides, traits may be low",
+    TALLER: "may be taller than measured: its top is where the views stop seeing",
+}
+
+
+def uncovered(
+    plants_xy: Mapping[int, NDArray[np.float64]],
+    stations_xy: Mapping[int, NDArray[np.float64]],
+    views_read: Mapping[int, int],
+    views_per_turn: int,
+) -> dict[int, Caution]:
+    """The plants (id -> (2,) position) whose nearest station (id -> (2,)) has no usable
+    capture (not in ``views_read``: station -> views read) or turned through fewer than
+    ``views_per_turn`` views."""
+    if not stations_xy:
+        return {}
+    ids = list(stations_xy)
+    at = np.array([stations_xy[s] for s in ids])
+    read = [i for i, s in enumerate(ids) if s in views_read]
+    cautions: dict[int, Caution] = {}
+    for plant, xy in plants_xy.items():
+        distance = np.hypot(*(at - xy).T)
+        station = ids[int(np.argmin(distance))]
+        if station not in views_read:
+            nearest_read = float(distance[read].min()) if read else float("nan")
+            detail = f"station {station}; nearest read {nearest_read:.1f} m"
+            cautions[plant] = Caution(FARTHER, detail)
+        elif views_read[station] < views_per_turn:
+            cautions[plant] = Caution(
+                FEWER_SIDES, f"station {station}: {views_read[station]} views"
+            )
+    return cautions
+
+
+def grouped_warnings(cautions: Iterable[tuple[int, Caution]], views_per_turn: int) -> list[str]:
+    """One warning per kind of caution (plant id, caution), naming its plants in order, each
+    with its figures."""
+    ordered = sorted(cautions, key=lambda item: item[0])
+    warnings = []
+    for kind, heading in HEADINGS.items():
+        named = [f"{plant} ({c.detail})" for plant, c in ordered if c.kind == kind]
+        if named:
+            heading = heading.format(views=views_per_turn)
+            warnings.append(f"{heading}: plant {', plant '.join(named)}")
+    return warnings
+
+
 def coverage_warnings(
     plants_xy: Mapping[int, NDArray[np.float64]],
     stations_xy: Mapping[int, NDArray[np.float64]],
     views_read: Mapping[int, int],
     views_per_turn: int,
 ) -> list[str]:
-    """One warning for the plants (id -> (2,) position) whose nearest station (id -> (2,))
-    has no usable capture (not in ``views_read``: station -> views read), one for those whose
-    nearest station turned through fewer than ``views_per_turn`` views."""
-    if not plants_xy or not stations_xy:
-        return []
-    ids = list(stations_xy)
-    at = np.array([stations_xy[s] for s in ids])
-    unseen: list[str] = []
-    partial: list[str] = []
-    for plant, xy in plants_xy.items():
-        distance = np.hypot(*(at - xy).T)
-        station = ids[int(np.argmin(distance))]
-        if station not in views_read:
-            read = [i for i, s in enumerate(ids) if s in views_read]
-            nearest_read = float(distance[read].min()) if read else float("nan")
-            unseen.append(f"{plant} (station {station}; nearest read {nearest_read:.1f} m)")
-        elif views_read[station] < views_per_turn:
-            partial.append(f"{plant} (station {station}: {views_read[station]} views)")
-    warnings = []
-    if unseen:
-        warnings.append(
-            f"plants seen only from farther stations, their traits may be low: the station "
-            f"nearest each has no usable capture: plant {', plant '.join(unseen)}"
-        )
-    if partial:
-        warnings.append(
-            f"plants seen from fewer sides, their traits may be low: the station nearest each "
-            f"turned through fewer than {views_per_turn} views: plant {', plant '.join(partial)}"
-        )
-    return warnings
+    """The warnings of :func:`uncovered`: one per kind."""
+    cautions = uncovered(plants_xy, stations_xy, views_read, views_per_turn)
+    return grouped_warnings(cautions.items(), views_per_turn)
 
 
 def view_ceiling_m(
@@ -120,6 +167,27 @@ def view_ceiling_m(
     return float(z[seen].max()) if seen.any() else float("-inf")
 
 
+def cut_tops(
+    tops_m: Mapping[int, NDArray[np.float64]],
+    T_out_camera: NDArray[np.float64],
+    camera: DepthCamera,
+    radius_m: float,
+    min_depth_m: float,
+    pass_through_max_m: float,
+) -> dict[int, Caution]:
+    """The plants (id -> (3,) highest point) whose highest point lies within
+    :data:`CEILING_MARGIN_M` of the ceiling above it: the highest any view sees there
+    (:func:`view_ceiling_m`), or the filters' pass-through limit."""
+    cautions = {}
+    for plant, top in tops_m.items():
+        seen = view_ceiling_m(top[:2], T_out_camera, camera, radius_m, min_depth_m)
+        ceiling = min(seen, pass_through_max_m)
+        if top[2] >= ceiling - CEILING_MARGIN_M:
+            detail = f"top {100 * top[2]:.0f} cm, views reach {100 * ceiling:.0f} cm"
+            cautions[plant] = Caution(TALLER, detail)
+    return cautions
+
+
 def cut_tops_warning(
     tops_m: Mapping[int, NDArray[np.float64]],
     T_out_camera: NDArray[np.float64],
@@ -128,18 +196,6 @@ def cut_tops_warning(
     min_depth_m: float,
     pass_through_max_m: float,
 ) -> list[str]:
-    """One warning for the plants (id -> (3,) highest point) whose highest point lies within
-    :data:`CEILING_MARGIN_M` of the ceiling above it: the highest any view sees there
-    (:func:`view_ceiling_m`), or the filters' pass-through limit."""
-    cut = []
-    for plant, top in tops_m.items():
-        seen = view_ceiling_m(top[:2], T_out_camera, camera, radius_m, min_depth_m)
-        ceiling = min(seen, pass_through_max_m)
-        if top[2] >= ceiling - CEILING_MARGIN_M:
-            cut.append(f"{plant} (top {100 * top[2]:.0f} cm, views reach {100 * ceiling:.0f} cm)")
-    if not cut:
-        return []
-    return [
-        "plants that may be taller than measured: their highest point lies where the views "
-        f"stop seeing: plant {', plant '.join(cut)}"
-    ]
+    """The warning of :func:`cut_tops`."""
+    cautions = cut_tops(tops_m, T_out_camera, camera, radius_m, min_depth_m, pass_through_max_m)
+    return grouped_warnings(cautions.items(), 0)

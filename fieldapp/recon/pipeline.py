@@ -103,7 +103,16 @@ def reconstruct(
             for w in step.warnings
         ),
     ]
-    plot = _Plot(reference.value, scanned.value, fused, placed, grid.value, found.value, organs)
+    plot = _Plot(
+        reference.value,
+        scanned.value,
+        fused,
+        placed,
+        grid.value,
+        found.value,
+        organs,
+        covered.value,
+    )
     return _result(session.id, plot, settings, timer, warnings)
 
 
@@ -374,6 +383,7 @@ class _Plot:
     grid: stages.GridPrior
     search: PlantSearch
     organs: dict[int, PlantOrgans]
+    cautions: dict[int, tuple[str, ...]]
 
 
 def _result(
@@ -408,4 +418,5 @@ def _result(
         T_map_field=placed.T_map_field,
         expected_plants=plot.grid.expected,
         flag_ambiguous_share=settings.plants.stems.flag_ambiguous_share,
+        cautions=plot.cautions,
     )

@@ -61,6 +61,9 @@ class Reconstruction:
     T_map_field: Matrix4 | None = None
     expected_plants: int | None = None
     flag_ambiguous_share: float = 0.05
+    cautions: dict[int, tuple[str, ...]] = field(default_factory=dict)
+    """Per plant id, why its traits are less sure than the others' (``recon/coverage.py``: the
+    captures did not cover it as planned, its top lies where the views stop seeing)."""
 
     def rows(self) -> list[PlantRow]:
         """The lines of ``plants.csv``."""
@@ -130,7 +133,8 @@ class Reconstruction:
 
     def plant_report(self) -> dict[str, Any]:
         """How the plants were found: from stems or clusters, ambiguous shares (flagged above
-        ``flag_ambiguous_share``), splits and merges, grid cells missing and plants extra."""
+        ``flag_ambiguous_share``), each plant's cautions, splits and merges, grid cells missing
+        and plants extra."""
         search = self.search or PlantSearch(self.plants)
         return {
             "method": "stems, geodesic assignment; density clusters where no stem is seen",
@@ -142,6 +146,7 @@ class Reconstruction:
                     "ambiguous_share": round(p.ambiguous_share, 4),
                     "flagged": p.ambiguous_share > self.flag_ambiguous_share,
                     "grid_cell": list(p.grid_cell) if p.grid_cell else None,
+                    "cautions": list(self.cautions.get(p.id, ())),
                 }
                 for p in self.plants
             ],

@@ -21,7 +21,7 @@ from fieldapp.io.calibration import Calibration, T_view0_view, ViewStep
 from fieldapp.io.session import Capture, Session
 from fieldapp.recon.arrival import BaseMoves, move_coarse
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.coverage import coverage_warnings, cut_tops_warning, station_axes_xy
+from fieldapp.recon.coverage import cut_tops, grouped_warnings, station_axes_xy, uncovered
 from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
 from fieldapp.recon.forkmap import ForkedMap
 from fieldapp.recon.grid import GridNodes
@@ -456,15 +456,16 @@ def coverage(
     scanned: ScanSummary,
     crop: CropSettings,
     pass_through_max_m: float,
-) -> Staged[None]:
+) -> Staged[dict[int, tuple[str, ...]]]:
     """Warns of the plants the captures did not cover as planned (``recon/coverage.py``): the
     station nearest each has no usable capture or turned through fewer views than a turn; and
     of those whose highest point lies where the views (the calibration's camera, cropped to
     ``crop``) stop seeing or at the filters' ``pass_through_max_m``. Nothing for a plant on a
-    turntable (one station, placed by the table)."""
+    turntable (one station, placed by the table). The value: each such plant's cautions, for
+    its entry in ``report.json``."""
     view_step, stations = calibration.view_step, calibration.stations
     if scanned.turntable is not None or view_step is None or stations is None:
-        return Staged(None)
+        return Staged({})
     to_reference, camera = stations.to_reference, calibration.depth_camera
     stations_xy = station_axes_xy(
         {s: r.T_field_station for s, r in placed.registrations.items()},
@@ -474,7 +475,8 @@ def coverage(
     )
     plants_xy = {p.id: np.array([p.traits.x_m, p.traits.y_m]) for p in plants}
     views = {s: len(v) for s, v in scanned.views.items()}
-    warnings = coverage_warnings(plants_xy, stations_xy, views, view_step.views_per_turn)
+    turn = view_step.views_per_turn
+    cautions = list(uncovered(plants_xy, stations_xy, views, turn).items())
     cameras = np.array(
         [
             placed.registrations[s].T_field_station @ T_view0_view(view_step.matrix, view)
@@ -484,10 +486,13 @@ def coverage(
         ]
     ).reshape(-1, 4, 4)
     tops = {p.id: p.cloud.points[int(np.argmax(p.cloud.points[:, 2]))] for p in plants}
-    warnings += cut_tops_warning(
+    cautions += cut_tops(
         tops, cameras, camera, crop.radius_m, crop.min_depth_m, pass_through_max_m
-    )
-    return Staged(None, tuple(warnings))
+    ).items()
+    notes: dict[int, tuple[str, ...]] = {}
+    for plant, caution in sorted(cautions, key=lambda item: item[0]):
+        notes[plant] = (*notes.get(plant, ()), caution.note())
+    return Staged(notes, tuple(grouped_warnings(cautions, turn)))
 
 
 def find_plants(

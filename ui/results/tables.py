@@ -89,7 +89,9 @@ class SearchNote:
 def plant_search_notes(report: dict[str, Any]) -> dict[int, SearchNote]:
     """Per plant id, from ``report.json``'s ``plant_search``: found from a stem or as a density
     cluster, the share of its points another stem reaches almost as soon (flagged above the
-    report's bar), the plants whose canopy it shares (split by their stems) and its grid cell.
+    report's bar), the plants whose canopy it shares (split by their stems), its cautions
+    (flagged too: seen only from afar or from fewer sides, a top the views may cut) and its
+    grid cell.
     Empty when the report has no plant search (results from before it)."""
     search = report.get("plant_search") or {}
     groups: dict[int, list[int]] = {}
@@ -119,12 +121,17 @@ def plant_search_notes(report: dict[str, Any]) -> dict[int, SearchNote]:
         if entry.get("flagged"):
             badge = f"⚠ {share:.1f} % ambiguous"
             lines.append("check this plant: its traits may include a neighbour's leaf")
+        cautions = [str(c) for c in entry.get("cautions") or []]
+        lines.extend(cautions)
+        if cautions and not entry.get("flagged"):
+            badge = "⚠ " + cautions[0].split(":")[0].split(",")[0]
         cell = entry.get("grid_cell")
         if cell:
             lines.append(f"planting grid row {cell[0]}, column {cell[1]}")
         elif plant in extra:
             lines.append("at no planting-grid cell (an extra plant)")
-        notes[plant] = SearchNote(badge, "\n".join(lines), bool(entry.get("flagged")))
+        flagged = bool(entry.get("flagged")) or bool(cautions)
+        notes[plant] = SearchNote(badge, "\n".join(lines), flagged)
     return notes
 
 

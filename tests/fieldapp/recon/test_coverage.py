@@ -93,6 +93,10 @@ def test_a_mission_of_two_stations_names_every_plant_another_station_stands_near
     assert len(far) == 1 and len(few) == 1
     assert _named(far[0]) == {p for p, s in nearest.items() if s not in (4, 5)}
     assert _named(few[0]) == {p for p, s in nearest.items() if s in (4, 5)}
+    for entry in result.plant_report()["plants"]:  # report.json: each plant's own caution
+        far_from_its_station = nearest[entry["plant"]] not in (4, 5)
+        kind = "seen only from farther stations" if far_from_its_station else "seen from fewer"
+        assert entry["cautions"][0].startswith(kind)  # then maybe a top the views cut
 
 
 KINECT = DepthCamera(width=512, height=424, fx=365.18, fy=364.49, cx=256.0, cy=209.59)

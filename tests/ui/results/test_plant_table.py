@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from PySide6 import QtCore
+from PySide6 import QtCore, QtGui
 
 from fieldapp.results.files import PlantRecord
 from ui.results.tables import FOUND_COLUMN, PLANT_COLUMNS, PlantTableModel
@@ -61,3 +61,33 @@ def test_results_without_a_plant_search_still_show_their_plants(qtbot) -> None:
     model.set_plants(_records(), {})
     assert model.rowCount() == 4
     assert _cell(model, 0, QtCore.Qt.ItemDataRole.DisplayRole) == "-"
+
+
+def test_a_plant_with_a_caution_is_flagged_with_it_in_its_tooltip(qtbot) -> None:
+    report = {
+        "plant_search": {
+            "plants": [
+                {"plant": 1, "from_stem": True, "ambiguous_share": 0.0, "flagged": False,
+                 "cautions": ["may be taller than measured: its top is where the views stop "
+                              "seeing (top 114 cm, views reach 115 cm)"]},
+                {"plant": 2, "from_stem": True, "ambiguous_share": 0.021, "flagged": True,
+                 "cautions": ["seen only from farther stations, traits may be low (station 9; "
+                              "nearest read 1.2 m)"]},
+                {"plant": 3, "from_stem": True, "ambiguous_share": 0.0, "flagged": False,
+                 "cautions": []},
+            ],
+        }
+    }  # fmt: skip
+    model = PlantTableModel()
+    model.set_plants(_records()[:3], report)
+    display, tip = QtCore.Qt.ItemDataRole.DisplayRole, QtCore.Qt.ItemDataRole.ToolTipRole
+    assert [_cell(model, r, display) for r in range(3)] == [
+        "⚠ may be taller than measured",
+        "⚠ 2.1 % ambiguous",  # the ambiguity badge first; the caution in the tooltip
+        "stem",
+    ]
+    assert "views reach 115 cm" in _cell(model, 0, tip)
+    assert "station 9" in _cell(model, 1, tip)
+    orange = QtGui.QColor(190, 90, 0)
+    drawn = [model.item(r, FOUND_COLUMN).foreground().color() == orange for r in range(3)]
+    assert drawn == [True, True, False]  # flagged plants in orange
