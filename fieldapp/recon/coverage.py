@@ -122,17 +122,6 @@ def grouped_warnings(cautions: Iterable[tuple[int, Caution]], views_per_turn: in
     return warnings
 
 
-def coverage_warnings(
-    plants_xy: Mapping[int, NDArray[np.float64]],
-    stations_xy: Mapping[int, NDArray[np.float64]],
-    views_read: Mapping[int, int],
-    views_per_turn: int,
-) -> list[str]:
-    """The warnings of :func:`uncovered`: one per kind."""
-    cautions = uncovered(plants_xy, stations_xy, views_read, views_per_turn)
-    return grouped_warnings(cautions.items(), views_per_turn)
-
-
 def view_ceiling_m(
     xy_m: NDArray[np.float64],
     T_out_camera: NDArray[np.float64],
@@ -186,16 +175,3 @@ def cut_tops(
             detail = f"top {100 * top[2]:.0f} cm, views reach {100 * ceiling:.0f} cm"
             cautions[plant] = Caution(TALLER, detail)
     return cautions
-
-
-def cut_tops_warning(
-    tops_m: Mapping[int, NDArray[np.float64]],
-    T_out_camera: NDArray[np.float64],
-    camera: DepthCamera,
-    radius_m: float,
-    min_depth_m: float,
-    pass_through_max_m: float,
-) -> list[str]:
-    """The warning of :func:`cut_tops`."""
-    cautions = cut_tops(tops_m, T_out_camera, camera, radius_m, min_depth_m, pass_through_max_m)
-    return grouped_warnings(cautions.items(), 0)

@@ -14,15 +14,24 @@ from devices.geometry import Matrix4
 from fieldapp.io.calibration import DepthCamera
 from fieldapp.io.session import load_session
 from fieldapp.recon.coverage import (
-    coverage_warnings,
-    cut_tops_warning,
+    cut_tops,
+    grouped_warnings,
     station_axes_xy,
+    uncovered,
     view_ceiling_m,
 )
 from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
 
 GRID = {s: np.array([1.6 * ((s - 1) % 3), 1.6 * ((s - 1) // 3)]) for s in range(1, 10)}
+
+
+def coverage_warnings(plants: dict, stations: dict, read: dict, turn: int) -> list[str]:
+    return grouped_warnings(uncovered(plants, stations, read, turn).items(), turn)
+
+
+def cut_tops_warning(tops: dict, *camera_and_limits: object) -> list[str]:
+    return grouped_warnings(cut_tops(tops, *camera_and_limits).items(), 0)  # type: ignore[arg-type]
 
 
 def _moved(x: float, y: float, yaw_deg: float = 0.0) -> Matrix4:
