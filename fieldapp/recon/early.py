@@ -30,11 +30,11 @@ if the reconstruction ends before its stations are taken (an error, a cancel).
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import logging
 import os
 import pickle
-import queue
 import signal
 import struct
 import threading
@@ -339,6 +339,67 @@ class EarlyStations:
         self._claims.close()
 
 
+OUTBOX_BYTES = 64 << 20
+"""The reader reads no further ahead while this much of what it read waits to be sent (a
+depth-only station is 40-50 MB pickled: all of a plot's were queued while the pipeline
+imported, and the reader peaked at 364 MB on a 3 x 3 plot)."""
+
+
+class Outbox:
+    """Messages from the reading thread to the sending one, at most ``limit`` bytes of them
+    waiting or being sent (one message, whatever its size, when none is). :meth:`close`
+    (the receiver has gone) wakes a reader waiting for room."""
+
+    def __init__(self, limit: int) -> None:
+        self._limit = limit
+        self._messages: collections.deque[bytes | None] = collections.deque()
+        self._pending = 0  # bytes put and not yet sent
+        self._changed = threading.Condition()
+        self.closed = threading.Event()
+
+    def put(self, message: bytes) -> None:
+        """Queue ``message`` once there is room for it (or the outbox is closed: dropped)."""
+        with self._changed:
+            self._changed.wait_for(
+                lambda: (
+                    self.closed.is_set()
+                    or self._pending == 0
+                    or self._pending + len(message) <= self._limit
+                )
+            )
+            if self.closed.is_set():
+                return
+            self._messages.append(message)
+            self._pending += len(message)
+            self._changed.notify_all()
+
+    def finish(self) -> None:
+        """No more messages: :meth:`get` returns ``None`` after the last."""
+        with self._changed:
+            self._messages.append(None)
+            self._changed.notify_all()
+
+    def get(self) -> bytes | None:
+        """The next message (waiting for one), ``None`` when finished or closed."""
+        with self._changed:
+            self._changed.wait_for(lambda: bool(self._messages) or self.closed.is_set())
+            if self.closed.is_set():
+                return None
+            return self._messages.popleft()
+
+    def sent(self, size: int) -> None:
+        """A message of ``size`` bytes has left: its room is free."""
+        with self._changed:
+            self._pending -= size
+            self._changed.notify_all()
+
+    def close(self) -> None:
+        """The receiver has gone: nothing more is queued or sent."""
+        with self._changed:
+            self.closed.set()
+            self._changed.notify_all()
+
+
 def _read_from_front(
     session: Session,
     stations: list[tuple[int, list[Capture]]],
@@ -351,16 +412,17 @@ def _read_from_front(
     thread and send ``(index, (scan, warnings))``, or ``(index, None)`` when it raised; a
     thread of its own writes to the pipe, so reading goes on while this process imports."""
     connection = Connection(send_fd, readable=False)
-    outbox: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
-    gone = threading.Event()
+    outbox = Outbox(OUTBOX_BYTES)
+    gone = outbox.closed
 
     def send() -> None:
         while (message := outbox.get()) is not None:
             try:
                 connection.send_bytes(message)
             except OSError:  # this process has closed its end: stop reading
-                gone.set()
+                outbox.close()
                 return
+            outbox.sent(len(message))
 
     sender = threading.Thread(target=send, name="early-stations")
     sender.start()
@@ -381,6 +443,6 @@ def _read_from_front(
         except Exception:  # read again in this process, which raises it as before
             message = pickle.dumps((index, None))
         outbox.put(message)
-    outbox.put(None)
+    outbox.finish()
     sender.join()
     connection.close()

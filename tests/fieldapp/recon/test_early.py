@@ -191,3 +191,36 @@ def test_a_calibration_the_rays_cannot_come_from_starts_no_reader(
 
     monkeypatch.setattr(early, "ray_table", no_rays)
     assert start_reading(load_session(small_session), SETTINGS) is None
+
+
+def _putting(outbox: early.Outbox, message: bytes) -> threading.Thread:
+    thread = threading.Thread(target=outbox.put, args=(message,), daemon=True)
+    thread.start()
+    return thread
+
+
+def test_the_reader_reads_no_further_ahead_than_its_outbox_holds() -> None:
+    """A depth-only station is 40-50 MB pickled: the reader queued every station of a plot
+    while the pipeline imported. Now a message waits for room (one always fits when none
+    waits), and room comes when a message has been sent."""
+    outbox = early.Outbox(limit=10)
+    outbox.put(b"x" * 25)  # larger than the limit, but nothing waits: queued at once
+    second = _putting(outbox, b"y" * 4)
+    second.join(timeout=0.2)
+    assert second.is_alive()  # 25 + 4 bytes would exceed the limit
+    assert outbox.get() == b"x" * 25
+    outbox.sent(25)
+    second.join(timeout=30.0)
+    assert not second.is_alive() and outbox.get() == b"y" * 4
+    outbox.put(b"z" * 5)  # 4 still being sent: 9 fit
+    outbox.finish()
+    assert outbox.get() == b"z" * 5 and outbox.get() is None
+
+
+def test_a_reader_waiting_for_room_stops_when_the_pipeline_has_gone() -> None:
+    outbox = early.Outbox(limit=10)
+    outbox.put(b"x" * 8)
+    waiting = _putting(outbox, b"y" * 8)
+    outbox.close()  # the pipeline closed its end: the sender saw OSError
+    waiting.join(timeout=30.0)
+    assert not waiting.is_alive() and outbox.get() is None
