@@ -12,7 +12,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.camera.frames import Intrinsics
+from fieldapp.io.calibration import Calibration
 from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.settings import CropSettings
+
+PAPER_CAMERA_HEIGHT_M = 1.3
+PAPER_STATION_SPACING_M = 1.6
+"""The rig the paper's crop radius (2.25 m) was chosen for."""
 
 
 def ray_table(intrinsics: Intrinsics) -> NDArray[np.float64]:
@@ -87,3 +93,29 @@ def backproject_pixels(
     if inside.all():
         return Cloud(points, colors)
     return Cloud(np.compress(inside, points, axis=0), np.compress(inside, colors, axis=0))
+
+
+def rig_crop(crop: CropSettings, calibration: Calibration) -> CropSettings:
+    """``crop`` with its radius scaled to the rig (``CropSettings.scale_to_rig``): the radius
+    that keeps, on the ground, as many station spacings around each camera as ``radius_m``
+    keeps on the paper's rig, to the centimetre (the paper's rig keeps 2.25 m). The cameras'
+    height is the median of the stations' view-0 optical centres above the ground in the field
+    frame of the calibration's ground transform, the spacing the median distance from each to
+    the nearest other. ``crop`` as it is when the calibration has no ground transform or fewer
+    than two stations (nothing to scale by), or when the radius does not reach the paper's
+    ground."""
+    stations = calibration.stations
+    if not crop.scale_to_rig or calibration.ground is None or stations is None:
+        return crop
+    if len(stations.to_reference) < 2 or crop.radius_m <= PAPER_CAMERA_HEIGHT_M:
+        return crop
+    T_field_reference = calibration.ground.matrix
+    centres = np.array([(T_field_reference @ T)[:3, 3] for T in stations.to_reference.values()])
+    apart = np.linalg.norm(centres[:, None, :2] - centres[None, :, :2], axis=2)
+    np.fill_diagonal(apart, np.inf)
+    height, spacing = float(np.median(centres[:, 2])), float(np.median(apart.min(axis=1)))
+    if height <= 0.0 or spacing <= 0.0:
+        return crop
+    reach = np.sqrt(crop.radius_m**2 - PAPER_CAMERA_HEIGHT_M**2) / PAPER_STATION_SPACING_M
+    radius = round(float(np.hypot(height, reach * spacing)), 2)
+    return crop.model_copy(update={"radius_m": radius})

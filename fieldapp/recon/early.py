@@ -48,8 +48,9 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from fieldapp.io.calibration import Calibration
 from fieldapp.io.session import Capture, Session
-from fieldapp.recon.backproject import ray_table
+from fieldapp.recon.backproject import ray_table, rig_crop
 from fieldapp.recon.scans import StationScan, captures_by_station, carries_plant, read_station
 from fieldapp.recon.settings import CropSettings, ReconstructionSettings
 
@@ -81,17 +82,20 @@ class ReadArguments:
     soil_pixel_stride: int
 
 
-def read_arguments(settings: ReconstructionSettings) -> ReadArguments:
-    """The arguments ``settings`` reads stations with."""
+def read_arguments(settings: ReconstructionSettings, calibration: Calibration) -> ReadArguments:
+    """The arguments ``settings`` reads stations of a session calibrated by ``calibration``
+    with (the crop scaled to its rig, :func:`~fieldapp.recon.backproject.rig_crop`)."""
     filters, ground = settings.filters, settings.ground
-    return ReadArguments(settings.crop, filters.exg_threshold, ground.soil_pixel_stride)
+    crop = rig_crop(settings.crop, calibration)
+    return ReadArguments(crop, filters.exg_threshold, ground.soil_pixel_stride)
 
 
 def start_reading(session: Session, settings: ReconstructionSettings) -> EarlyStations | None:
     """A reader forked now that starts on ``session``'s stations, for
     :func:`fieldapp.recon.pipeline.reconstruct`'s ``early`` (``None`` where there is none:
     see :meth:`EarlyStations.start`). Call it before importing the pipeline."""
-    return EarlyStations.start(session, read_arguments(settings), settings.threads)
+    arguments = read_arguments(settings, session.calibration)
+    return EarlyStations.start(session, arguments, settings.threads)
 
 
 class _Claims:

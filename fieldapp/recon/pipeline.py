@@ -20,7 +20,7 @@ from fieldapp.io.calibration import Stations, ViewStep
 from fieldapp.io.session import Session
 from fieldapp.recon import stages
 from fieldapp.recon.arrival import BaseMoves, base_moves
-from fieldapp.recon.backproject import ray_table
+from fieldapp.recon.backproject import ray_table, rig_crop
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.early import EarlyStations, StationRead, read_arguments
 from fieldapp.recon.filters import FilteredStation
@@ -87,7 +87,8 @@ def reconstruct(
         grid = stages.planting_grid(session, placed.T_map_field)
         ground_radius_m = settings.ground.local_ground_radius_m
         found = stages.find_plants(placed, settings.plants, ground_radius_m, grid.value.nodes)
-        seen = (session.calibration, reference.value, scanned.value, settings.crop)
+        crop = rig_crop(settings.crop, session.calibration)
+        seen = (session.calibration, reference.value, scanned.value, crop)
         covered = stages.coverage(
             placed, found.value.plants, *seen, settings.filters.pass_through_max_m
         )
@@ -170,7 +171,7 @@ def _local_reconstruction(
             crop, top_m = settings.crop, settings.filters.pass_through_max_m
             local = stages.turntable_scan(session, crop, top_m, settings.registration.enabled)
         yield progress("local reconstruction", 1.0, "turntable views joined")
-    elif early is not None and early.serves(session, read_arguments(settings)):
+    elif early is not None and early.serves(session, read_arguments(settings, session.calibration)):
         local = yield from _early_scans(early, settings, stations, timer, stream)
     else:
         local = yield from _station_scans(session, settings, stations, timer, stream)
@@ -191,6 +192,7 @@ def _station_scans(
     with timer.stage("local reconstruction"):
         rays = ray_table(session.calibration.depth_camera.intrinsics())
         grouped = captures_by_station(session)
+        arguments = read_arguments(settings, session.calibration)  # crop scaled to the rig
     read = yield from _per_station(
         timer,
         "local reconstruction",
@@ -201,9 +203,9 @@ def _station_scans(
                 station,
                 captures,
                 rays,
-                settings.crop,
-                settings.filters.exg_threshold,
-                settings.ground.soil_pixel_stride,
+                arguments.crop,
+                arguments.exg_threshold,
+                arguments.soil_pixel_stride,
                 settings.threads,
             ),
             keep,

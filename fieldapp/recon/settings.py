@@ -20,6 +20,12 @@ class CropSettings(_Section):
 
     radius_m: float = Field(default=2.25, gt=0.0)
     min_depth_m: float = Field(default=0.5, ge=0.0)
+    scale_to_rig: bool = True
+    """``radius_m`` is the paper's, for its rig (cameras 1.3 m above the ground, stations
+    1.6 m apart): on the ground it keeps 1.84 m around each camera, 1.15 station spacings, so
+    that neighbouring stations overlap. On another rig (the calibration's ground and stations
+    tell the cameras' height and spacing) the radius keeping the same reach in spacings is used
+    (``backproject.rig_crop``): cameras 1.6 m high keep 2.44 m. Off: ``radius_m`` as it is."""
 
 
 class GroundSettings(_Section):

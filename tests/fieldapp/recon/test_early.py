@@ -27,7 +27,7 @@ SETTINGS = ReconstructionSettings()
 def _here(session: Session) -> dict[int, StationRead]:
     """Every station read in this process, as the pipeline does without a reader."""
     rays = ray_table(session.calibration.depth_camera.intrinsics())
-    a = read_arguments(SETTINGS)
+    a = read_arguments(SETTINGS, session.calibration)
     return {
         station: read_station(
             session, station, captures, a.crop, a.exg_threshold, a.soil_pixel_stride, rays
@@ -67,7 +67,9 @@ def test_the_reader_and_this_process_share_the_stations_into_the_same_scans(
 ) -> None:
     session = load_session(small_session)
     reader = start_reading(session, SETTINGS)
-    assert reader is not None and reader.serves(session, read_arguments(SETTINGS))
+    assert reader is not None and reader.serves(
+        session, read_arguments(SETTINGS, session.calibration)
+    )
     _wait_for_the_reader_to_take_the_first(reader)
     here: list[int] = []
 
@@ -162,7 +164,7 @@ def test_an_error_is_raised_here_for_the_first_station_that_raises(
 
 def test_no_reader_on_one_thread_or_without_fork(small_session: Path) -> None:
     session = load_session(small_session)
-    arguments = read_arguments(SETTINGS)
+    arguments = read_arguments(SETTINGS, session.calibration)
     assert EarlyStations.start(session, arguments, threads=1) is None
     assert EarlyStations.start(session, arguments, threads=2, fork=lambda: False) is None
 
@@ -172,9 +174,11 @@ def test_a_reader_not_used_is_killed_and_reaped(small_session: Path) -> None:
     reader = start_reading(session, SETTINGS)
     assert reader is not None and reader.pid is not None
     pid, other = reader.pid, ReconstructionSettings(crop=CropSettings(radius_m=1.0))
-    assert reader.serves(session, read_arguments(SETTINGS))
-    assert not reader.serves(session, read_arguments(other))  # other settings
-    assert not reader.serves(load_session(small_session), read_arguments(SETTINGS))
+    assert reader.serves(session, read_arguments(SETTINGS, session.calibration))
+    assert not reader.serves(session, read_arguments(other, session.calibration))  # other settings
+    assert not reader.serves(
+        load_session(small_session), read_arguments(SETTINGS, session.calibration)
+    )
     reader.close()
     assert reader.pid is None
     with pytest.raises(ChildProcessError):  # reaped: no zombie left
