@@ -13,6 +13,7 @@ import argparse
 import logging
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -55,6 +56,13 @@ def register(subparsers: Any) -> None:
         metavar="M,DEG",
         help="standard deviation of the base's true arrival from the nominal station pose: "
         "metres per axis and degrees of yaw, up to 0.1,5 (default about 0.025,1)",
+    )
+    parser.add_argument(
+        "--camera",
+        default=None,
+        metavar="M,DEG",
+        help="the rig's camera: height of its optical centre above the ground in metres and "
+        "pitch below the horizontal in degrees (default 1.3,45, the paper's rig)",
     )
     parser.add_argument("--seed", default="0", help="world seed (same seed, same plants)")
     parser.add_argument("--day", default="0", help="days since the first scan (plants grow)")
@@ -110,6 +118,28 @@ def parse_list(name: str, text: str, low: int, high: int) -> list[int]:
     return sorted(values)
 
 
+CAMERA_HEIGHTS_M = (0.6, 2.5)
+CAMERA_PITCHES_DEG = (20.0, 80.0)
+
+
+def parse_camera(text: str | None) -> dict[str, float]:
+    """``"1.6,35"`` -> the rig's camera height (m) and pitch (degrees down) as
+    :class:`~devices.sim.rig.RigGeometry` fields, each within the option's range; ``None``:
+    none (the paper's rig)."""
+    if text is None:
+        return {}
+    try:
+        height_m, pitch_deg = (float(p) for p in text.split(","))
+    except ValueError:
+        raise FieldappError(f"--camera: {text!r} is not two numbers M,DEG (e.g. 1.6,35)") from None
+    (low_m, high_m), (low_deg, high_deg) = CAMERA_HEIGHTS_M, CAMERA_PITCHES_DEG
+    if not (low_m <= height_m <= high_m and low_deg <= pitch_deg <= high_deg):
+        raise FieldappError(
+            f"--camera: {text!r} is outside {low_m:g}..{high_m:g} m, {low_deg:g}..{high_deg:g} deg"
+        )
+    return {"camera_height_m": height_m, "pitch_deg": pitch_deg}
+
+
 def parse_arrival(text: str | None) -> tuple[float, float] | None:
     """``"0.03,1.5"`` -> (0.03 m, 1.5 deg), each within the option's range; ``None`` stays."""
     if text is None:
@@ -144,7 +174,10 @@ def run(args: argparse.Namespace) -> int:
         raise FieldappError(
             f"--plant-model: {args.plant_model!r} is not one of {', '.join(PLANT_MODELS)}"
         )
-    rig = RigGeometry(grid=parse_int("grid", args.grid, 2, MAX_GRID))
+    grid, camera = parse_int("grid", args.grid, 2, MAX_GRID), parse_camera(args.camera)
+    rig = RigGeometry(grid=grid)
+    if camera:
+        rig = replace(rig, camera_height_m=camera["camera_height_m"], pitch_deg=camera["pitch_deg"])
     last = rig.grid**2
     stations = parse_list("stations", args.stations or f"1-{last}", 1, last)
     views = parse_list("views", args.views, 0, rig.views - 1)
@@ -170,6 +203,8 @@ def run(args: argparse.Namespace) -> int:
                 about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
             if args.depth_only:
                 about["depth_only"] = True
+            if camera:  # absent: the paper's rig (sessions unchanged)
+                about["camera"] = camera
             plan = simulated_plan(rig, sown=args.scene == "plot")
             count = write_session(args.out, world, stations, views, seed, about, errors, plan)
         if args.scene == "checkerboard" and shots:
