@@ -9,11 +9,11 @@ corner measured 17.8 cm wide for 41.9 and 5.8 cm short (others so placed came ou
 Such plants are named in the warnings, so that no one takes their traits for as sure as the
 others'.
 
-The cameras look down at 45 degrees from 1.3 m: above a point a metre away they see up to
-about 1 m, and nothing above 1.5 m passes the filters. A plant taller than what any view sees
-above it is measured at that ceiling: simulated day-60 plants of 103-130 cm came out 104-114 cm
-with no flag. A plant whose highest point lies at the ceiling of every view that sees that
-spot (:func:`view_ceiling_m`) is named too.
+On the paper's rig the cameras look down at 45 degrees from 1.3 m: above a point a metre away
+they see up to about 1 m, and nothing above 1.5 m passes the filters. A plant taller than what
+any view sees above it is measured at that ceiling: simulated day-60 plants of 103-130 cm came
+out 103-114 cm with no flag. A plant whose highest point lies within :data:`CEILING_MARGIN_M`
+of the highest any view sees above that spot (:func:`view_ceiling_m`) is named too.
 """
 
 from __future__ import annotations
