@@ -14,15 +14,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from devices.geometry import invert, pose_error
 from fieldapp.cli import main
 from fieldapp.io.session import load_session
 from fieldapp.recon.backproject import rig_crop
 from fieldapp.recon.pipeline import run_reconstruction
-from fieldapp.recon.result import Reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
 
 from .test_end_to_end import matched_errors
+from .test_large_arrival import _errors
 
 pytestmark = pytest.mark.slow
 
@@ -33,15 +32,6 @@ def high(tmp_path_factory: pytest.TempPathFactory) -> Path:
     options = ["--grid", "2", "--camera", "1.6,35", "--seed", "5"]
     assert main(["simulate", "--out", str(folder), *options]) == 0
     return folder
-
-
-def _station_errors(result: Reconstruction, folder: Path) -> list[tuple[float, float]]:
-    truth = json.loads((folder / "truth.json").read_text())
-    T = {int(s): np.array(m) for s, m in truth["T_field_camera"].items()}
-    return [
-        pose_error(result.T_reference_station(s), invert(T[result.reference]) @ T[s])
-        for s in result.registrations
-    ]
 
 
 def test_the_simulator_builds_the_rig_asked_for(
@@ -64,7 +54,7 @@ def test_on_a_higher_rig_the_crop_scaled_to_it_lets_every_station_register(high:
     assert rig_crop(ReconstructionSettings().crop, session.calibration).radius_m == 2.44
     result = run_reconstruction(session, ReconstructionSettings())
     assert all(r.verdict in ("refined", "reference") for r in result.registrations.values())
-    for shift_m, turn_deg in _station_errors(result, high):
+    for shift_m, turn_deg in _errors(result, high).values():
         assert shift_m < 0.01 and turn_deg < 0.3
     truth = json.loads((high / "truth.json").read_text())
     e = matched_errors(result, truth)  # every true plant found, once
