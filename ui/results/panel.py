@@ -107,6 +107,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self.view3d.show_scene(scene)
         self.map.show_scene(scene)
         self.plant_model.set_plants(results.plants, results.report)
+        self._fit_table()
         reference = results.report.get("reference_station")
         self.stations.setModel(station_model(results.report, reference))
         self.warnings.clear()
@@ -123,6 +124,18 @@ class ResultsPanel(QtWidgets.QWidget):
         self.export_button.setEnabled(True)
         self.history.record_button.setEnabled(True)
         self.results_shown.emit(results)
+
+    def _fit_table(self) -> None:
+        """The plant table's pane as wide as its columns (up to half the panel), so that the
+        "found" column, last, shows each plant's flag without scrolling."""
+        header = self.table.horizontalHeader()
+        self.table.resizeColumnsToContents()
+        wanted = header.length() + self.table.verticalScrollBar().sizeHint().width()
+        wanted += 2 * self.table.frameWidth()
+        total = sum(self.splitter.sizes())
+        if total > 0 and wanted > self.splitter.sizes()[0]:
+            width = min(wanted, total // 2)
+            self.splitter.setSizes([width, total - width])
 
     def select_plant(self, plant: int | None) -> None:
         """Select ``plant`` everywhere: table row, 3D view and map."""
@@ -254,7 +267,7 @@ class ResultsPanel(QtWidgets.QWidget):
         )
         for widget, name in pages:
             self.tabs.addTab(widget, name)
-        splitter = QtWidgets.QSplitter()
+        splitter = self.splitter = QtWidgets.QSplitter()
         splitter.addWidget(self.table)
         splitter.addWidget(self.tabs)
         splitter.setStretchFactor(1, 3)

@@ -62,6 +62,19 @@ def test_results_opened_without_their_session_say_whose_they_are(panel, plot_res
     )
 
 
+def test_the_plant_table_pane_is_as_wide_as_its_columns(panel, qtbot, plot_results: Path) -> None:
+    """Its last column, "found", carries each plant's flag: it used to start past the pane's
+    edge, the flags a scroll away."""
+    panel.resize(1500, 900)
+    panel.show()
+    qtbot.waitExposed(panel)
+    panel.open_results(plot_results)
+    header = panel.table.horizontalHeader()
+    table_pane, rest = panel.splitter.sizes()
+    assert table_pane >= min(header.length(), (table_pane + rest) // 2)
+    assert header.sectionViewportPosition(header.count() - 1) < panel.table.viewport().width()
+
+
 def test_the_inspector_follows_and_drives_the_selection(panel, plot_results: Path) -> None:
     panel.open_results(plot_results)
     plants = [p.plant for p in panel.results.plants]
