@@ -113,6 +113,7 @@ def reconstruct(
         found.value,
         organs,
         covered.value,
+        crop.radius_m,
     )
     return _result(session.id, plot, settings, timer, warnings)
 
@@ -386,6 +387,7 @@ class _Plot:
     search: PlantSearch
     organs: dict[int, PlantOrgans]
     cautions: dict[int, tuple[str, ...]]
+    crop_radius_m: float
 
 
 def _result(
@@ -421,4 +423,5 @@ def _result(
         expected_plants=plot.grid.expected,
         flag_ambiguous_share=settings.plants.stems.flag_ambiguous_share,
         cautions=plot.cautions,
+        crop_radius_m=plot.crop_radius_m,
     )

@@ -61,6 +61,8 @@ class Reconstruction:
     T_map_field: Matrix4 | None = None
     expected_plants: int | None = None
     flag_ambiguous_share: float = 0.05
+    crop_radius_m: float | None = None
+    """The back-projection's crop radius used (scaled to the rig, ``backproject.rig_crop``)."""
     cautions: dict[int, tuple[str, ...]] = field(default_factory=dict)
     """Per plant id, why its traits are less sure than the others' (``recon/coverage.py``: the
     captures did not cover it as planned, its top lies where the views stop seeing)."""
@@ -173,6 +175,7 @@ class Reconstruction:
             "plant_search": self.plant_report(),
             "stations": {str(s): _station_entry(r) for s, r in sorted(self.registrations.items())},
             "points_kept": self.kept,
+            "crop_radius_m": self.crop_radius_m,
             "plant_separation": {str(s): line for s, line in sorted(self.separation.items())},
             "exg_thresholds": {str(s): round(t, 4) for s, t in sorted(self.exg_thresholds.items())},
             "timings_s": {name: round(t, 4) for name, t in self.timings_s.items()},

@@ -53,6 +53,7 @@ def test_on_a_higher_rig_the_crop_scaled_to_it_lets_every_station_register(high:
     session = load_session(high)
     assert rig_crop(ReconstructionSettings().crop, session.calibration).radius_m == 2.44
     result = run_reconstruction(session, ReconstructionSettings())
+    assert result.report()["crop_radius_m"] == 2.44  # what was used, in report.json
     assert all(r.verdict in ("refined", "reference") for r in result.registrations.values())
     for shift_m, turn_deg in _errors(result, high).values():
         assert shift_m < 0.01 and turn_deg < 0.3
@@ -66,5 +67,6 @@ def test_with_the_papers_radius_the_stations_of_that_rig_do_not_overlap(high: Pa
     settings = ReconstructionSettings()
     settings.crop.scale_to_rig = False
     result = run_reconstruction(load_session(high), settings)
+    assert result.report()["crop_radius_m"] == 2.25
     unreliable = [s for s, r in result.registrations.items() if r.verdict == "unreliable"]
     assert len(unreliable) >= 2  # flagged, never silently wrong, but not placed
