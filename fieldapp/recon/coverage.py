@@ -9,6 +9,14 @@ corner measured 17.8 cm wide for 41.9 and 5.8 cm short (others so placed came ou
 Such plants are named in the warnings, so that no one takes their traits for as sure as the
 others'.
 
+A plant near a station is seen close up only on that station's side: the cameras look down
+and outwards, and the side of the plant away from them is seen from the next stations. When
+those are not read, the plant was seen from one side only although its nearest station turned
+all the way: on the 3 x 3 plot captured from its four corner stations, the plants 0.5 m from
+the corners measured 25 cm wide for 50, 28 for 39 and 34 for 41. A plant is named when the
+views read leave it unseen over more than half a turn (:data:`ONE_SIDE_DEG`: no camera in a
+half-plane round it, :func:`unseen_arc_deg`) where the planned views would not have.
+
 On the paper's rig the cameras look down at 45 degrees from 1.3 m: above a point a metre away
 they see up to about 1 m, and nothing above 1.5 m passes the filters. A plant taller than what
 any view sees above it is measured at that ceiling: simulated day-60 plants of 103-130 cm came
@@ -24,11 +32,29 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from devices.geometry import Matrix4
+from devices.geometry import Matrix4, invert
 from fieldapp.io.calibration import DepthCamera
 
 CEILING_MARGIN_M = 0.02
 """A plant whose highest point is within this of the views' ceiling above it may be cut."""
+ONE_SIDE_DEG = 180.0
+"""A plant no view saw from an arc of more than this round it was seen from one side."""
+
+
+def station_poses(
+    T_out_station: Mapping[int, Matrix4],
+    to_reference: Mapping[int, Matrix4],
+    reference: int,
+) -> dict[int, Matrix4]:
+    """Each calibrated station's pose in the output frame: ``T_out_station`` when it was
+    read, else by the station calibration ``to_reference`` from ``reference``'s (a station
+    read: the plot's anchor, which is not the calibration's reference when that was not
+    read)."""
+    T_out_reference = T_out_station[reference] @ invert(to_reference[reference])
+    return {
+        station: T_out_station.get(station, T_out_reference @ T_reference_station)
+        for station, T_reference_station in to_reference.items()
+    }
 
 
 def station_axes_xy(
@@ -38,15 +64,9 @@ def station_axes_xy(
     axis_point: NDArray[np.float64],
 ) -> dict[int, NDArray[np.float64]]:
     """(2,) where each calibrated station's turntable axis (``axis_point`` (3,), in its view-0
-    frame) stands in the output frame: from its registered pose ``T_out_station`` when it was
-    read, else from the reference's by the station calibration ``to_reference``."""
-    anchor = T_out_station[reference]
-    where: dict[int, NDArray[np.float64]] = {}
-    for station, T_reference_station in to_reference.items():
-        T = T_out_station.get(station)
-        T = anchor @ T_reference_station if T is None else T
-        where[station] = (T[:3, :3] @ axis_point + T[:3, 3])[:2]
-    return where
+    frame) stands in the output frame (poses: :func:`station_poses`)."""
+    poses = station_poses(T_out_station, to_reference, reference)
+    return {station: (T[:3, :3] @ axis_point + T[:3, 3])[:2] for station, T in poses.items()}
 
 
 @dataclass(frozen=True)
@@ -64,18 +84,22 @@ class Caution:
 
 FARTHER = "farther"
 FEWER_SIDES = "fewer sides"
+ONE_SIDE = "one side"
 TALLER = "taller"
 HEADINGS = {
     FARTHER: "plants seen only from farther stations, their traits may be low: the station "
     "nearest each has no usable capture",
     FEWER_SIDES: "plants seen from fewer sides, their traits may be low: the station nearest "
     "each turned through fewer than {views} views",
+    ONE_SIDE: "plants seen from one side only, their traits may be low: the views read leave "
+    "more than half a turn round each unseen, the planned views would not",
     TALLER: "plants that may be taller than measured: their highest point lies where the views "
     "stop seeing",
 }
 NOTES = {
     FARTHER: "seen only from farther stations, traits may be low",
     FEWER_SIDES: "seen from fewer sides, traits may be low",
+    ONE_SIDE: "seen from one side only, traits may be low",
     TALLER: "may be taller than measured: its top is where the views stop seeing",
 }
 
@@ -106,6 +130,68 @@ def uncovered(
             cautions[plant] = Caution(
                 FEWER_SIDES, f"station {station}: {views_read[station]} views"
             )
+    return cautions
+
+
+def seeing(
+    point_m: NDArray[np.float64],
+    T_out_camera: NDArray[np.float64],
+    camera: DepthCamera,
+    radius_m: float,
+    min_depth_m: float,
+) -> NDArray[np.bool_]:
+    """(V,) which of the views whose poses are ``T_out_camera`` (V, 4, 4) (OpenCV cameras)
+    have ``point_m`` (3,) in their image, no nearer than ``min_depth_m`` along their axis and
+    within the crop sphere of ``radius_m`` (occlusion aside)."""
+    R, C = T_out_camera[:, :3, :3], T_out_camera[:, :3, 3]
+    q = np.einsum("vji,vj->vi", R, point_m - C)
+    ahead = q[:, 2] >= min_depth_m
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = camera.fx * q[:, 0] / q[:, 2] + camera.cx
+        v = camera.fy * q[:, 1] / q[:, 2] + camera.cy
+    inside = (u >= 0.0) & (u <= camera.width) & (v >= 0.0) & (v <= camera.height)
+    return ahead & inside & (np.linalg.norm(q, axis=1) <= radius_m)  # type: ignore[no-any-return]
+
+
+def unseen_arc_deg(
+    point_m: NDArray[np.float64],
+    T_out_camera: NDArray[np.float64],
+    camera: DepthCamera,
+    radius_m: float,
+    min_depth_m: float,
+) -> float:
+    """The widest arc round ``point_m`` (3,) (plan view, degrees) with none of the cameras
+    that see it (:func:`seeing`) in it: 0 when they surround it closely, over 180 when they
+    all stand on one side, 360 when none sees it."""
+    looking = seeing(point_m, T_out_camera, camera, radius_m, min_depth_m)
+    if not looking.any():
+        return 360.0
+    towards = T_out_camera[looking, :2, 3] - point_m[:2]
+    azimuths = np.sort(np.degrees(np.arctan2(towards[:, 1], towards[:, 0])) % 360.0)
+    return float(np.diff(np.append(azimuths, azimuths[0] + 360.0)).max())
+
+
+def one_sided(
+    centres_m: Mapping[int, NDArray[np.float64]],
+    planned: NDArray[np.float64],
+    read: NDArray[np.float64],
+    camera: DepthCamera,
+    radius_m: float,
+    min_depth_m: float,
+) -> dict[int, Caution]:
+    """The plants (id -> (3,) centre) that the ``read`` views (V, 4, 4) leave unseen over more
+    than :data:`ONE_SIDE_DEG` round them while the ``planned`` ones (P, 4, 4) would not
+    (:func:`unseen_arc_deg`)."""
+    cautions = {}
+    limits = (camera, radius_m, min_depth_m)
+    for plant, centre in centres_m.items():
+        arc = unseen_arc_deg(centre, read, *limits)
+        if arc <= ONE_SIDE_DEG:
+            continue
+        plan = unseen_arc_deg(centre, planned, *limits)
+        if plan <= ONE_SIDE_DEG:
+            detail = f"unseen over {arc:.0f} deg round it, {plan:.0f} as planned"
+            cautions[plant] = Caution(ONE_SIDE, detail)
     return cautions
 
 

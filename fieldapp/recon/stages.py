@@ -9,9 +9,9 @@ plan (the planting grid) is the only input they do.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Generator
+from collections.abc import Collection, Generator, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Generic, Literal, TypeVar
+from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,7 +21,14 @@ from fieldapp.io.calibration import Calibration, T_view0_view, ViewStep
 from fieldapp.io.session import Capture, Session
 from fieldapp.recon.arrival import BaseMoves, move_coarse
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.coverage import cut_tops, grouped_warnings, station_axes_xy, uncovered
+from fieldapp.recon.coverage import (
+    cut_tops,
+    grouped_warnings,
+    one_sided,
+    station_axes_xy,
+    station_poses,
+    uncovered,
+)
 from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
 from fieldapp.recon.forkmap import ForkedMap
 from fieldapp.recon.grid import GridNodes
@@ -467,8 +474,9 @@ def coverage(
     if scanned.turntable is not None or view_step is None or stations is None:
         return Staged({})
     to_reference, camera = stations.to_reference, calibration.depth_camera
+    T_field_station = {s: r.T_field_station for s, r in placed.registrations.items()}
     stations_xy = station_axes_xy(
-        {s: r.T_field_station for s, r in placed.registrations.items()},
+        T_field_station,
         to_reference,
         reference,
         turntable_axis_point(view_step.matrix, view_step.views_per_turn),
@@ -477,22 +485,43 @@ def coverage(
     views = {s: len(v) for s, v in scanned.views.items()}
     turn = view_step.views_per_turn
     cautions = list(uncovered(plants_xy, stations_xy, views, turn).items())
-    cameras = np.array(
-        [
-            placed.registrations[s].T_field_station @ T_view0_view(view_step.matrix, view)
-            for s, read in scanned.views.items()
-            if s in placed.registrations
-            for view in read
+
+    def cameras(poses: Mapping[int, Matrix4], views: Mapping[int, Sequence[int]]) -> NDArray[Any]:
+        """(V, 4, 4) the poses of the ``views`` (station -> view indices) of the stations
+        in ``poses``."""
+        shots = [
+            poses[s] @ T_view0_view(view_step.matrix, view)
+            for s, indices in views.items()
+            if s in poses
+            for view in indices
         ]
-    ).reshape(-1, 4, 4)
+        return np.array(shots).reshape(-1, 4, 4)
+
+    read = cameras(T_field_station, scanned.views)
+    planned = cameras(
+        station_poses(T_field_station, to_reference, reference),
+        {s: range(turn) for s in to_reference},
+    )
+    flagged = {plant for plant, _ in cautions}
+    centres = {
+        p.id: np.array([p.traits.x_m, p.traits.y_m, _mid_height_m(p)])
+        for p in plants
+        if p.id not in flagged
+    }
+    limits = (camera, crop.radius_m, crop.min_depth_m)
+    cautions += one_sided(centres, planned, read, *limits).items()
     tops = {p.id: p.cloud.points[int(np.argmax(p.cloud.points[:, 2]))] for p in plants}
-    cautions += cut_tops(
-        tops, cameras, camera, crop.radius_m, crop.min_depth_m, pass_through_max_m
-    ).items()
+    cautions += cut_tops(tops, read, *limits, pass_through_max_m).items()
     notes: dict[int, tuple[str, ...]] = {}
     for plant, caution in sorted(cautions, key=lambda item: item[0]):
         notes[plant] = (*notes.get(plant, ()), caution.note())
     return Staged(notes, tuple(grouped_warnings(cautions, turn)))
+
+
+def _mid_height_m(plant: Plant) -> float:
+    """Halfway up ``plant``'s points (output frame)."""
+    z = plant.cloud.points[:, 2]
+    return float(z.min() + z.max()) / 2.0
 
 
 def find_plants(

@@ -1,5 +1,6 @@
 """Plants the captures did not cover as planned are named: their nearest station has no usable
-capture, or turned through fewer views than a turn."""
+capture, or turned through fewer views than a turn, or the views read saw them from one side
+only."""
 
 from __future__ import annotations
 
@@ -16,8 +17,10 @@ from fieldapp.io.session import load_session
 from fieldapp.recon.coverage import (
     cut_tops,
     grouped_warnings,
+    one_sided,
     station_axes_xy,
     uncovered,
+    unseen_arc_deg,
     view_ceiling_m,
 )
 from fieldapp.recon.pipeline import run_reconstruction
@@ -74,6 +77,17 @@ def test_stations_not_read_stand_where_the_station_calibration_puts_them() -> No
     np.testing.assert_allclose(registered[6], [1.0, 1.0], atol=1e-12)  # its own pose wins
 
 
+def test_stations_not_read_are_placed_from_the_anchor_when_the_reference_was_not_read() -> None:
+    """The calibration's reference (5) has no capture; station 1 anchors the plot. Station 6
+    stands 3.2 m along x and 1.6 m along y from station 1 by the calibration, wherever
+    station 1 registered."""
+    to_reference = {5: np.eye(4), 1: _moved(-1.6, -1.6), 6: _moved(1.6, 0.0)}
+    where = station_axes_xy({1: _moved(10.0, 0.0)}, to_reference, 1, np.zeros(3))
+    np.testing.assert_allclose(where[1], [10.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(where[5], [11.6, 1.6], atol=1e-12)
+    np.testing.assert_allclose(where[6], [13.2, 1.6], atol=1e-12)
+
+
 def _named(warning: str) -> set[int]:
     return {int(m) for m in re.findall(r"plant (\d+) \(", warning)}
 
@@ -121,6 +135,72 @@ def _looking_along_x(height_m: float, pitch_deg: float = 45.0) -> np.ndarray:
     T[:3, :3] = np.column_stack([right, down, forward])
     T[:3, 3] = 0.0, 0.0, height_m
     return T[None]
+
+
+def _around(azimuths_deg: list[float], distance_m: float = 1.2) -> np.ndarray:
+    """(V, 4, 4) cameras 1.3 m up, ``distance_m`` from the origin at each azimuth, each
+    looking at the origin's vertical, pitched 45 degrees down."""
+    shots = []
+    for azimuth in np.radians(azimuths_deg):
+        T = _moved(distance_m * np.cos(azimuth), distance_m * np.sin(azimuth), 0.0)
+        T[:2, :2] = [[-np.cos(azimuth), np.sin(azimuth)], [-np.sin(azimuth), -np.cos(azimuth)]]
+        shots.append(T @ _looking_along_x(1.3)[0])
+    return np.array(shots)
+
+
+def test_the_unseen_arc_is_the_widest_gap_between_the_cameras_that_see_a_point() -> None:
+    centre = np.array([0.0, 0.0, 0.15])
+    assert unseen_arc_deg(centre, _around([0, 90, 180, 270]), KINECT, 2.25, 0.5) == pytest.approx(
+        90
+    )
+    assert unseen_arc_deg(centre, _around([0, 90, 200]), KINECT, 2.25, 0.5) == pytest.approx(160)
+    assert unseen_arc_deg(centre, _around([30]), KINECT, 2.25, 0.5) == 360.0
+    # cameras that do not see it leave their side unseen: one beyond the 2.25 m crop, one
+    # looking away, one so near that the point is under its image
+    far, away, near = _around([0], 2.6), _around([90]), _around([180], 0.1)
+    away[0, :3, :3] = away[0, :3, :3] @ np.diag([-1.0, 1.0, -1.0])  # turned round its axis
+    seen = np.concatenate([far, away, near, _around([270])])
+    assert unseen_arc_deg(centre, seen, KINECT, 2.25, 0.5) == 360.0
+    assert unseen_arc_deg(centre, seen, KINECT, 3.0, 0.5) == pytest.approx(270)  # far: seen
+
+
+def test_a_plant_the_views_read_saw_from_one_side_only_is_named_when_the_plan_would_not() -> None:
+    planned = _around([0, 90, 180, 270])
+    centres = {1: np.array([0.0, 0.0, 0.15])}
+    one_side = one_sided(centres, planned, planned[:2], KINECT, 2.25, 0.5)
+    assert grouped_warnings(one_side.items(), 8) == [
+        "plants seen from one side only, their traits may be low: the views read leave more "
+        "than half a turn round each unseen, the planned views would not: plant 1 (unseen over "
+        "270 deg round it, 90 as planned)"
+    ]
+    assert one_side[1].note() == (
+        "seen from one side only, traits may be low (unseen over 270 deg round it, 90 as planned)"
+    )
+    assert one_sided(centres, planned, planned[[0, 2]], KINECT, 2.25, 0.5) == {}  # both sides
+    assert one_sided(centres, planned[:2], planned[:2], KINECT, 2.25, 0.5) == {}  # as planned
+
+
+def test_the_plant_beside_the_only_station_read_is_named_seen_from_one_side(
+    tmp_path: Path,
+) -> None:
+    """A 2 x 2 plot captured from station 1 only, all eight views: the plant 0.5 m from it is
+    seen close up on the station's side and from nowhere else (its other sides face the
+    stations not read), the three others only from farther away."""
+    from fieldapp.cli import main
+
+    args = ["--grid", "2", "--stations", "1", "--seed", "11"]
+    assert main(["simulate", "--out", str(tmp_path / "s"), *args]) == 0
+    result = run_reconstruction(load_session(tmp_path / "s"), ReconstructionSettings())
+    truth = json.loads((tmp_path / "s" / "truth.json").read_text())
+    station_1 = np.array([truth["stations"]["1"]["nominal_pose"][k] for k in ("x", "y")])
+    nearest = min(
+        result.plants,
+        key=lambda p: np.hypot(p.traits.x_m - station_1[0], p.traits.y_m - station_1[1]),
+    )
+    one = [w for w in result.warnings if w.startswith("plants seen from one side only")]
+    far = [w for w in result.warnings if w.startswith("plants seen only from farther")]
+    assert len(one) == 1 and _named(one[0]) == {nearest.id}
+    assert len(far) == 1 and _named(far[0]) == {p.id for p in result.plants} - {nearest.id}
 
 
 def test_the_ceiling_above_a_spot_is_where_the_view_stops_seeing_up_its_vertical() -> None:
