@@ -164,4 +164,5 @@ class NoticeLog(QtWidgets.QTreeWidget):
 
     def texts(self) -> list[str]:
         """What happened, newest first."""
-        return [self.topLevelItem(i).text(2) for i in range(self.topLevelItemCount())]
+        items = (self.topLevelItem(i) for i in range(self.topLevelItemCount()))
+        return [item.text(2) for item in items if item is not None]

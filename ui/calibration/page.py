@@ -180,9 +180,7 @@ class CalibratePage(QtWidgets.QStackedWidget):
         space = self.workspaces.get(key)
         if space is None:
             space = self._workspace(key)
-        session_page = getattr(space.wizard, "session_page", None)
-        if session_page is not None and space.wizard.currentPage() is session_page:
-            session_page.load_remembered()  # chosen meanwhile in another wizard
+        space.wizard.catch_up()  # e.g. a session chosen meanwhile in another wizard
         self.setCurrentWidget(space)
         space.wizard.show()
         space.wizard.setFocus()

@@ -176,6 +176,10 @@ class CalibrationWizard(QtWidgets.QWizard):
         """The live previews (``stop()``-able) to stop when the wizard closes."""
         return []
 
+    def catch_up(self) -> None:
+        """Take in what changed while the wizard was not shown (called each time it is opened;
+        nothing by default)."""
+
     def watch_solve(self) -> None:
         """Keep Back disabled while ``solve`` runs (call once its page is added)."""
         self.solve.completeChanged.connect(self._update_back)

@@ -175,7 +175,7 @@ class ReprojectionPicture(QtWidgets.QWidget):
         )
 
 
-class StationLayout(pg.PlotWidget):
+class StationLayout(pg.PlotWidget):  # type: ignore[misc]  # pyqtgraph is untyped
     """Top view of the stations' cameras (view 0), each joined to the station it was measured
     through; :attr:`positions` are the plotted (horizontal, vertical) metres per station."""
 

@@ -108,6 +108,11 @@ class _SessionWizard(CalibrationWizard):
     def previews(self) -> list[Any]:
         return [self.session_page.preview]
 
+    def catch_up(self) -> None:
+        """On the session step, load the session chosen meanwhile in another wizard."""
+        if self.currentPage() is self.session_page:
+            self.session_page.load_remembered()
+
 
 class ViewsWizard(_SessionWizard):
     def __init__(

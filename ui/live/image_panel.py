@@ -20,7 +20,7 @@ BAR_W = 90
 MARK_COLOUR = (255, 0, 255)
 
 
-class ImagePanel(pg.GraphicsLayoutWidget):
+class ImagePanel(pg.GraphicsLayoutWidget):  # type: ignore[misc]  # pyqtgraph is untyped
     """Depth beside (or above) colour or IR; :attr:`arrangement` is ``"row"`` or
     ``"column"``."""
 

@@ -74,7 +74,7 @@ class IncidentPrompt(QtCore.QObject):
         box.setInformativeText(
             f"{incident.what}.\nThe base stays stopped until you decide what to do."
         )
-        buttons = {}
+        buttons: dict[QtWidgets.QAbstractButton, Choice] = {}
         for choice in incident.choices:
             button = box.addButton(BUTTONS[choice], QtWidgets.QMessageBox.ButtonRole.ActionRole)
             button.setObjectName(f"incident-{choice.value}")

@@ -34,7 +34,7 @@ def rotated(path: QtGui.QPainterPath, yaw_deg: float) -> QtGui.QPainterPath:
     return transform.map(path)
 
 
-class PlanMap(pg.PlotWidget):
+class PlanMap(pg.PlotWidget):  # type: ignore[misc]  # pyqtgraph is untyped
     """Stations, path and base pose; :attr:`station_clicked` gives a station number."""
 
     station_clicked = QtCore.Signal(int)

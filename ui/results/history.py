@@ -24,16 +24,18 @@ SPREAD_D = 0.3  # half-width of one date's strip of plants, in days
 LEGEND_WIDTH_PX = 90
 
 
-class DayAxis(pg.AxisItem):
+class DayAxis(pg.AxisItem):  # type: ignore[misc]  # pyqtgraph is untyped
     """An axis of day ordinals labelled with whole dates."""
 
-    def tickValues(self, minVal: float, maxVal: float, size: float) -> list:
+    def tickValues(
+        self, minVal: float, maxVal: float, size: float
+    ) -> list[tuple[float, list[float]]]:
         span_d = max(1.0, maxVal - minVal)
         step_d = max(1, int(np.ceil(span_d / max(1.0, size / 90.0))))
         first = int(np.ceil(minVal / step_d) * step_d)
         return [(float(step_d), [float(d) for d in range(first, int(maxVal) + 1, step_d)])]
 
-    def tickStrings(self, values: list, scale: float, spacing: float) -> list[str]:
+    def tickStrings(self, values: list[float], scale: float, spacing: float) -> list[str]:
         return [dt.date.fromordinal(round(v)).isoformat() for v in values]
 
 

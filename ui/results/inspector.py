@@ -122,7 +122,7 @@ class PlantInspector(QtWidgets.QWidget):
         )
 
     def _set_leaves(self, leaves: list[dict[str, object]]) -> None:
-        self.leaves.setModel(leaf_model(leaves))  # type: ignore[arg-type]
+        self.leaves.setModel(leaf_model(leaves))
         self.leaves.resizeColumnsToContents()
         self.leaves.selectionModel().selectionChanged.connect(self._leaf_row_selected)
 

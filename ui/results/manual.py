@@ -107,8 +107,8 @@ class ManualPanel(QtWidgets.QWidget):
         for row, plant in enumerate(self.plants):
             record = by_id.get(plant.plant)
             if record is not None:
-                self.table.item(row, 2).setText(_text(record.height_cm))
-                self.table.item(row, 4).setText(_text(record.width_cm))
+                self._cell(row, 2).setText(_text(record.height_cm))
+                self._cell(row, 4).setText(_text(record.width_cm))
         self.table.blockSignals(False)
         unknown = sorted(set(by_id) - {p.plant for p in self.plants})
         self.recompute()
@@ -126,8 +126,8 @@ class ManualPanel(QtWidgets.QWidget):
         records = []
         for row, plant in enumerate(self.plants):
             where = f"plant {plant.plant}"
-            height = parse_length(self.table.item(row, 2).text(), f"{where}, manual height")
-            width = parse_length(self.table.item(row, 4).text(), f"{where}, manual width")
+            height = parse_length(self._cell(row, 2).text(), f"{where}, manual height")
+            width = parse_length(self._cell(row, 4).text(), f"{where}, manual width")
             if height is not None or width is not None:
                 records.append(ManualRecord(plant.plant, height, width))
         return records
@@ -175,6 +175,13 @@ class ManualPanel(QtWidgets.QWidget):
             return self.records()
         except FieldappError:
             return []
+
+    def _cell(self, row: int, column: int) -> QtWidgets.QTableWidgetItem:
+        """The table's item at ``row``, ``column`` of a plant listed: :meth:`set_plants` gives
+        every cell of each plant's row one, and the rows change only there."""
+        item = self.table.item(row, column)
+        assert item is not None, f"no item at row {row}, column {column}"
+        return item
 
     def _changed(self, item: QtWidgets.QTableWidgetItem) -> None:
         if item.column() in MANUAL_COLUMN.values():

@@ -51,9 +51,9 @@ class ResultsPanel(QtWidgets.QWidget):
         self.runner.succeeded.connect(self._succeeded)
         self.runner.failed.connect(self._failed)
         self.runner.cancelled.connect(self._cancelled)
-        self._build()
+        layout = self._build()
         self.correction = CorrectionBar(self)  # merge, split, delete, renumber, undo
-        self.layout().insertWidget(3, self.correction)  # type: ignore[attr-defined]
+        layout.insertWidget(3, self.correction)
         self._set_running(False)
 
     # --- public API --------------------------------------------------------------------
@@ -195,7 +195,8 @@ class ResultsPanel(QtWidgets.QWidget):
 
     # --- building ----------------------------------------------------------------------
 
-    def _build(self) -> None:
+    def _build(self) -> QtWidgets.QVBoxLayout:
+        """The page's widgets; returns its layout (the correction bar goes in it later)."""
         open_session = QtWidgets.QPushButton("Open session…")
         open_session.clicked.connect(self._ask_session)
         open_results = QtWidgets.QPushButton("Open results…")
@@ -219,7 +220,7 @@ class ResultsPanel(QtWidgets.QWidget):
             row1.addWidget(widget)
         row1.addStretch(1)
         row2 = QtWidgets.QHBoxLayout()
-        for widget in (
+        for control in (
             self.results_dir,
             self.run_button,
             self.cancel_button,
@@ -227,7 +228,7 @@ class ResultsPanel(QtWidgets.QWidget):
             self.stage,
             self.export_button,
         ):
-            row2.addWidget(widget)
+            row2.addWidget(control)
         self.plant_model = PlantTableModel(self)
         self.proxy = QtCore.QSortFilterProxyModel(self)
         self.proxy.setSourceModel(self.plant_model)
@@ -265,8 +266,8 @@ class ResultsPanel(QtWidgets.QWidget):
             (self.manual, "Manual measurements"),
             (self.history, "History"),
         )
-        for widget, name in pages:
-            self.tabs.addTab(widget, name)
+        for page, name in pages:
+            self.tabs.addTab(page, name)
         splitter = self.splitter = QtWidgets.QSplitter()
         splitter.addWidget(self.table)
         splitter.addWidget(self.tabs)
@@ -281,6 +282,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self.export_button.setEnabled(False)
         self.history.record_button.setEnabled(False)
         self._build_organ_views()
+        return layout
 
     def _build_organ_views(self) -> None:
         """The per-plant inspector (linked both ways with the plant table, the 3D view and

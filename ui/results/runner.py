@@ -66,12 +66,15 @@ def ask_overwrite(parent: QtWidgets.QWidget | None, folder: Path, existing: list
         f"finishes.\nKeep both: the new run goes to {free_results_dir(folder).name}."
     )
     roles = QtWidgets.QMessageBox.ButtonRole
-    answers = {
-        box.addButton("Replace", roles.DestructiveRole): "replace",
-        box.addButton("Keep both", roles.AcceptRole): "keep both",
-        box.addButton(QtWidgets.QMessageBox.StandardButton.Cancel): "cancel",
+    replace = box.addButton("Replace", roles.DestructiveRole)
+    keep_both = box.addButton("Keep both", roles.AcceptRole)
+    cancel = box.addButton(QtWidgets.QMessageBox.StandardButton.Cancel)
+    answers: dict[QtWidgets.QAbstractButton, str] = {
+        replace: "replace",
+        keep_both: "keep both",
+        cancel: "cancel",
     }
-    box.setDefaultButton(next(b for b, a in answers.items() if a == "keep both"))
+    box.setDefaultButton(keep_both)
     box.exec()
     return answers.get(box.clickedButton(), "cancel")
 

@@ -117,13 +117,17 @@ def project(
     homogeneous = np.c_[points_m, np.ones(len(points_m))] @ mvp.T
     w = homogeneous[:, 3:4]
     ndc = np.where(w > 1e-9, homogeneous[:, :3] / np.where(w > 1e-9, w, 1.0), np.nan)
-    return np.c_[(ndc[:, 0] + 1) / 2 * width_px, (1 - ndc[:, 1]) / 2 * height_px]
+    pixels: NDArray[np.float64] = np.c_[
+        (ndc[:, 0] + 1) / 2 * width_px, (1 - ndc[:, 1]) / 2 * height_px
+    ]
+    return pixels
 
 
 def depth_m(points_m: NDArray[np.float64], mvp: NDArray[np.float64]) -> NDArray[np.float64]:
     """(N,) distance of ``points_m`` (N, 3) in front of the camera along its axis (the clip
     space w of a perspective ``mvp``; metres for a view in metres)."""
-    return np.c_[points_m, np.ones(len(points_m))] @ mvp[3]
+    depth: NDArray[np.float64] = np.c_[points_m, np.ones(len(points_m))] @ mvp[3]
+    return depth
 
 
 def pick_on_screen(

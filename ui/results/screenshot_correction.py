@@ -17,6 +17,7 @@ import logging
 import sys
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from PySide6 import QtCore, QtWidgets
@@ -24,6 +25,10 @@ from PySide6.QtTest import QTest
 
 from ui.results.scene import depth_m, pick_on_screen
 from ui.screenshots import pump, results_panel
+
+if TYPE_CHECKING:
+    from ui.results import ResultsPanel
+    from ui.results.data import PlotResults
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +57,7 @@ def shoot(out: Path, seed: int = 3) -> None:
         _save(panel, out, "split-picked")
         _apply(panel, bar.picker.apply)
         _save(panel, out, "split")
-        bar.select_plants([min(p.plant for p in panel.results.plants)])
+        bar.select_plants([min(p.plant for p in _shown(panel).plants)])
         _apply(panel, bar.delete_action)
         _apply(panel, bar.undo_action)
         _reconstruct(panel)
@@ -70,6 +75,13 @@ def _reconstruct(panel: QtWidgets.QWidget) -> None:
     panel.reconstruct()  # type: ignore[attr-defined]
     pump(lambda: panel.results is not None, 600.0)  # type: ignore[attr-defined]
     pump(timeout_s=1.0)
+
+
+def _shown(panel: ResultsPanel) -> PlotResults:
+    """The results ``panel`` shows; raises when it shows none (a reconstruction failed)."""
+    if panel.results is None:
+        raise RuntimeError("no results shown")
+    return panel.results
 
 
 def _answer_replace() -> None:
@@ -93,7 +105,7 @@ def _nearest_pair(panel: QtWidgets.QWidget) -> tuple[int, int]:
     xy = np.array([(p.x_m, p.y_m) for p in plants])
     distance = np.linalg.norm(xy[:, None] - xy[None], axis=2) + np.eye(len(xy)) * 1e9
     i, j = np.unravel_index(np.argmin(distance), distance.shape)
-    return tuple(sorted((plants[i].plant, plants[j].plant)))  # type: ignore[return-value]
+    return tuple(sorted((plants[i].plant, plants[j].plant)))
 
 
 def _true_stems(session: Path, panel: QtWidgets.QWidget, plant: int) -> list[np.ndarray]:

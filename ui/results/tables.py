@@ -91,8 +91,7 @@ def plant_search_notes(report: dict[str, Any]) -> dict[int, SearchNote]:
     cluster, the share of its points another stem reaches almost as soon (flagged above the
     report's bar), the plants whose canopy it shares (split by their stems), its cautions
     (flagged too: seen only from afar, from fewer sides or from one side only, a top the views
-    may cut) and its
-    grid cell.
+    may cut) and its grid cell.
     Empty when the report has no plant search (results from before it)."""
     search = report.get("plant_search") or {}
     groups: dict[int, list[int]] = {}
