@@ -308,11 +308,13 @@ def join_stations(
             registrations, start, how_placed = again, run_start, how
     notes: tuple[str, ...] = ()
     if how_placed:
+        refined = len(first) - len(_kept_coarse(registrations))
+        kept = "its coarse pose" if len(first) == 1 else "coarse poses"
+        outcome = "it is refined" if len(first) == 1 else f"{refined} of them are refined"
         notes = (
             f"registration: with the arrival uncertainty of the settings ({_sigmas(settings)}) "
-            f"{_listed(first)} kept at coarse poses; registered again {how_placed}, "
-            f"{len(first) - len(_kept_coarse(registrations))} of them are refined. The base "
-            "errs more than registration.arrival_sigma_m / _deg say: set them to match it",
+            f"{_listed(first)} kept at {kept}; registered again {how_placed}, {outcome}. The "
+            "base errs more than registration.arrival_sigma_m / _deg say: set them to match it",
         )
     registrations = {  # each correction from where the station's filtered points are
         s: replace(r, T_correction=r.T_correction @ start[s] @ invert(T_field_levelled[s]))
