@@ -144,13 +144,21 @@ def seeing(
     have ``point_m`` (3,) in their image, no nearer than ``min_depth_m`` along their axis and
     within the crop sphere of ``radius_m`` (occlusion aside)."""
     R, C = T_out_camera[:, :3, :3], T_out_camera[:, :3, 3]
-    q = np.einsum("vji,vj->vi", R, point_m - C)
-    ahead = q[:, 2] >= min_depth_m
+    return _in_view(np.einsum("vji,vj->vi", R, point_m - C), camera, radius_m, min_depth_m)
+
+
+def _in_view(
+    q_m: NDArray[np.float64], camera: DepthCamera, radius_m: float, min_depth_m: float
+) -> NDArray[np.bool_]:
+    """(V,) whether each point ``q_m`` (V, 3), one per view in its camera's frame, lies in
+    the image (its edges included), no nearer than ``min_depth_m`` along the axis and within
+    ``radius_m`` of the camera."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = camera.fx * q[:, 0] / q[:, 2] + camera.cx
-        v = camera.fy * q[:, 1] / q[:, 2] + camera.cy
-    inside = (u >= 0.0) & (u <= camera.width) & (v >= 0.0) & (v <= camera.height)
-    return ahead & inside & (np.linalg.norm(q, axis=1) <= radius_m)  # type: ignore[no-any-return]
+        u = camera.fx * q_m[:, 0] / q_m[:, 2] + camera.cx
+        v = camera.fy * q_m[:, 1] / q_m[:, 2] + camera.cy
+    inside = (u >= 0.0) & (u <= camera.width) & (v >= -1e-6) & (v <= camera.height)
+    near = (q_m[:, 2] >= min_depth_m - 1e-9) & (np.linalg.norm(q_m, axis=1) <= radius_m + 1e-9)
+    return inside & near  # type: ignore[no-any-return]
 
 
 def unseen_arc_deg(
@@ -233,12 +241,8 @@ def view_ceiling_m(
         z_sphere = C[:, 2] + np.sqrt(np.maximum(radius_m**2 - across**2, 0.0))
         z_near = np.where(b[:, 2] < 0.0, (min_depth_m - a[:, 2]) / b[:, 2], np.inf)
     z = np.minimum(np.minimum(z_edge, z_near), np.where(across < radius_m, z_sphere, -np.inf))
-    q = a + z[:, None] * b
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = camera.fx * q[:, 0] / q[:, 2] + camera.cx
-        v = camera.fy * q[:, 1] / q[:, 2] + camera.cy
-    seen = np.isfinite(z) & (q[:, 2] >= min_depth_m - 1e-9) & (u >= 0.0) & (u <= camera.width)
-    seen &= (v >= -1e-6) & (v <= camera.height) & (np.linalg.norm(q, axis=1) <= radius_m + 1e-9)
+    with np.errstate(invalid="ignore"):
+        seen = np.isfinite(z) & _in_view(a + z[:, None] * b, camera, radius_m, min_depth_m)
     return float(z[seen].max()) if seen.any() else float("-inf")
 
 
