@@ -77,15 +77,17 @@ def _aligned(points: NDArray[np.float64], tree: cKDTree, rounds: int = 8) -> NDA
 
 def labels(folder: Path, session: str) -> tuple[NDArray[np.intp], list[str]]:
     """(N,) index into the names of the plant each point lies on (-1: none within 1.5 cm)."""
-    from devices.sim.scene import plot_scene
+    from devices.sim.scene import PlotLayout, plot_scene
 
     inputs = pickle.loads((folder / f"{session}.pkl").read_bytes())
     truth = json.loads((folder / session / "truth.json").read_text())
     first = truth["plants"][0]
     offset = np.array([first["map_x_m"] - first["x_m"], first["map_y_m"] - first["y_m"], 0.0])
+    rig = truth["rig"]  # the plants spread over the session's grid of stations, as simulated
     scene = plot_scene(
         int(truth["seed"]),
         int(truth.get("day", 0)),
+        PlotLayout.for_stations(int(rig["grid"]), float(rig["station_spacing_m"])),
         stage=truth["stage"],
         plant_model=truth.get("plant_model", "distichous"),
     )
