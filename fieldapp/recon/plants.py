@@ -273,10 +273,10 @@ def _join_fragments(
     that density clustering puts with reached points go to the stem of the nearest reached
     point of their cluster: a leaf seen with a gap at its base stays with its plant. Returns
     (N,) the joined points that are a guess: where the cluster holds two stems' points
-    (canopies touch), those whose nearest point of another stem is less than ``margin_m``
-    farther than the one they went to (a gap-cut leaf between two plants went to the nearer:
-    touching depth-only irregular seed 87, 2 340 points of a leaf 13 cm too narrow joined to
-    the neighbour, 12 cm too wide, neither flagged)."""
+    (canopies touch), those whose nearest point of another stem there is less than
+    ``margin_m`` farther than the one they went to (a gap-cut leaf between two plants went to
+    the nearer: touching depth-only irregular seed 87, 2 340 points of a leaf 13 cm too narrow
+    joined to the neighbour, 12 cm too wide, neither flagged)."""
     guessed = np.zeros(len(points_m), dtype=bool)
     unreached = labels == UNREACHED
     if not unreached.any() or unreached.all():
@@ -287,50 +287,46 @@ def _join_fragments(
     joined = np.flatnonzero(unreached & has_stem[clusters])
     if len(joined) == 0:
         return guessed
-    reached = np.flatnonzero(~unreached)
-    distance, nearest = cKDTree(points_m[reached]).query(points_m[joined])
-    labels[joined] = labels[reached[nearest]]
-    guessed[joined] = _second_stem_near(
-        points_m, labels, clusters, reached, joined, distance, margin_m
-    )
+    reached = np.flatnonzero(~unreached & np.isin(clusters, clusters[joined]))
+    for r, j in zip(*(_by_cluster(clusters, part) for part in (reached, joined)), strict=True):
+        distance, nearest = cKDTree(points_m[r]).query(points_m[j])
+        labels[j] = labels[r[nearest]]
+        guessed[j] = _second_stem_near(points_m, labels, r, j, distance, margin_m)
     merges.append(f"{len(joined)} points not reached along a plant joined to the nearest plant")
     return guessed
+
+
+def _by_cluster(clusters: NDArray[np.intp], members: NDArray[np.intp]) -> list[NDArray[np.intp]]:
+    """``members`` (indices) grouped by their cluster, in cluster order."""
+    order = np.argsort(clusters[members], kind="stable")
+    _, starts = np.unique(clusters[members][order], return_index=True)
+    return np.split(members[order], starts[1:])
 
 
 def _second_stem_near(
     points_m: NDArray[np.float64],
     labels: NDArray[np.intp],
-    clusters: NDArray[np.intp],
     reached: NDArray[np.intp],
     joined: NDArray[np.intp],
     distance_m: NDArray[np.float64],
     margin_m: float,
 ) -> NDArray[np.bool_]:
-    """(len(joined),) whether a reached point of another stem than the one each ``joined``
-    point went to (its nearest reached point, ``distance_m`` away) lies within ``margin_m``
-    more; only in the density clusters holding two stems' reached points (one k-d tree per
-    stem over its reached points there)."""
-    near = np.zeros(len(joined), dtype=bool)
-    stems_after = int(labels.max()) + 1
-    pairs = np.unique(clusters[reached] * stems_after + labels[reached])  # (cluster, stem)
-    shared_cluster = np.bincount(pairs // stems_after, minlength=int(clusters.max()) + 1) > 1
-    chosen = np.flatnonzero(shared_cluster[clusters[joined]])
-    if len(chosen) == 0:
-        return near
-    queried, went_to = points_m[joined[chosen]], labels[joined[chosen]]
-    reach = distance_m[chosen] + margin_m
-    candidates = reached[shared_cluster[clusters[reached]]]
-    order = np.argsort(labels[candidates], kind="stable")
-    stems, starts = np.unique(labels[candidates][order], return_index=True)
-    other = np.full(len(chosen), np.inf)
-    for stem, members in zip(stems, np.split(candidates[order], starts[1:]), strict=True):
-        elsewhere = went_to != stem
+    """(len(joined),) for the points of one cluster: whether a ``reached`` point of another
+    stem than the one each ``joined`` point went to (its nearest reached point, ``distance_m``
+    away) lies within ``margin_m`` more (one k-d tree per stem over its points there)."""
+    other = np.full(len(joined), np.inf)
+    went_to, reach = labels[joined], distance_m + margin_m
+    stems = np.unique(labels[reached])
+    for stem in stems if len(stems) > 1 else ():
+        asked = np.flatnonzero(went_to != stem)
+        if len(asked) == 0:
+            continue
+        members = reached[labels[reached] == stem]
         found, _ = cKDTree(points_m[members]).query(
-            queried[elsewhere], distance_upper_bound=float(reach[elsewhere].max(initial=0.0))
+            points_m[joined[asked]], distance_upper_bound=float(reach[asked].max())
         )
-        other[elsewhere] = np.minimum(other[elsewhere], found)
-    near[chosen] = other < reach
-    return near
+        other[asked] = np.minimum(other[asked], found)
+    return other < reach
 
 
 def _measured(

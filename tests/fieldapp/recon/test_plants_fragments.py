@@ -61,3 +61,14 @@ def test_a_fragment_in_a_cluster_of_one_plant_is_sure_whatever_lies_beyond() -> 
     _, labels, guessed = _joined([(a, 0), (b, 1), (fragment, UNREACHED)])
     part = slice(len(a) + len(b), None)
     assert (labels[part] == 0).all() and not guessed.any()
+
+
+def test_another_stem_across_air_does_not_make_a_join_a_guess() -> None:
+    """Plants 0 and 1 share a cluster (their leaves meet at x = 0.40 m), as do plants 2 and 3,
+    6 cm away across air; the fragment beyond plant 0's other end lies 6 cm from plant 2, but
+    in plant 0's cluster the only other plant is 45-60 cm farther: the join is sure."""
+    a, b = _line(0.0, 0.40), _line(0.405, 0.8)
+    c, d = _line(-0.2, -0.01, y=0.06), _line(0.0, 0.3, y=0.06)
+    fragment = _line(-0.15, -0.01)
+    _, labels, guessed = _joined([(a, 0), (b, 1), (c, 2), (d, 3), (fragment, UNREACHED)])
+    assert (labels[-len(fragment) :] == 0).all() and not guessed.any()
