@@ -223,27 +223,40 @@ def view_ceiling_m(
     radius_m: float,
     min_depth_m: float,
 ) -> float:
-    """The highest point above ``xy_m`` (2,) (output frame, z up) that one of the views whose
-    poses are ``T_out_camera`` (V, 4, 4) sees: where the vertical through it leaves the image
-    at its top edge (OpenCV camera: y down the image), the crop sphere of ``radius_m`` around
-    the camera, or comes nearer than ``min_depth_m`` (a camera looking down: going up the
-    vertical comes nearer), whichever comes first, on an image column; -inf when no view sees
-    up that vertical."""
+    """The highest point above ``xy_m`` (2,) (output frame, z up, from the ground at 0) that
+    one of the views whose poses are ``T_out_camera`` (V, 4, 4) sees: each view sees the
+    stretch of that vertical inside its image (any of the four edges may end it: a vertical
+    is not an image column), no nearer than ``min_depth_m`` along its axis (a camera looking
+    down: going up the vertical comes nearer) and within the crop sphere of ``radius_m``;
+    the top of the highest stretch, or -inf when no view sees any of it."""
     R, C = T_out_camera[:, :3, :3], T_out_camera[:, :3, 3]
     ground = np.array([xy_m[0], xy_m[1], 0.0])
     a = np.einsum("vji,vj->vi", R, ground - C)  # the vertical's foot in each camera's frame
-    b = R[:, 2, :]  # the vertical's direction (world z) in each camera's frame
-    k = camera.cy / camera.fy
-    rising = b[:, 1] + k * b[:, 2]  # how the top edge's test changes going up the vertical
+    b = R[:, 2, :]  # the vertical's direction (world z) in each camera's frame, unit
+    # each bound as c . q + d >= 0 on q = a + z b: u >= 0, u <= width, v >= 0, v <= height
+    # (times the depth, positive where the near limit holds) and the near limit itself
+    c = np.array(
+        [
+            [camera.fx, 0.0, camera.cx],
+            [-camera.fx, 0.0, camera.width - camera.cx],
+            [0.0, camera.fy, camera.cy],
+            [0.0, -camera.fy, camera.height - camera.cy],
+            [0.0, 0.0, 1.0],
+        ]
+    )
+    d = np.array([0.0, 0.0, 0.0, 0.0, -min_depth_m])
+    at_foot, rate = a @ c.T + d, b @ c.T  # (V, 5): each bound's value at z = 0, its slope
     with np.errstate(divide="ignore", invalid="ignore"):
-        z_edge = np.where(rising < 0.0, -(a[:, 1] + k * a[:, 2]) / rising, np.inf)
-        across = np.hypot(*(ground[:2] - C[:, :2]).T)
-        z_sphere = C[:, 2] + np.sqrt(np.maximum(radius_m**2 - across**2, 0.0))
-        z_near = np.where(b[:, 2] < 0.0, (min_depth_m - a[:, 2]) / b[:, 2], np.inf)
-    z = np.minimum(np.minimum(z_edge, z_near), np.where(across < radius_m, z_sphere, -np.inf))
-    with np.errstate(invalid="ignore"):
-        seen = np.isfinite(z) & _in_view(a + z[:, None] * b, camera, radius_m, min_depth_m)
-    return float(z[seen].max()) if seen.any() else float("-inf")
+        crossing = -at_foot / rate
+    low = np.where(rate > 0.0, crossing, -np.inf).max(axis=1, initial=0.0)  # from the ground
+    high = np.where(rate < 0.0, crossing, np.inf).min(axis=1)
+    never = ((rate == 0.0) & (at_foot < 0.0)).any(axis=1)
+    along = np.einsum("vi,vi->v", a, b)  # the crop sphere: |a + z b| <= radius_m
+    spread = along**2 - np.einsum("vi,vi->v", a, a) + radius_m**2
+    root = np.sqrt(np.maximum(spread, 0.0))
+    low, high = np.maximum(low, -along - root), np.minimum(high, -along + root)
+    seen = ~never & (spread >= 0.0) & (low <= high)
+    return float(high[seen].max()) if seen.any() else float("-inf")
 
 
 def cut_tops(
@@ -260,7 +273,9 @@ def cut_tops(
     cautions = {}
     for plant, top in tops_m.items():
         seen = view_ceiling_m(top[:2], T_out_camera, camera, radius_m, min_depth_m)
-        ceiling = min(seen, pass_through_max_m)
+        # no view's stretch of that vertical (its top seen, yet off every view by the
+        # poses): nothing to judge it by but the filters' limit
+        ceiling = pass_through_max_m if seen == float("-inf") else min(seen, pass_through_max_m)
         if top[2] >= ceiling - CEILING_MARGIN_M:
             detail = f"top {100 * top[2]:.0f} cm, views reach {100 * ceiling:.0f} cm"
             cautions[plant] = Caution(TALLER, detail)

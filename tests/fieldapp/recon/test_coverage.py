@@ -222,6 +222,19 @@ def test_the_ceiling_above_a_spot_is_where_the_view_stops_seeing_up_its_vertical
     assert view_ceiling_m(np.array([1.0, 0.0]), two, KINECT, 2.25, 0.5) == pytest.approx(edge + 0.3)
 
 
+def test_a_vertical_near_the_images_side_leaves_it_through_that_side() -> None:
+    """80 cm to the camera's left, a metre ahead: going up, the vertical leaves the image
+    through its left edge (u = 0) at 0.69 m, before it reaches the top edge (1.03 m); a
+    vertical is not an image column, so a view's stretch can end at any edge (the ceiling was
+    -inf here: no view seen, a top named cut by a ceiling of "-inf cm")."""
+    camera = _looking_along_x(1.3)
+    cos = np.cos(np.radians(45.0))
+    # u >= 0 <=> depth (cos 45 * (2.3 - z)) >= fx / cx * 0.8
+    side = 2.3 - KINECT.fx / KINECT.cx * 0.8 / cos
+    assert view_ceiling_m(np.array([1.0, 0.8]), camera, KINECT, 2.25, 0.5) == pytest.approx(side)
+    assert 0.6 < side < 1.0
+
+
 def test_a_plant_whose_top_is_at_the_ceiling_may_be_taller_than_measured() -> None:
     camera = _looking_along_x(1.3)
     tops = {1: np.array([1.0, 0.0, 1.025]), 2: np.array([1.0, 0.0, 0.95])}
