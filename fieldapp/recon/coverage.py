@@ -70,6 +70,16 @@ def station_axes_xy(
 
 
 @dataclass(frozen=True)
+class ViewLimits:
+    """What a view sees of the points in its image: those no nearer than ``min_depth_m``
+    along its axis (the sensor's near limit) and within ``radius_m`` of it (the crop)."""
+
+    camera: DepthCamera
+    radius_m: float
+    min_depth_m: float
+
+
+@dataclass(frozen=True)
 class Caution:
     """Why one plant's traits are less sure than the others': ``kind`` (one of
     :data:`FARTHER`, :data:`FEWER_SIDES`, :data:`TALLER`) and the plant's figures."""
@@ -136,42 +146,30 @@ def uncovered(
 def seeing(
     point_m: NDArray[np.float64],
     T_out_camera: NDArray[np.float64],
-    camera: DepthCamera,
-    radius_m: float,
-    min_depth_m: float,
+    limits: ViewLimits,
 ) -> NDArray[np.bool_]:
     """(V,) which of the views whose poses are ``T_out_camera`` (V, 4, 4) (OpenCV cameras)
-    have ``point_m`` (3,) in their image, no nearer than ``min_depth_m`` along their axis and
-    within the crop sphere of ``radius_m`` (occlusion aside)."""
+    see ``point_m`` (3,) within their ``limits`` (occlusion aside)."""
     R, C = T_out_camera[:, :3, :3], T_out_camera[:, :3, 3]
-    return _in_view(np.einsum("vji,vj->vi", R, point_m - C), camera, radius_m, min_depth_m)
-
-
-def _in_view(
-    q_m: NDArray[np.float64], camera: DepthCamera, radius_m: float, min_depth_m: float
-) -> NDArray[np.bool_]:
-    """(V,) whether each point ``q_m`` (V, 3), one per view in its camera's frame, lies in
-    the image (its edges included), no nearer than ``min_depth_m`` along the axis and within
-    ``radius_m`` of the camera."""
+    q = np.einsum("vji,vj->vi", R, point_m - C)  # in each camera's frame
+    camera = limits.camera
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = camera.fx * q_m[:, 0] / q_m[:, 2] + camera.cx
-        v = camera.fy * q_m[:, 1] / q_m[:, 2] + camera.cy
-    inside = (u >= 0.0) & (u <= camera.width) & (v >= -1e-6) & (v <= camera.height)
-    near = (q_m[:, 2] >= min_depth_m - 1e-9) & (np.linalg.norm(q_m, axis=1) <= radius_m + 1e-9)
+        u = camera.fx * q[:, 0] / q[:, 2] + camera.cx
+        v = camera.fy * q[:, 1] / q[:, 2] + camera.cy
+    inside = (u >= 0.0) & (u <= camera.width) & (v >= 0.0) & (v <= camera.height)
+    near = (q[:, 2] >= limits.min_depth_m) & (np.linalg.norm(q, axis=1) <= limits.radius_m)
     return inside & near  # type: ignore[no-any-return]
 
 
 def unseen_arc_deg(
     point_m: NDArray[np.float64],
     T_out_camera: NDArray[np.float64],
-    camera: DepthCamera,
-    radius_m: float,
-    min_depth_m: float,
+    limits: ViewLimits,
 ) -> float:
     """The widest arc round ``point_m`` (3,) (plan view, degrees) with none of the cameras
     that see it (:func:`seeing`) in it: 0 when they surround it closely, over 180 when they
     all stand on one side, 360 when none sees it."""
-    looking = seeing(point_m, T_out_camera, camera, radius_m, min_depth_m)
+    looking = seeing(point_m, T_out_camera, limits)
     if not looking.any():
         return 360.0
     towards = T_out_camera[looking, :2, 3] - point_m[:2]
@@ -183,20 +181,17 @@ def one_sided(
     centres_m: Mapping[int, NDArray[np.float64]],
     planned: NDArray[np.float64],
     read: NDArray[np.float64],
-    camera: DepthCamera,
-    radius_m: float,
-    min_depth_m: float,
+    limits: ViewLimits,
 ) -> dict[int, Caution]:
     """The plants (id -> (3,) centre) that the ``read`` views (V, 4, 4) leave unseen over more
     than :data:`ONE_SIDE_DEG` round them while the ``planned`` ones (P, 4, 4) would not
     (:func:`unseen_arc_deg`)."""
     cautions = {}
-    limits = (camera, radius_m, min_depth_m)
     for plant, centre in centres_m.items():
-        arc = unseen_arc_deg(centre, read, *limits)
+        arc = unseen_arc_deg(centre, read, limits)
         if arc <= ONE_SIDE_DEG:
             continue
-        plan = unseen_arc_deg(centre, planned, *limits)
+        plan = unseen_arc_deg(centre, planned, limits)
         if plan <= ONE_SIDE_DEG:
             detail = f"unseen over {arc:.0f} deg round it, {plan:.0f} as planned"
             cautions[plant] = Caution(ONE_SIDE, detail)
@@ -219,16 +214,14 @@ def grouped_warnings(cautions: Iterable[tuple[int, Caution]], views_per_turn: in
 def view_ceiling_m(
     xy_m: NDArray[np.float64],
     T_out_camera: NDArray[np.float64],
-    camera: DepthCamera,
-    radius_m: float,
-    min_depth_m: float,
+    limits: ViewLimits,
 ) -> float:
     """The highest point above ``xy_m`` (2,) (output frame, z up, from the ground at 0) that
     one of the views whose poses are ``T_out_camera`` (V, 4, 4) sees: each view sees the
     stretch of that vertical inside its image (any of the four edges may end it: a vertical
-    is not an image column), no nearer than ``min_depth_m`` along its axis (a camera looking
-    down: going up the vertical comes nearer) and within the crop sphere of ``radius_m``;
-    the top of the highest stretch, or -inf when no view sees any of it."""
+    is not an image column) and within its ``limits`` (a camera looking down: going up the
+    vertical comes nearer); the top of the highest stretch, or -inf when no view sees any."""
+    camera, radius_m = limits.camera, limits.radius_m
     R, C = T_out_camera[:, :3, :3], T_out_camera[:, :3, 3]
     ground = np.array([xy_m[0], xy_m[1], 0.0])
     a = np.einsum("vji,vj->vi", R, ground - C)  # the vertical's foot in each camera's frame
@@ -244,7 +237,7 @@ def view_ceiling_m(
             [0.0, 0.0, 1.0],
         ]
     )
-    d = np.array([0.0, 0.0, 0.0, 0.0, -min_depth_m])
+    d = np.array([0.0, 0.0, 0.0, 0.0, -limits.min_depth_m])
     at_foot, rate = a @ c.T + d, b @ c.T  # (V, 5): each bound's value at z = 0, its slope
     with np.errstate(divide="ignore", invalid="ignore"):
         crossing = -at_foot / rate
@@ -262,9 +255,7 @@ def view_ceiling_m(
 def cut_tops(
     tops_m: Mapping[int, NDArray[np.float64]],
     T_out_camera: NDArray[np.float64],
-    camera: DepthCamera,
-    radius_m: float,
-    min_depth_m: float,
+    limits: ViewLimits,
     pass_through_max_m: float,
 ) -> dict[int, Caution]:
     """The plants (id -> (3,) highest point) whose highest point lies within
@@ -272,7 +263,7 @@ def cut_tops(
     (:func:`view_ceiling_m`), or the filters' pass-through limit."""
     cautions = {}
     for plant, top in tops_m.items():
-        seen = view_ceiling_m(top[:2], T_out_camera, camera, radius_m, min_depth_m)
+        seen = view_ceiling_m(top[:2], T_out_camera, limits)
         # no view's stretch of that vertical (its top seen, yet off every view by the
         # poses): nothing to judge it by but the filters' limit
         ceiling = pass_through_max_m if seen == float("-inf") else min(seen, pass_through_max_m)

@@ -22,6 +22,7 @@ from fieldapp.io.session import Capture, Session
 from fieldapp.recon.arrival import BaseMoves, move_coarse
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.coverage import (
+    ViewLimits,
     cut_tops,
     grouped_warnings,
     one_sided,
@@ -510,10 +511,10 @@ def coverage(
         for p in plants
         if p.id not in flagged
     }
-    limits = (camera, crop.radius_m, crop.min_depth_m)
-    cautions += one_sided(centres, planned, read, *limits).items()
+    limits = ViewLimits(camera, crop.radius_m, crop.min_depth_m)
+    cautions += one_sided(centres, planned, read, limits).items()
     tops = {p.id: p.cloud.points[int(np.argmax(p.cloud.points[:, 2]))] for p in plants}
-    cautions += cut_tops(tops, read, *limits, pass_through_max_m).items()
+    cautions += cut_tops(tops, read, limits, pass_through_max_m).items()
     notes: dict[int, tuple[str, ...]] = {}
     for plant, caution in sorted(cautions, key=lambda item: item[0]):
         notes[plant] = (*notes.get(plant, ()), caution.note())

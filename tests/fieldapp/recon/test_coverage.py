@@ -15,6 +15,7 @@ from devices.geometry import Matrix4
 from fieldapp.io.calibration import DepthCamera
 from fieldapp.io.session import load_session
 from fieldapp.recon.coverage import (
+    ViewLimits,
     cut_tops,
     grouped_warnings,
     one_sided,
@@ -123,6 +124,8 @@ def test_a_mission_of_two_stations_names_every_plant_another_station_stands_near
 
 
 KINECT = DepthCamera(width=512, height=424, fx=365.18, fy=364.49, cx=256.0, cy=209.59)
+PAPER = ViewLimits(KINECT, 2.25, 0.5)
+"""The paper's crop (2.25 m) and the sensor's near limit (0.5 m)."""
 
 
 def _looking_along_x(height_m: float, pitch_deg: float = 45.0) -> np.ndarray:
@@ -150,24 +153,23 @@ def _around(azimuths_deg: list[float], distance_m: float = 1.2) -> np.ndarray:
 
 def test_the_unseen_arc_is_the_widest_gap_between_the_cameras_that_see_a_point() -> None:
     centre = np.array([0.0, 0.0, 0.15])
-    assert unseen_arc_deg(centre, _around([0, 90, 180, 270]), KINECT, 2.25, 0.5) == pytest.approx(
-        90
-    )
-    assert unseen_arc_deg(centre, _around([0, 90, 200]), KINECT, 2.25, 0.5) == pytest.approx(160)
-    assert unseen_arc_deg(centre, _around([30]), KINECT, 2.25, 0.5) == 360.0
+    assert unseen_arc_deg(centre, _around([0, 90, 180, 270]), PAPER) == pytest.approx(90)
+    assert unseen_arc_deg(centre, _around([0, 90, 200]), PAPER) == pytest.approx(160)
+    assert unseen_arc_deg(centre, _around([30]), PAPER) == 360.0
     # cameras that do not see it leave their side unseen: one beyond the 2.25 m crop, one
     # looking away, one so near that the point is under its image
     far, away, near = _around([0], 2.6), _around([90]), _around([180], 0.1)
     away[0, :3, :3] = away[0, :3, :3] @ np.diag([-1.0, 1.0, -1.0])  # turned round its axis
     seen = np.concatenate([far, away, near, _around([270])])
-    assert unseen_arc_deg(centre, seen, KINECT, 2.25, 0.5) == 360.0
-    assert unseen_arc_deg(centre, seen, KINECT, 3.0, 0.5) == pytest.approx(270)  # far: seen
+    assert unseen_arc_deg(centre, seen, PAPER) == 360.0
+    wider = ViewLimits(KINECT, 3.0, 0.5)  # the far one sees it
+    assert unseen_arc_deg(centre, seen, wider) == pytest.approx(270)
 
 
 def test_a_plant_the_views_read_saw_from_one_side_only_is_named_when_the_plan_would_not() -> None:
     planned = _around([0, 90, 180, 270])
     centres = {1: np.array([0.0, 0.0, 0.15])}
-    one_side = one_sided(centres, planned, planned[:2], KINECT, 2.25, 0.5)
+    one_side = one_sided(centres, planned, planned[:2], PAPER)
     assert grouped_warnings(one_side.items(), 8) == [
         "plants seen from one side only, their traits may be low: the views read leave more "
         "than half a turn round each unseen, the planned views would not: plant 1 (unseen over "
@@ -176,8 +178,8 @@ def test_a_plant_the_views_read_saw_from_one_side_only_is_named_when_the_plan_wo
     assert one_side[1].note() == (
         "seen from one side only, traits may be low (unseen over 270 deg round it, 90 as planned)"
     )
-    assert one_sided(centres, planned, planned[[0, 2]], KINECT, 2.25, 0.5) == {}  # both sides
-    assert one_sided(centres, planned[:2], planned[:2], KINECT, 2.25, 0.5) == {}  # as planned
+    assert one_sided(centres, planned, planned[[0, 2]], PAPER) == {}  # both sides
+    assert one_sided(centres, planned[:2], planned[:2], PAPER) == {}  # as planned
 
 
 def test_the_plant_beside_the_only_station_read_is_named_seen_from_one_side(
@@ -207,19 +209,19 @@ def test_the_ceiling_above_a_spot_is_where_the_view_stops_seeing_up_its_vertical
     camera = _looking_along_x(1.3)
     above_axis = np.degrees(np.arctan(KINECT.cy / KINECT.fy))  # the top edge: 29.9 degrees
     edge = 1.3 - 1.0 * np.tan(np.radians(45.0 - above_axis))  # a metre ahead: 1.03 m
-    assert view_ceiling_m(np.array([1.0, 0.0]), camera, KINECT, 2.25, 0.5) == pytest.approx(edge)
+    assert view_ceiling_m(np.array([1.0, 0.0]), camera, PAPER) == pytest.approx(edge)
     # 20 cm ahead the vertical comes within 0.5 m of the camera first (depth along its axis)
     near = 1.3 + (0.2 * np.cos(np.radians(45.0)) - 0.5) / np.sin(np.radians(45.0))
-    assert view_ceiling_m(np.array([0.2, 0.0]), camera, KINECT, 2.25, 0.5) == pytest.approx(near)
+    assert view_ceiling_m(np.array([0.2, 0.0]), camera, PAPER) == pytest.approx(near)
     # 2.2 m ahead the top edge (0.71 m) lies beyond the 2.25 m crop: nothing up there is kept
-    assert view_ceiling_m(np.array([2.2, 0.0]), camera, KINECT, 2.25, 0.5) == float("-inf")
-    assert view_ceiling_m(np.array([2.2, 0.0]), camera, KINECT, 2.5, 0.5) == pytest.approx(
-        1.3 - 2.2 * np.tan(np.radians(45.0 - above_axis))
-    )
-    assert view_ceiling_m(np.array([-1.0, 0.0]), camera, KINECT, 2.25, 0.5) == float("-inf")
-    assert view_ceiling_m(np.array([1.0, 1.5]), camera, KINECT, 2.25, 0.5) == float("-inf")
+    assert view_ceiling_m(np.array([2.2, 0.0]), camera, PAPER) == float("-inf")
+    assert view_ceiling_m(
+        np.array([2.2, 0.0]), camera, ViewLimits(KINECT, 2.5, 0.5)
+    ) == pytest.approx(1.3 - 2.2 * np.tan(np.radians(45.0 - above_axis)))
+    assert view_ceiling_m(np.array([-1.0, 0.0]), camera, PAPER) == float("-inf")
+    assert view_ceiling_m(np.array([1.0, 1.5]), camera, PAPER) == float("-inf")
     two = np.concatenate([camera, _looking_along_x(1.6)])  # the higher one sees higher
-    assert view_ceiling_m(np.array([1.0, 0.0]), two, KINECT, 2.25, 0.5) == pytest.approx(edge + 0.3)
+    assert view_ceiling_m(np.array([1.0, 0.0]), two, PAPER) == pytest.approx(edge + 0.3)
 
 
 def test_a_vertical_near_the_images_side_leaves_it_through_that_side() -> None:
@@ -231,20 +233,20 @@ def test_a_vertical_near_the_images_side_leaves_it_through_that_side() -> None:
     cos = np.cos(np.radians(45.0))
     # u >= 0 <=> depth (cos 45 * (2.3 - z)) >= fx / cx * 0.8
     side = 2.3 - KINECT.fx / KINECT.cx * 0.8 / cos
-    assert view_ceiling_m(np.array([1.0, 0.8]), camera, KINECT, 2.25, 0.5) == pytest.approx(side)
+    assert view_ceiling_m(np.array([1.0, 0.8]), camera, PAPER) == pytest.approx(side)
     assert 0.6 < side < 1.0
 
 
 def test_a_plant_whose_top_is_at_the_ceiling_may_be_taller_than_measured() -> None:
     camera = _looking_along_x(1.3)
     tops = {1: np.array([1.0, 0.0, 1.025]), 2: np.array([1.0, 0.0, 0.95])}
-    assert cut_tops_warning(tops, camera, KINECT, 2.25, 0.5, 1.5) == [
+    assert cut_tops_warning(tops, camera, PAPER, 1.5) == [
         "plants that may be taller than measured: their highest point lies where the views "
         "stop seeing: plant 1 (top 102 cm, views reach 103 cm)"
     ]
     high = _looking_along_x(3.0)  # sees far above the filters' limit there
     tops = {3: np.array([1.0, 0.0, 1.49]), 4: np.array([1.0, 0.0, 1.2])}
-    assert cut_tops_warning(tops, high, KINECT, 2.25, 0.5, 1.5) == [
+    assert cut_tops_warning(tops, high, PAPER, 1.5) == [
         "plants that may be taller than measured: their highest point lies where the views "
         "stop seeing: plant 3 (top 149 cm, views reach 150 cm)"
     ]
