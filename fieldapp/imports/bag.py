@@ -108,8 +108,24 @@ class _Playback:
         self._composer = rs.processing_block(self._compose)
         self._composed = rs.frame_queue(2, keep_frames=True)
         self._composer.start(self._composed)
+        self._last_ms: dict[Any, float] = {}
+        self._start()
+
+    def _start(self) -> None:
+        """Start every sensor, then play.
+
+        The playback starts reading the file as soon as its first sensor starts, and drops the
+        frames of a sensor not yet started ("stream is no longer active"): started one by one,
+        depth could be read alone for a while and its colour partners lost (a loaded CI machine
+        lost six of eight). Paused first, it reads nothing for anyone until every sensor is
+        started and it is resumed from the beginning of the file."""
+        self.playback.pause()
         for sensor in self.opened:
-            sensor.start(self._take)
+            self._start_sensor(sensor)
+        self.playback.resume()
+
+    def _start_sensor(self, sensor: Any) -> None:
+        sensor.start(self._take)
 
     def _take(self, frame: Any) -> None:
         """The SDK's callback: queue ``frame``, waiting while the reader is behind (in non-real
@@ -137,10 +153,13 @@ class _Playback:
                     return
                 continue
             if not self.has_color:
-                if frame.get_profile().stream_type() == self.rs.stream.depth:
+                kind = frame.get_profile().stream_type()
+                if kind == self.rs.stream.depth and not self._repeated(kind, frame):
                     yield BagFrame(_depth_m(frame.as_depth_frame()), None)
                 continue
             kind = frame.get_profile().stream_type()
+            if self._repeated(kind, frame):
+                continue
             (depths if kind == self.rs.stream.depth else colours).append(frame)
             while depths and colours:
                 depth, colour = depths[0], colours[0]
@@ -151,6 +170,15 @@ class _Playback:
                 else:  # the older of the two has no partner: the other stream moved on
                     (depths if dt_ms < 0 else colours).popleft()
                     self.pairs_dropped += 1
+
+    def _repeated(self, kind: Any, frame: Any) -> bool:
+        """Whether ``frame`` is not later than the last of its stream: the one frame read while
+        paused can reach its sensor's callback after the resume, which reads it again."""
+        stamp = frame.get_timestamp()
+        if kind in self._last_ms and stamp <= self._last_ms[kind]:
+            return True
+        self._last_ms[kind] = stamp
+        return False
 
     def _aligned(self, depth: Any, colour: Any) -> BagFrame:
         assert self.align is not None

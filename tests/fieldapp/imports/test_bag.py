@@ -3,6 +3,8 @@ back through the SDK, into sessions that ``verify`` accepts."""
 
 from __future__ import annotations
 
+import queue
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -175,3 +177,31 @@ def test_what_is_not_a_recording_is_named(tmp_path):
         import_bag(path, tmp_path / "out", BagOptions())
     with pytest.raises(FieldappError, match="no such recording"):
         import_bag(tmp_path / "missing.bag", tmp_path / "out", BagOptions())
+
+
+def test_a_sensor_started_late_loses_none_of_its_frames(recordings, tmp_path, monkeypatch):
+    """The SDK plays the file as soon as the first sensor starts and drops the frames of a
+    sensor not yet started. Here the reader is slow (room for two frames) and the colour
+    sensor starts only once depth frames have filled that room (or a while has passed): every
+    pair must still be imported, in order, and none twice."""
+    from fieldapp.imports import bag
+
+    started = bag._Playback._start_sensor
+
+    def start_then_let_it_play(self, sensor):
+        if sensor is self.opened[0]:
+            self.queue = queue.Queue(maxsize=2)
+        started(self, sensor)
+        if len(self.opened) > 1 and sensor is self.opened[0]:
+            for _ in range(50):  # a bounded poll for the depth frames, not a speed check
+                if self.queue.full():
+                    break
+                threading.Event().wait(0.02)
+
+    monkeypatch.setattr(bag._Playback, "_start_sensor", start_then_let_it_play)
+    result = import_bag(recordings["color"], tmp_path / "session", BagOptions())
+    assert not any("no partner" in line for line in result.lines), result.lines
+    assert result.captures == FRAMES and result.depth_only == 0
+    session = load_session(tmp_path / "session")
+    grey = [int(session.read_capture(c).color[0, 0, 0]) for c in session.captures]
+    assert grey == [10 * i for i in range(FRAMES)]
