@@ -32,6 +32,8 @@ SHEET_THICKNESS = 0.06
 SHEET_RADIUS_M = 0.035
 SHEET_MIN_ANGLE_DEG = 35.0
 SHEET_TOLERANCE_M = 0.005
+BIN_BLOCK = 16_384
+"""Voxels whose normals are binned to the 200 directions at a time (:func:`crossing_sheets`)."""
 
 _HALF_NEIGHBOURHOOD = np.array(
     [offset for offset in itertools.product((-1, 0, 1), repeat=3) if offset > (0, 0, 0)],
@@ -226,11 +228,13 @@ def crossing_sheets(
     k, directions = len(candidates), _directions(200)
     close, apart = np.cos(np.radians(12.0)), np.cos(np.radians(min_angle_deg))
     half = np.cos(np.radians(min_angle_deg / 2.0))
-    # each thin voxel's normal binned to its nearest direction, once; a direction's votes are
-    # the normals binned within 12 degrees of it
-    bins = np.argmax(np.abs(normals[thin] @ directions.T), axis=1)
+    # each neighbouring thin voxel's normal binned to its nearest direction, once; a
+    # direction's votes are the normals binned within 12 degrees of it
     binned = np.zeros(len(normals), dtype=np.intp)
-    binned[thin] = bins
+    used = np.unique(neighbour)
+    for start in range(0, len(used), BIN_BLOCK):  # (block, 200): not (every thin voxel, 200)
+        rows = used[start : start + BIN_BLOCK]
+        binned[rows] = np.argmax(np.abs(normals[rows] @ directions.T), axis=1)
     counted = np.bincount(
         owner * len(directions) + binned[neighbour], minlength=k * len(directions)
     )
