@@ -34,6 +34,9 @@ SHEET_MIN_ANGLE_DEG = 35.0
 SHEET_TOLERANCE_M = 0.005
 BIN_BLOCK = 16_384
 """Voxels whose normals are binned to the 200 directions at a time (:func:`crossing_sheets`)."""
+EDGE_BLOCK = 262_144
+"""Edges of the voxel graph whose (voxel, sheet) state pairs are costed at a time
+(:func:`sheet_graph`)."""
 
 _HALF_NEIGHBOURHOOD = np.array(
     [offset for offset in itertools.product((-1, 0, 1), repeat=3) if offset > (0, 0, 0)],
@@ -298,29 +301,38 @@ def sheet_graph(
     count = np.bincount(state_voxel, minlength=voxels)
     first = np.concatenate([[0], np.cumsum(count)[:-1]])
     edges = graph.edges.tocoo()
-    pairs = count[edges.row] * count[edges.col]
-    edge = np.repeat(np.arange(len(edges.row)), pairs)
-    k = np.arange(len(edge)) - np.repeat(np.cumsum(pairs) - pairs, pairs)
-    across = count[edges.col][edge]
-    row = first[edges.row][edge] + k // across
-    col = first[edges.col][edge] + k % across
-    cosine = np.abs(np.sum(state_normal[row] * state_normal[col], axis=1))
-    cost = edges.data[edge] + bend_penalty_m * (1.0 - np.minimum(cosine, 1.0))
-    # a step out of a crossing's sheet pays as a bend by its angle to the sheet's plane: two
-    # sheets stacked 1-3 cm apart are no X, and stepping from one to the other leaves both
-    step = graph.centres_m[edges.col][edge] - graph.centres_m[edges.row][edge]
-    step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
-    out = np.zeros(len(row))
-    for end in (row, col):
-        on = split[state_voxel[end]]
-        sine = np.minimum(np.abs(np.sum(step[on] * state_normal[end[on]], axis=1)), 1.0)
-        out[on] = np.maximum(out[on], 1.0 - np.sqrt(1.0 - sine**2))
-    cost += bend_penalty_m * out
+    pairs = count[edges.row] * count[edges.col]  # one state pair per edge but at crossings
+    starts = np.cumsum(pairs) - pairs
+    total = int(pairs.sum())
+    row, col = np.empty(total, dtype=np.intp), np.empty(total, dtype=np.intp)
+    cost, bend = np.empty(total), np.empty(total)
+    for lo in range(0, len(pairs), EDGE_BLOCK):  # a block of edges at a time: (E, 3) arrays
+        hi = min(lo + EDGE_BLOCK, len(pairs))  # of a big plot's millions of edges were 0.5 GB
+        block = pairs[lo:hi]
+        at = slice(int(starts[lo]), int(starts[lo] + block.sum()))
+        edge = np.repeat(np.arange(lo, hi), block)
+        k = np.arange(len(edge)) - np.repeat(starts[lo:hi] - starts[lo], block)
+        across = count[edges.col[edge]]
+        r = first[edges.row[edge]] + k // across
+        c = first[edges.col[edge]] + k % across
+        cosine = np.abs(np.sum(state_normal[r] * state_normal[c], axis=1))
+        length = edges.data[edge]
+        summed = length + bend_penalty_m * (1.0 - np.minimum(cosine, 1.0))
+        # a step out of a crossing's sheet pays as a bend by its angle to the sheet's plane:
+        # two sheets stacked 1-3 cm apart are no X, and stepping from one to the other leaves
+        # both
+        step = graph.centres_m[edges.col[edge]] - graph.centres_m[edges.row[edge]]
+        step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
+        out = np.zeros(len(r))
+        for end in (r, c):
+            on = split[state_voxel[end]]
+            sine = np.minimum(np.abs(np.sum(step[on] * state_normal[end[on]], axis=1)), 1.0)
+            out[on] = np.maximum(out[on], 1.0 - np.sqrt(1.0 - sine**2))
+        summed += bend_penalty_m * out
+        row[at], col[at], cost[at], bend[at] = r, c, summed, summed - length
     states = len(state_voxel)
-    weighted, bend = _same_layout(
-        cost, cost - edges.data[edge], row, col, (states, states), keep_bend
-    )
-    return weighted, state_voxel, bend
+    weighted, bend_edges = _same_layout(cost, bend, row, col, (states, states), keep_bend)
+    return weighted, state_voxel, bend_edges
 
 
 def assign_to_stems(

@@ -69,3 +69,20 @@ def test_the_sheets_are_the_same_whatever_the_binning_block(monkeypatch) -> None
     assert len(whole.voxel) >= 5
     np.testing.assert_array_equal(blocked.voxel, whole.voxel)
     np.testing.assert_array_equal(blocked.normal, whole.normal)
+
+
+def test_the_sheet_graph_is_the_same_whatever_the_edge_block(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The (voxel, sheet) states' edges are costed a block of edges at a time: blocks of any
+    size (here splitting the crossings' state pairs across blocks) give the same graph."""
+    from fieldapp.recon import geodesic
+
+    a, b = x_pair(np.random.default_rng(2))
+    graph = voxel_graph(np.concatenate([a, b]), 0.01)
+    sheets = crossing_sheets(graph)
+    assert len(sheets.voxel) >= 5
+    whole, voxels, bend = geodesic.sheet_graph(graph, 1.0, sheets, keep_bend=True)
+    monkeypatch.setattr(geodesic, "EDGE_BLOCK", 5)
+    blocked, blocked_voxels, blocked_bend = geodesic.sheet_graph(graph, 1.0, sheets, keep_bend=True)
+    np.testing.assert_array_equal(blocked_voxels, voxels)
+    for x, y in ((blocked, whole), (blocked_bend, bend)):
+        assert (x != y).nnz == 0 and np.array_equal(x.indptr, y.indptr)
