@@ -415,9 +415,14 @@ def _joined(
     """Every station's plants in the plot's frame, averaged in ``voxel_m`` voxels, and the
     soil samples ((M, 3) float64). Its own function so that the stations' moved copies are
     freed before the outlier removal's neighbour search, the pipeline's largest."""
-    plants = Cloud.concatenate(
-        [f.plants.transformed(registrations[s].T_correction) for s, f in filtered.items()]
-    )
+    total = sum(len(f.plants) for f in filtered.values())
+    plants = Cloud(np.empty((total, 3)), np.empty((total, 3), dtype=np.uint8))
+    at = 0
+    for station, f in filtered.items():  # moved into place: no second copy of the plot
+        rows = slice(at, at + len(f.plants))
+        plants.points[rows] = transform_points(registrations[station].T_correction, f.plants.points)
+        plants.colors[rows] = f.plants.colors
+        at = rows.stop
     soil = [transform_points(registrations[s].T_correction, f.soil_m) for s, f in filtered.items()]
     return voxel_mean(plants, voxel_m), np.concatenate(soil)
 
