@@ -108,7 +108,7 @@ class _Playback:
         self._composer = rs.processing_block(self._compose)
         self._composed = rs.frame_queue(2, keep_frames=True)
         self._composer.start(self._composed)
-        self._last_ms: dict[Any, float] = {}
+        self._last: dict[Any, tuple[int, float]] = {}
         self._start()
 
     def _start(self) -> None:
@@ -172,12 +172,14 @@ class _Playback:
                     self.pairs_dropped += 1
 
     def _repeated(self, kind: Any, frame: Any) -> bool:
-        """Whether ``frame`` is not later than the last of its stream: the one frame read while
-        paused can reach its sensor's callback after the resume, which reads it again."""
-        stamp = frame.get_timestamp()
-        if kind in self._last_ms and stamp <= self._last_ms[kind]:
+        """Whether ``frame`` is the last frame of its stream again (same number and time): the
+        one frame read while paused can reach its sensor's callback after the resume, which
+        reads it again. Only that exact repeat: a recording whose clock starts over keeps its
+        later frames."""
+        stamp = (frame.get_frame_number(), frame.get_timestamp())
+        if self._last.get(kind) == stamp:
             return True
-        self._last_ms[kind] = stamp
+        self._last[kind] = stamp
         return False
 
     def _aligned(self, depth: Any, colour: Any) -> BagFrame:

@@ -205,3 +205,25 @@ def test_a_sensor_started_late_loses_none_of_its_frames(recordings, tmp_path, mo
     session = load_session(tmp_path / "session")
     grey = [int(session.read_capture(c).color[0, 0, 0]) for c in session.captures]
     assert grey == [10 * i for i in range(FRAMES)]
+
+
+class _Stamped:
+    def __init__(self, number: int, stamp_ms: float) -> None:
+        self.number, self.stamp_ms = number, stamp_ms
+
+    def get_frame_number(self) -> int:
+        return self.number
+
+    def get_timestamp(self) -> float:
+        return self.stamp_ms
+
+
+def test_only_a_frame_delivered_twice_is_skipped_not_a_clock_that_starts_over():
+    from fieldapp.imports.bag import _Playback
+
+    playback = object.__new__(_Playback)  # the bookkeeping alone, no SDK
+    playback._last = {}
+    frames = [(0, 0.0), (0, 0.0), (1, 33.3), (2, 66.6), (0, 0.0), (1, 33.3)]
+    kept = [f for f in frames if not playback._repeated("depth", _Stamped(*f))]
+    assert kept == [(0, 0.0), (1, 33.3), (2, 66.6), (0, 0.0), (1, 33.3)]
+    assert not playback._repeated("color", _Stamped(0, 0.0))  # each stream on its own
