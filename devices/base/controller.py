@@ -155,6 +155,9 @@ class BaseController:
 
     def _goto(self, args: dict[str, Any]) -> Reply | dict[str, Any]:
         goal = goal_from_args(args)
+        problem = self._bounds_problem(goal.pose)  # a goal off the map is so in any state
+        if problem:
+            return Reply.failure(None, ErrorCode.OUT_OF_BOUNDS, problem)
         if self._latched:
             return Reply.failure(
                 None, ErrorCode.STOPPED, f"stop latch set ({self._error}): send reset, then goto"
@@ -163,9 +166,6 @@ class BaseController:
             return Reply.failure(
                 None, ErrorCode.BUSY, f"goal {self._goal_id} is active: cancel it first"
             )
-        problem = self._bounds_problem(goal.pose)
-        if problem:
-            return Reply.failure(None, ErrorCode.OUT_OF_BOUNDS, problem)
         try:
             self.backend.begin_goal(goal)
         except GoalRefused as error:

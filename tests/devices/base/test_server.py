@@ -341,6 +341,9 @@ def test_command_semantics(sim: SimulatedBase, make_client: MakeClient) -> None:
     with pytest.raises(BaseRequestRejected) as busy:
         client.goto("b", Pose(1.0, 1.0, 0.0), wait=False)
     assert busy.value.code == "busy"
+    with pytest.raises(BaseRequestRejected) as off_map:  # off the map whatever the base does
+        client.goto("b", Pose(0.0, 9.0, 0.0), wait=False)
+    assert off_map.value.code == "out_of_bounds"
     assert client.cancel("not-a") is False
     assert client.cancel("a") is True
     here = sim.pose
