@@ -66,11 +66,16 @@ def radius_outliers(
 
 
 def voxel_keys(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.int64]:
-    """(N,) int64: one key per voxel of edge ``voxel_m`` (21 bits per axis)."""
-    cells = np.floor(points / voxel_m).astype(np.int64) + (1 << 20)
-    if len(cells) and (cells.min() < 0 or cells.max() >= (1 << 21)):
-        raise ValueError(f"points span more than 2^21 voxels of {voxel_m} m")
-    return (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]
+    """(N,) int64: one key per voxel of edge ``voxel_m`` (21 bits per axis). An axis at a
+    time: whole, the (N, 3) float and integer cells of a big plot's fused cloud (6 M points)
+    were 0.4 GB of temporaries."""
+    keys = np.zeros(len(points), dtype=np.int64)
+    for axis, shift in ((0, 42), (1, 21), (2, 0)):
+        cells = np.floor(points[:, axis] / voxel_m).astype(np.int64) + (1 << 20)
+        if len(cells) and (cells.min() < 0 or cells.max() >= (1 << 21)):
+            raise ValueError(f"points span more than 2^21 voxels of {voxel_m} m")
+        keys |= cells << shift
+    return keys
 
 
 def voxel_mean(cloud: Cloud, voxel_m: float) -> Cloud:

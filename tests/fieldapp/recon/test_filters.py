@@ -239,3 +239,17 @@ def test_the_openmp_lookup_says_what_it_found(
         assert messages(threads) == (expected or [none.format(folder)])
     monkeypatch.setattr(pykdtree, "__file__", "/nowhere/pykdtree/__init__.py")
     assert messages(2) == [none.format(Path("/nowhere/pykdtree.libs"))]
+
+
+def test_voxel_keys_are_one_per_voxel_and_refuse_a_span_they_cannot_pack() -> None:
+    from fieldapp.recon.filters import voxel_keys
+
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-3.0, 3.0, (5000, 3))
+    keys = voxel_keys(points, 0.01)
+    cells = np.floor(points / 0.01).astype(np.int64)
+    _, by_cell = np.unique(cells, axis=0, return_inverse=True)
+    _, by_key = np.unique(keys, return_inverse=True)
+    assert np.array_equal(by_cell.ravel(), by_key.ravel())  # the same partition
+    with pytest.raises(ValueError, match="more than 2"):
+        voxel_keys(np.array([[0.0, 0.0, 0.0], [0.0, 30_000.0, 0.0]]), 0.01)
