@@ -29,9 +29,6 @@ from devices.camera.frames import Frame, Intrinsics
 
 log = logging.getLogger(__name__)
 
-PLAYBACK_POLL_S = 0.1
-"""A recording is asked whether it has ended this often while no frame set comes."""
-
 
 def load_binding() -> Any:
     """The ``pyrealsense2`` module, or :class:`CameraUnavailable` saying how to install it."""
@@ -62,7 +59,6 @@ class RealSenseCamera(DepthCamera):
         self._pipeline: Any = None
         self._align: Any = None
         self._playback: Any = None
-        self._played = False  # a frame set of the recording was read
         self._intrinsics: Intrinsics | None = None
         self._model = "RealSense"
 
@@ -132,17 +128,13 @@ class RealSenseCamera(DepthCamera):
         rs = self._rs
         deadline = time.monotonic() + timeout_s
         while (remaining := deadline - time.monotonic()) > 0:
-            wait_s = remaining if self._playback is None else min(remaining, PLAYBACK_POLL_S)
-            ok, frames = self._pipeline.try_wait_for_frames(max(1, int(wait_s * 1000)))
+            ok, frames = self._pipeline.try_wait_for_frames(max(1, int(remaining * 1000)))
             if not ok:
-                if self._ended(rs):
-                    break  # a recording that has ended says so now, not after the timeout
-                continue
+                break
             stamp = time.monotonic()
             aligned = self._align.process(frames)
             depth, color = aligned.get_depth_frame(), aligned.get_color_frame()
             if depth and color:
-                self._played = True
                 return self._frame(rs, depth, color, stamp)
         raise self._no_frame(rs, timeout_s)
 
@@ -158,14 +150,6 @@ class RealSenseCamera(DepthCamera):
             "device_timestamp_ms": float(depth.get_timestamp()),
         }
         return Frame(depth_m, rgb, None, stamp, meta)
-
-    def _ended(self, rs: Any) -> bool:
-        """Whether this is a recording played to its end (every frame set already read). Not
-        before its first frame set: the SDK says "stopped" too until its reader has started."""
-        if self._playback is None:
-            return True  # a live camera: the wait was the whole timeout
-        stopped = self._playback.current_status() == rs.playback_status.stopped
-        return bool(stopped and self._played)
 
     def _no_frame(self, rs: Any, timeout_s: float) -> Exception:
         """Why no frame came: the recording ended, the device is gone, or a timeout."""
