@@ -152,13 +152,12 @@ class _Playback:
                     self.pairs_dropped += len(depths) + len(colours) if self.has_color else 0
                     return
                 continue
-            if not self.has_color:
-                kind = frame.get_profile().stream_type()
-                if kind == self.rs.stream.depth and not self._repeated(kind, frame):
-                    yield BagFrame(_depth_m(frame.as_depth_frame()), None)
-                continue
             kind = frame.get_profile().stream_type()
             if self._repeated(kind, frame):
+                continue
+            if not self.has_color:
+                if kind == self.rs.stream.depth:
+                    yield BagFrame(_depth_m(frame.as_depth_frame()), None)
                 continue
             (depths if kind == self.rs.stream.depth else colours).append(frame)
             while depths and colours:
