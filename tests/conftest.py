@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
+import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -29,6 +32,41 @@ def shared_data() -> Path:
             pytest.fail(f"{message}; CI=true requires it")
         pytest.skip(message)
     return folder
+
+
+OnceBuilder = Callable[[str, Callable[[Path], None]], Path]
+
+
+@pytest.fixture(scope="session")
+def built_once(tmp_path_factory: pytest.TempPathFactory) -> OnceBuilder:
+    """``built_once(name, build)``: the folder ``name``, filled by ``build(folder)`` once per
+    test run and shared by every pytest-xdist worker.
+
+    ``make test`` spreads the files over two workers, and a session fixture is built once per
+    worker: the batch tests' twelve sessions and their reconstructions (30 s) were built twice.
+    The first worker to ask builds the folder under a lock in the run's temporary directory;
+    the other waits for it and reads it. Fixtures that use it must only read the folder. A
+    build interrupted half-way (a worker killed) is built again from scratch.
+    """
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+
+    def build_once(name: str, build: Callable[[Path], None]) -> Path:
+        if worker is None:  # one process: nothing to share
+            folder = tmp_path_factory.mktemp(name)
+            build(folder)
+            return folder
+        run_root = tmp_path_factory.getbasetemp().parent  # this run's, shared by its workers
+        folder, done = run_root / f"once-{name}", run_root / f"once-{name}.done"
+        with (run_root / f"once-{name}.lock").open("w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+            if not done.exists():
+                shutil.rmtree(folder, ignore_errors=True)
+                folder.mkdir()
+                build(folder)
+                done.touch()
+        return folder
+
+    return build_once
 
 
 @pytest.fixture(scope="session")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,6 +17,9 @@ from fieldapp.cli import main
 from fieldapp.io.session import load_session
 
 SEEDS = range(12)
+
+OnceBuilder = Callable[[str, Callable[[Path], None]], Path]
+"""The root conftest's ``built_once`` fixture."""
 
 
 def stations(seed: int) -> str:
@@ -47,30 +51,35 @@ class Simulated:
 
 
 @pytest.fixture(scope="session")
-def simulated(tmp_path_factory: pytest.TempPathFactory) -> Simulated:
-    root = tmp_path_factory.mktemp("batch")
-    folders = []
-    for seed in SEEDS:
-        folder = root / "sessions" / f"s{seed:02d}"
-        argv = ["simulate", "--out", str(folder), "--stations", stations(seed), "--views", "0-3"]
-        assert quietly([*argv, "--seed", str(seed)]) == 0
-        folders.append(folder)
-    return Simulated(folders, root / "no-settings.yaml")
+def simulated(built_once: OnceBuilder) -> Simulated:
+    """The twelve sessions, simulated once per run (every worker reads the same folders)."""
+
+    def build(root: Path) -> None:
+        for seed in SEEDS:
+            folder = root / f"s{seed:02d}"
+            argv = ["simulate", "--out", str(folder), "--stations", stations(seed), "--views"]
+            assert quietly([*argv, "0-3", "--seed", str(seed)]) == 0
+
+    root = built_once("batch-sessions", build)
+    folders = [root / f"s{seed:02d}" for seed in SEEDS]
+    return Simulated(folders, root.parent / "batch-no-settings.yaml")
 
 
 @pytest.fixture(scope="session")
-def sessions(simulated: Simulated, tmp_path_factory: pytest.TempPathFactory) -> Sessions:
+def sessions(simulated: Simulated, built_once: OnceBuilder) -> Sessions:
     """The simulated sessions, each reconstructed by ``fieldapp reconstruct`` in turn with
     the batch's settings: the defaults with one thread (with two, ICP's parallel sums vary in
     their last bits from run to run, and now and then a point lands in another voxel)."""
-    root, one_by_one = tmp_path_factory.mktemp("one-by-one"), {}
-    one_thread = root / "one-thread.yaml"
-    one_thread.write_text("reconstruction:\n  threads: 1\n", encoding="utf-8")
-    for folder in simulated.folders:
-        out = root / folder.name
-        argv = ["reconstruct", str(folder), "--out", str(out), "--quiet"]
-        assert quietly([*argv, "--settings", str(one_thread)]) == 0
-        one_by_one[load_session(folder).id] = out
+
+    def build(root: Path) -> None:
+        one_thread = root / "one-thread.yaml"
+        one_thread.write_text("reconstruction:\n  threads: 1\n", encoding="utf-8")
+        for folder in simulated.folders:
+            argv = ["reconstruct", str(folder), "--out", str(root / folder.name), "--quiet"]
+            assert quietly([*argv, "--settings", str(one_thread)]) == 0
+
+    root = built_once("batch-one-by-one", build)
+    one_by_one = {load_session(f).id: root / f.name for f in simulated.folders}
     return Sessions(simulated.folders, one_by_one, simulated.no_settings)
 
 
