@@ -13,6 +13,9 @@ For each plant with ambiguous points every leaf
 centres of the 1 cm level sets of the geodesic distance from its base, and the width of each
 section, up to where the leaf meets another plant (its sections touch another plant's points or
 are ambiguous) or its width jumps (the neighbour holds one side of it, or another leaf joins).
+Where another leaf lying over it joins it (the organ step keeps the two one branch), the
+trace would end there, short of any contact: the branch is split at its fork and each arm
+traced on its own (:func:`_arms_of`), an arm followed only when traced :data:`MIN_ARM_M`.
 From there the ribbon is continued in 1 cm steps (:func:`follow`) along the parabola fitted (in
 arc length) to the last :data:`FIT_M` of its midrib, its width following the taper fitted there;
 each step takes the points inside it (across the ribbon within its half width, off its plane
@@ -28,6 +31,7 @@ the one that reached it nearer to where its leaf was seen whole.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,6 +69,11 @@ MAX_PATCHY_M = 0.2
 (at most :data:`MAX_PATCHY_M`) only when a filled step follows it."""
 MAX_SHIFT = 0.25
 """A step moves the ribbon across by at most this share of its half width."""
+MIN_ARM_M = FIT_M
+"""An arm is followed only when traced this far: a shorter trace cannot set its course."""
+ARM_INSIDE = 0.9
+"""An arm of a forked leaf: a leaf of the forks-split segmentation with this share of its
+points in the unsplit leaf."""
 MAX_GAP_M = 0.03
 MIN_WIDTH_M = 0.01
 MAX_REACH_M = 0.5
@@ -105,9 +114,18 @@ class Ribbon:
         self.widths_m = np.append(self.widths_m, width_m)
 
 
+class Trace(NamedTuple):
+    """A leaf traced: its ``ribbon``, (M,) the points it ``held`` and whether it ``forked``
+    (its trace ends where it widens abruptly without meeting another plant)."""
+
+    ribbon: Ribbon
+    held: NDArray[np.bool_]
+    forked: bool
+
+
 def trace_leaf(
     points_m: NDArray[np.float64], touching: NDArray[np.bool_], axis_xy_m: NDArray[np.float64]
-) -> tuple[Ribbon, NDArray[np.bool_]] | None:
+) -> Trace | None:
     """The ribbon of a leaf's points (M, 3) from its base (the points nearest the stem at
     ``axis_xy_m`` (2,), plan view) up to where it meets another plant (``touching`` (M,): near
     another plant's points or ambiguous) or its width jumps, and (M,) which points the leaf
@@ -136,7 +154,9 @@ def trace_leaf(
     tangents = tangents - centres[np.maximum(np.arange(len(parts)) - 1, 0)]
     counts = np.array([len(part) for part in parts], dtype=np.intp)
     widths = section_widths_m(np.concatenate(parts), counts, tangents)
-    first = _first_contact(widths, np.array([share for _, share, _ in kept]))
+    shares = np.array([share for _, share, _ in kept])
+    first = _first_contact(widths, shares)
+    forked = _forks_at(widths, shares, first)
     if first < 4 or float(np.median(widths[first - 4 : first])) > MAX_WIDTH_M:
         return None
     centres, widths = centres[:first], widths[:first]
@@ -146,18 +166,36 @@ def trace_leaf(
     normal = np.linalg.eigh(spread.T @ spread)[1][:, 0]
     end_level = kept[first][2] if first < len(kept) else levels.max() + 1
     held = levels < end_level - round(FIT_M / LEVEL_M)
-    return Ribbon(centres, arc, widths, normal), held
+    return Trace(Ribbon(centres, arc, widths, normal), held, forked)
 
 
 def _first_contact(widths_m: NDArray[np.float64], touching_share: NDArray[np.float64]) -> int:
     """Index of the first section (from :data:`MIN_CLEAN_M` on) that meets another plant or
     narrows or widens abruptly (:data:`NARROWING`); the number of sections when none does."""
     for i in range(round(MIN_CLEAN_M / LEVEL_M), len(widths_m)):
-        before = float(np.median(widths_m[max(i - 4, 0) : i]))
-        abrupt = not NARROWING * before <= widths_m[i] <= before / NARROWING
-        if touching_share[i] > CONTACT_SHARE or abrupt:
+        if touching_share[i] > CONTACT_SHARE or _abrupt(widths_m, i):
             return i
     return len(widths_m)
+
+
+def _abrupt(widths_m: NDArray[np.float64], i: int) -> bool:
+    """Whether section ``i`` is narrower than :data:`NARROWING` times the median of the four
+    before it, or wider than that median over :data:`NARROWING`."""
+    before = _before(widths_m, i)
+    return not NARROWING * before <= widths_m[i] <= before / NARROWING
+
+
+def _forks_at(widths_m: NDArray[np.float64], touching_share: NDArray[np.float64], i: int) -> bool:
+    """Whether the trace's end at section ``i`` is a fork: the leaf widens there abruptly
+    without meeting another plant (another leaf lying over it joins it there)."""
+    if i >= len(widths_m) or touching_share[i] > CONTACT_SHARE:
+        return False
+    return bool(widths_m[i] > _before(widths_m, i) / NARROWING)
+
+
+def _before(widths_m: NDArray[np.float64], i: int) -> float:
+    """The median width of the four sections before section ``i``."""
+    return float(np.median(widths_m[max(i - 4, 0) : i]))
 
 
 def follow(
@@ -266,18 +304,46 @@ def _trace_plants(
     bounds = np.searchsorted(labels[order], [traced, traced + 1])
     for stem, start, stop in zip(traced, *bounds, strict=True):
         members = order[start:stop]
-        # Leaves lying over each other near the stem stay one branch here: split at their
-        # fork, the arms' traces gave touching seed 10's p07 a neighbour's leaf (+11.7 cm;
-        # width RMSE over 48 touching inputs 1.67 cm unsplit, 1.77 split; RECONSTRUCTION.md)
+        # Leaves lying over each other near the stem stay one branch here, split at their
+        # fork only where the branch's trace ends at it: split everywhere, a short arm's
+        # trace gave touching seed 10's p07 a neighbour's leaf (+11.7 cm; width RMSE over
+        # 48 touching inputs 1.67 cm unsplit, 1.77 split; RECONSTRUCTION.md)
         organs = segment_organs(points_m[members], feet_m[stem], split_forks=False)
         touching[members] |= _touching(points_m, tree, members, on_stems & (labels != stem))
+        arms: list[NDArray[np.intp]] | None = None
+        foot_xy = organs.axis.foot_m[:2]
         for leaf in organs.leaves:
-            chosen = members[leaf]
-            found = trace_leaf(points_m[chosen], touching[chosen], organs.axis.foot_m[:2])
-            if found is not None:
-                ribbons.append((int(stem), found[0]))
-                held[chosen[found[1]]] = True
+            traces = [(leaf, trace_leaf(points_m[members[leaf]], touching[members[leaf]], foot_xy))]
+            if traces[0][1] is not None and traces[0][1].forked:
+                # its trace stopped where two leaves lying over each other part: each arm is
+                # traced on its own (touching seed 94's p28: the arm that meets the neighbour)
+                if arms is None:
+                    arms = segment_organs(points_m[members], feet_m[stem]).leaves
+                split = [
+                    (arm, trace_leaf(points_m[members[arm]], touching[members[arm]], foot_xy))
+                    for arm in _arms_of(leaf, arms, len(members))
+                ]
+                reach = max((f.ribbon.arc_m[-1] for _, f in split if f is not None), default=0.0)
+                if reach > traces[0][1].ribbon.arc_m[-1]:  # the split did not cut it short
+                    traces = split
+            for part, found in traces:
+                if found is None:
+                    continue
+                held[members[part[found.held]]] = True
+                if len(traces) == 1 or found.ribbon.arc_m[-1] >= MIN_ARM_M:
+                    ribbons.append((int(stem), found.ribbon))
     return ribbons, held
+
+
+def _arms_of(
+    leaf: NDArray[np.intp], split: list[NDArray[np.intp]], size: int
+) -> list[NDArray[np.intp]]:
+    """The leaves of the forks-split segmentation ``split`` that lie within ``leaf`` (both
+    indices into the same plant's ``size`` points), when it split ``leaf`` into two or more."""
+    inside = np.zeros(size, dtype=bool)
+    inside[leaf] = True
+    arms = [arm for arm in split if len(arm) and inside[arm].mean() >= ARM_INSIDE]
+    return arms if len(arms) >= 2 else []
 
 
 def follow_leaves(

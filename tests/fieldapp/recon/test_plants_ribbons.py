@@ -5,14 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
+from fieldapp.recon.organs import segment_organs
 from fieldapp.recon.plants import search_plants
-from fieldapp.recon.ribbons import trace_leaf
+from fieldapp.recon.ribbons import _arms_of, _trace_plants, trace_leaf
 from fieldapp.recon.settings import PlantSettings, StemSettings
 
 from .synthetic import LEAF_RGB, colored
 from .test_plants_stems import NO_SOIL, own_share, width_m
-from .touching import crossing_pair, level_leaf, lying_pair
+from .touching import crossing_pair, level_leaf, lying_pair, stacked_plant
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
@@ -56,8 +58,8 @@ def test_a_traced_leaf_stops_where_it_meets_another_plant() -> None:
     points = level_leaf(rng, (0.0, 0.0), 0.0, 0.15, 0.75, 0.30, 6000)
     touching = points[:, 0] > 0.5  # another plant's points near the leaf from 50 cm on
     found = trace_leaf(points, touching, np.zeros(2))
-    assert found is not None
-    ribbon, held = found
+    assert found is not None and not found.forked
+    ribbon, held, _ = found
     assert 0.47 <= ribbon.centres_m[-1, 0] <= 0.5
     # held: the traced part up to 12 cm before its end (where the ribbon's fit rests)
     assert held[points[:, 0] < 0.33].all() and not held[points[:, 0] > 0.4].any()
@@ -74,3 +76,56 @@ def test_the_ribbons_also_keep_a_crossing_leaf_without_the_outward_cost() -> Non
     settings = PlantSettings(stems=StemSettings(inward_penalty=0.0, bend_penalty_m=0.0))
     search = search_plants(colored(np.concatenate([a, b]), LEAF_RGB), NO_SOIL, settings, 0.15)
     assert search.plants[0].traits.width_m == pytest.approx(width_m(a), abs=0.02)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_a_trace_stopped_where_another_leaf_joins_it_says_it_forked(seed: int) -> None:
+    plant = stacked_plant(np.random.default_rng(seed))
+    organs = segment_organs(plant, np.zeros(3), split_forks=False)
+    assert len(organs.leaves) == 1  # the two leaves are one branch to the organ step
+    leaf = plant[organs.leaves[0]]
+    found = trace_leaf(leaf, np.zeros(len(leaf), dtype=bool), np.zeros(2))
+    assert found is not None and found.forked
+    assert 0.15 <= found.ribbon.arc_m[-1] <= 0.35  # it stops where the second leaf joins
+
+
+def test_the_arms_of_a_forked_leaf_are_traced_each_on_its_own() -> None:
+    """Touching seed 94's p28: its leaf's trace stopped 14 cm out, where another leaf lying
+    over it joined it, 25 cm before the contact where the neighbour took its outer part;
+    traced along its own arm it reaches the contact and is followed on across it. The organ
+    step's split does not always cut a clean arm (then the branch's own trace is kept): the
+    ribbons never reach less far than the branch's trace, and mostly reach the leaf's end."""
+    reached = []
+    for seed in range(6):
+        plant = stacked_plant(np.random.default_rng(seed))
+        labels = np.zeros(len(plant), dtype=np.intp)
+        none = np.zeros(len(plant), dtype=bool)
+        feet = np.zeros((1, 3))
+        ribbons, _ = _trace_plants(plant, labels, none, feet, np.array([0]), cKDTree(plant))
+        longest = max((ribbon.arc_m[-1] for _, ribbon in ribbons), default=0.0)
+        organs = segment_organs(plant, feet[0], split_forks=False)
+        branch = organs.leaves[0]
+        alone = trace_leaf(plant[branch], none[branch], organs.axis.foot_m[:2])
+        assert alone is None or longest >= alone.ribbon.arc_m[-1]
+        reached.append(longest >= 0.6)  # the long leaf's own arm, out towards its tip (75 cm)
+    assert sum(reached) >= 3, reached  # measured: 4 of 6; without the arms none
+
+
+def test_a_trace_that_meets_another_plant_or_narrows_did_not_fork() -> None:
+    rng = np.random.default_rng(4)
+    points = level_leaf(rng, (0.0, 0.0), 0.0, 0.15, 0.75, 0.30, 6000)
+    met = trace_leaf(points, points[:, 0] > 0.5, np.zeros(2))
+    assert met is not None and not met.forked
+    held_side = ~((points[:, 0] > 0.4) & (points[:, 1] > 0.0))  # a neighbour holds one side
+    narrowed = trace_leaf(points[held_side], np.zeros(int(held_side.sum()), bool), np.zeros(2))
+    assert narrowed is not None and not narrowed.forked
+    assert narrowed.ribbon.centres_m[-1, 0] <= 0.42
+
+
+def test_the_arms_of_a_leaf_are_the_split_leaves_inside_it() -> None:
+    leaf = np.arange(0, 100)
+    split = [np.arange(0, 60), np.arange(60, 100), np.arange(100, 150)]
+    assert [len(a) for a in _arms_of(leaf, split, 150)] == [60, 40]
+    assert _arms_of(leaf, [np.arange(0, 100), np.arange(100, 150)], 150) == []  # not split
+    straddling = [np.arange(0, 50), np.arange(50, 150)]  # half of it outside the leaf
+    assert _arms_of(leaf, straddling, 150) == []

@@ -137,3 +137,45 @@ def x_pair(
         ]
     )
     return a + rng.normal(0.0, 0.001, a.shape), b + rng.normal(0.0, 0.001, b.shape)
+
+
+def resting_leaf(
+    rng: np.random.Generator,
+    start_xy: tuple[float, float],
+    z_m: float,
+    join_m: float,
+    turn_deg: float,
+    length_m: float,
+    n: int,
+) -> NDArray[np.float64]:
+    """(n, 3) points on a flat leaf at height ``z_m`` that runs along +x from ``start_xy`` for
+    ``join_m``, then turns ``turn_deg`` and runs on to ``length_m``, tapering from 6 cm wide."""
+    u = rng.uniform(0.0, 1.0, n)
+    s = u * length_m
+    across = rng.uniform(-0.5, 0.5, n) * 0.06 * (1.0 - 0.6 * u)
+    t = np.radians(turn_deg)
+    turned = np.array([np.cos(t), np.sin(t)])
+    before = s <= join_m
+    centre = np.where(
+        before[:, None],
+        np.column_stack([s, np.zeros(n)]),
+        np.array([join_m, 0.0]) + np.outer(s - join_m, turned),
+    )
+    heading = np.where(before[:, None], [1.0, 0.0], turned)
+    side = np.column_stack([-heading[:, 1], heading[:, 0]])
+    xy = np.asarray(start_xy) + centre + across[:, None] * side
+    return np.column_stack([xy, np.full(n, z_m)])
+
+
+def stacked_plant(rng: np.random.Generator) -> NDArray[np.float64]:
+    """A plant at (0, 0) whose long level leaf (along +x, 75 cm, 30 cm up) carries another
+    leaf resting on it 1 cm over and 5 cm to the side from 15 cm out, which leaves it 12 cm
+    further on at 60 degrees: one branch for the organ step unsplit, two arms split at their
+    fork; the first leaf's trace widens abruptly where the second joins it."""
+    return np.concatenate(
+        [
+            plant(rng, (0.0, 0.0), []),
+            level_leaf(rng, (0.0, 0.0), 0.0, 0.15, 0.75, 0.30, 6000),
+            resting_leaf(rng, (0.15, 0.05), 0.31, 0.12, 60.0, 0.40, 3000),
+        ]
+    )
