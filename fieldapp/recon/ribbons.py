@@ -14,8 +14,9 @@ centres of the 1 cm level sets of the geodesic distance from its base, and the w
 section, up to where the leaf meets another plant (its sections touch another plant's points or
 are ambiguous) or its width jumps (the neighbour holds one side of it, or another leaf joins).
 Where another leaf lying over it joins it (the organ step keeps the two one branch), the
-trace would end there, short of any contact: the branch is split at its fork and each arm
-traced on its own (:func:`_arms_of`), an arm followed only when traced :data:`MIN_ARM_M`.
+trace would end there, short of any contact, and a branch of leaves joined near the stem is
+too wide to trace at all: such a branch is split at its forks and each arm traced on its own
+(:func:`_arms_of`), an arm followed only when traced :data:`MIN_ARM_M`.
 From there the ribbon is continued in 1 cm steps (:func:`follow`) along the parabola fitted (in
 arc length) to the last :data:`FIT_M` of its midrib, its width following the taper fitted there;
 each step takes the points inside it (across the ribbon within its half width, off its plane
@@ -305,7 +306,7 @@ def _trace_plants(
     for stem, start, stop in zip(traced, *bounds, strict=True):
         members = order[start:stop]
         # Leaves lying over each other near the stem stay one branch here, split at their
-        # fork only where the branch's trace ends at it: split everywhere, a short arm's
+        # fork only where the branch's trace ends at it or fails: split everywhere, a short arm's
         # trace gave touching seed 10's p07 a neighbour's leaf (+11.7 cm; width RMSE over
         # 48 touching inputs 1.67 cm unsplit, 1.77 split; RECONSTRUCTION.md)
         organs = segment_organs(points_m[members], feet_m[stem], split_forks=False)
@@ -314,9 +315,10 @@ def _trace_plants(
         foot_xy = organs.axis.foot_m[:2]
         for leaf in organs.leaves:
             traces = [(leaf, trace_leaf(points_m[members[leaf]], touching[members[leaf]], foot_xy))]
-            if traces[0][1] is not None and traces[0][1].forked:
-                # its trace stopped where two leaves lying over each other part: each arm is
-                # traced on its own (touching seed 94's p28: the arm that meets the neighbour)
+            if traces[0][1] is None or traces[0][1].forked:
+                # its trace stopped where another leaf joins it, or it is too wide to trace:
+                # each arm is traced on its own (touching seed 94's p28: the arm that meets
+                # the neighbour; seed 1's p14: leaves joined near the stem)
                 if arms is None:
                     arms = segment_organs(points_m[members], feet_m[stem]).leaves
                 split = [
@@ -324,7 +326,8 @@ def _trace_plants(
                     for arm in _arms_of(leaf, arms, len(members))
                 ]
                 reach = max((f.ribbon.arc_m[-1] for _, f in split if f is not None), default=0.0)
-                if reach > traces[0][1].ribbon.arc_m[-1]:  # the split did not cut it short
+                whole = traces[0][1]
+                if reach > (0.0 if whole is None else whole.ribbon.arc_m[-1]):
                     traces = split
             for part, found in traces:
                 if found is None:
