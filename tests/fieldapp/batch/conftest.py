@@ -7,19 +7,19 @@ from __future__ import annotations
 
 import contextlib
 import io
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 
 from fieldapp.cli import main
 from fieldapp.io.session import load_session
 
-SEEDS = range(12)
+if TYPE_CHECKING:  # the root conftest's built_once fixture
+    from ...conftest import OnceBuilder
 
-OnceBuilder = Callable[[str, Callable[[Path], None]], Path]
-"""The root conftest's ``built_once`` fixture."""
+SEEDS = range(12)
 
 
 def stations(seed: int) -> str:

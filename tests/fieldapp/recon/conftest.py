@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import json
 import pickle
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
@@ -17,8 +16,8 @@ from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.result import Reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
 
-OnceBuilder = Callable[[str, Callable[[Path], None]], Path]
-"""The root conftest's ``built_once`` fixture."""
+if TYPE_CHECKING:  # the root conftest's built_once fixture
+    from ...conftest import OnceBuilder
 
 
 @dataclass(frozen=True)
