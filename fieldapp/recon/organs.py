@@ -188,28 +188,65 @@ def segment_organs(
     stem's foot (3,) (base xy, local ground z). ``split_forks``: a branch forking into
     leaf-sized arms is one leaf per arm (two leaves lying over each other near the stem);
     without it such a branch is one leaf, as the plants step's ribbons trace it."""
-    axis = fit_stem_axis(points_m, foot_m)
-    along, radial = axis.split(points_m)
-    foot_ring = (along > 0.005) & (along < FOOT_HEIGHT_M) & (radial < FOOT_SEARCH_M)
-    stem_radius = float(np.median(radial[foot_ring])) if foot_ring.sum() >= 5 else 0.006
-    stem_radius = float(np.clip(stem_radius, 0.003, 0.012))
-    cut = max(stem_radius + CUT_MARGIN_M, MIN_CUT_RADIUS_M)
-    outside = np.flatnonzero(radial > cut)
-    leaves = _leaves_from_components(
-        points_m, outside, _LeafGraph.of(points_m[outside]), radial, cut, split_forks
-    )
-    leaves = _grow_into_shell(points_m, leaves, along, radial, stem_radius + SHELL_GAP_M, cut)
-    starts = [float(along[leaf][np.argmin(radial[leaf])]) for leaf in leaves]
-    leaves = [leaves[i] for i in np.argsort(starts, kind="stable")]
-    organ = np.where(radial <= cut, ORGAN_STEM, ORGAN_NONE).astype(np.uint8)
-    leaf_id = np.zeros(len(points_m), dtype=np.uint8)
-    for number, leaf in enumerate(leaves, start=1):
-        organ[leaf] = ORGAN_LEAF
-        leaf_id[leaf] = min(number, 255)
-    if leaves:
-        top_insertion = max(starts)
-        organ[(organ == ORGAN_STEM) & (along > top_insertion)] = ORGAN_WHORL
-    return Organs(organ, leaf_id, axis, stem_radius, cut, leaves)
+    return Branches.of(points_m, foot_m).organs(split_forks)
+
+
+@dataclass(frozen=True)
+class Branches:
+    """A plant's stem axis and the branches leaving its stem, before any fork is split: what
+    :func:`segment_organs` computes with and without ``split_forks`` alike, so that a caller
+    needing both (the plants step's ribbons) finds the axis and the graph once."""
+
+    points_m: NDArray[np.float64]
+    axis: StemAxis
+    along: NDArray[np.float64]
+    radial: NDArray[np.float64]
+    stem_radius_m: float
+    cut_m: float
+    graph: _LeafGraph
+    point_voxel: NDArray[np.intp]
+    branches: list[NDArray[np.intp]]
+    pieces: list[NDArray[np.intp]]
+
+    @staticmethod
+    def of(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -> Branches:
+        """The plant's points (N, 3) and a first guess of its stem's foot (3,)."""
+        axis = fit_stem_axis(points_m, foot_m)
+        along, radial = axis.split(points_m)
+        foot_ring = (along > 0.005) & (along < FOOT_HEIGHT_M) & (radial < FOOT_SEARCH_M)
+        stem_radius = float(np.median(radial[foot_ring])) if foot_ring.sum() >= 5 else 0.006
+        stem_radius = float(np.clip(stem_radius, 0.003, 0.012))
+        cut = max(stem_radius + CUT_MARGIN_M, MIN_CUT_RADIUS_M)
+        outside = np.flatnonzero(radial > cut)
+        graph = _LeafGraph.of(points_m[outside])
+        point_voxel = np.full(len(points_m), -1, dtype=np.intp)
+        point_voxel[outside] = graph.voxel
+        branches, pieces = _branches(points_m, outside, graph, point_voxel, radial, cut)
+        return Branches(
+            points_m, axis, along, radial, stem_radius, cut, graph, point_voxel, branches, pieces
+        )
+
+    def organs(self, split_forks: bool = True) -> Organs:
+        """The organs, each branch one leaf or (``split_forks``) one leaf per arm."""
+        points_m, along, radial, cut = self.points_m, self.along, self.radial, self.cut_m
+        leaves = self.branches
+        if leaves and split_forks:
+            leaves = _split_forks(leaves, self.graph, self.point_voxel, radial, cut)
+        leaves = _join_pieces(points_m, leaves, self.pieces)
+        leaves = _grow_into_shell(
+            points_m, leaves, along, radial, self.stem_radius_m + SHELL_GAP_M, cut
+        )
+        starts = [float(along[leaf][np.argmin(radial[leaf])]) for leaf in leaves]
+        leaves = [leaves[i] for i in np.argsort(starts, kind="stable")]
+        organ = np.where(radial <= cut, ORGAN_STEM, ORGAN_NONE).astype(np.uint8)
+        leaf_id = np.zeros(len(points_m), dtype=np.uint8)
+        for number, leaf in enumerate(leaves, start=1):
+            organ[leaf] = ORGAN_LEAF
+            leaf_id[leaf] = min(number, 255)
+        if leaves:
+            top_insertion = max(starts)
+            organ[(organ == ORGAN_STEM) & (along > top_insertion)] = ORGAN_WHORL
+        return Organs(organ, leaf_id, self.axis, self.stem_radius_m, cut, leaves)
 
 
 def _grow_into_shell(
@@ -527,22 +564,20 @@ def _components_linked(points_m: NDArray[np.float64], link_m: float) -> NDArray[
     return connected_components(graph, directed=False)[1].astype(np.intp)  # type: ignore[no-any-return]
 
 
-def _leaves_from_components(
+def _branches(
     points_m: NDArray[np.float64],
     outside: NDArray[np.intp],
     graph: _LeafGraph,
+    point_voxel: NDArray[np.intp],
     radial: NDArray[np.float64],
     cut_m: float,
-    split_forks: bool = True,
-) -> list[NDArray[np.intp]]:
-    """Leaves (indices into ``points_m``): the components of the points ``outside`` the
-    cylinder (their ``graph``) that reach the stem and are large enough, split where they
-    leave the stem at two places and (``split_forks``) where they fork; the other large
-    pieces join the nearest such leaf."""
+) -> tuple[list[NDArray[np.intp]], list[NDArray[np.intp]]]:
+    """The branches (indices into ``points_m``): the components of the points ``outside`` the
+    cylinder (their ``graph``; ``point_voxel``: each point's voxel in it, -1 inside) that reach
+    the stem and are large enough, split where they leave the stem at two places; and the
+    other large pieces, which join the nearest leaf (:func:`_join_pieces`)."""
     labels = graph.component[graph.voxel]
-    point_voxel = np.full(len(points_m), -1, dtype=np.intp)
-    point_voxel[outside] = graph.voxel
-    leaves: list[NDArray[np.intp]] = []
+    branches: list[NDArray[np.intp]] = []
     pieces: list[NDArray[np.intp]] = []
     for label in np.unique(labels):
         members = outside[labels == label]
@@ -551,14 +586,19 @@ def _leaves_from_components(
         extent = float(np.ptp(points_m[members], axis=0).max())
         reaches = float(radial[members].min()) < cut_m + TOUCH_M
         if reaches and len(members) >= MIN_LEAF_POINTS and extent >= MIN_LEAF_EXTENT_M:
-            leaves += _split_at_bases(points_m, members, graph, point_voxel, radial, cut_m)
+            branches += _split_at_bases(points_m, members, graph, point_voxel, radial, cut_m)
         else:
             pieces.append(members)
-    if not leaves:
-        return leaves
-    if split_forks:
-        leaves = _split_forks(leaves, graph, point_voxel, radial, cut_m)
-    if not pieces:
+    return branches, pieces
+
+
+def _join_pieces(
+    points_m: NDArray[np.float64], leaves: list[NDArray[np.intp]], pieces: list[NDArray[np.intp]]
+) -> list[NDArray[np.intp]]:
+    """``leaves`` with each of the ``pieces`` (a leaf cut off by a gap) joined to the leaf it
+    lies nearest to, within :data:`FRAGMENT_JOIN_M` (a new list; the arrays are not changed)."""
+    leaves = list(leaves)
+    if not leaves or not pieces:
         return leaves
     leaf_of = np.repeat(np.arange(len(leaves)), [len(leaf) for leaf in leaves])
     gap, nearest = cKDTree(points_m[np.concatenate(leaves)]).query(points_m[np.concatenate(pieces)])

@@ -9,7 +9,7 @@ is the leaf itself: a ribbon (a smooth midrib whose direction and curvature cont
 that tapers) that runs on through the contact while the neighbour's leaf runs off at an angle.
 
 For each plant with ambiguous points every leaf
-(:func:`fieldapp.recon.organs.segment_organs`) is traced (:func:`trace_leaf`): its midrib, the
+(:class:`fieldapp.recon.organs.Branches`, unsplit) is traced (:func:`trace_leaf`): its midrib, the
 centres of the 1 cm level sets of the geodesic distance from its base, and the width of each
 section, up to where the leaf meets another plant (its sections touch another plant's points or
 are ambiguous) or its width jumps (the neighbour holds one side of it, or another leaf joins).
@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.leaf_traits import LeafGraph, section_widths_m
-from fieldapp.recon.organs import segment_organs
+from fieldapp.recon.organs import Branches
 
 LEVEL_M = 0.01
 MIN_SECTION_POINTS = 5
@@ -309,7 +309,8 @@ def _trace_plants(
         # fork only where the branch's trace ends at it or fails: split everywhere, a short arm's
         # trace gave touching seed 10's p07 a neighbour's leaf (+11.7 cm; width RMSE over
         # 48 touching inputs 1.67 cm unsplit, 1.77 split; RECONSTRUCTION.md)
-        organs = segment_organs(points_m[members], feet_m[stem], split_forks=False)
+        branches = Branches.of(points_m[members], feet_m[stem])
+        organs = branches.organs(split_forks=False)
         touching[members] |= _touching(points_m, tree, members, on_stems & (labels != stem))
         arms: list[NDArray[np.intp]] | None = None
         foot_xy = organs.axis.foot_m[:2]
@@ -320,7 +321,7 @@ def _trace_plants(
                 # each arm is traced on its own (touching seed 94's p28: the arm that meets
                 # the neighbour; seed 1's p14: leaves joined near the stem)
                 if arms is None:
-                    arms = segment_organs(points_m[members], feet_m[stem]).leaves
+                    arms = branches.organs(split_forks=True).leaves
                 split = [
                     (arm, trace_leaf(points_m[members[arm]], touching[members[arm]], foot_xy))
                     for arm in _arms_of(leaf, arms, len(members))

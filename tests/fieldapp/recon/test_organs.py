@@ -321,21 +321,23 @@ def test_two_leaves_stacked_on_the_same_side_are_two(gap_m: float) -> None:
 def test_the_plants_steps_ribbons_trace_stacked_leaves_as_one_branch() -> None:
     """The organ step splits two leaves stacked on the same side at their fork; the plants
     step's ribbons (``ribbons.follow_leaves``) trace them as one branch, as they were measured
-    with (split, their arms' traces took a neighbour's leaf on touching seed 10)."""
-    from fieldapp.recon.organs import segment_organs
+    with (split everywhere, a short arm's trace took a neighbour's leaf on touching seed 10),
+    and ask for the split only where the branch's trace ends at the fork or fails
+    (test_plants_ribbons.py): here it runs on through the fork."""
+    from fieldapp.recon.organs import Branches, segment_organs
 
     points = np.concatenate(_stacked_pair(0.05, np.random.default_rng(0)))
     assert len(segment_organs(points, np.zeros(3)).leaves) == 2
     assert len(segment_organs(points, np.zeros(3), split_forks=False).leaves) == 1
     calls: list[bool] = []
-    original = ribbons.segment_organs
+    original = Branches.organs
 
-    def recording(points_m, foot_m, split_forks=True):  # type: ignore[no-untyped-def]
+    def recording(self, split_forks=True):  # type: ignore[no-untyped-def]
         calls.append(split_forks)
-        return original(points_m, foot_m, split_forks)
+        return original(self, split_forks)
 
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(ribbons, "segment_organs", recording)
+        patch.setattr(Branches, "organs", recording)
         labels = np.zeros(len(points), dtype=np.intp)
         ribbons.follow_leaves(points, labels, np.ones(len(points), dtype=bool), np.zeros((1, 3)))
     assert calls and not any(calls)
