@@ -66,8 +66,10 @@ MIN_STEP_POINTS = 5
 :data:`MIN_STEP_POINTS` is a gap."""
 FILL = 0.6
 MAX_PATCHY_M = 0.2
-"""A step whose points span :data:`FILL` of the ribbon's width is the leaf's; a patchy stretch
-(at most :data:`MAX_PATCHY_M`) only when a filled step follows it."""
+"""A step whose points span :data:`FILL` of the ribbon's width, or of the span of the last
+step that did (a leaf's tip narrows under the width its course keeps), is the leaf's; a patchy
+stretch (at most :data:`MAX_PATCHY_M`) only when a filled step follows it. Only a step spanning
+:data:`FILL` of the width re-centres the ribbon."""
 MAX_SHIFT = 0.25
 """A step moves the ribbon across by at most this share of its half width."""
 MIN_ARM_M = FIT_M
@@ -213,6 +215,7 @@ def follow(
     start = float(ribbon.arc_m[-1])
     gap = patchy = 0.0
     ahead = STEP_M
+    last = np.inf  # the span of the last filled step
     while gap < MAX_GAP_M and patchy <= MAX_PATCHY_M:
         past = float(ribbon.arc_m[-1]) - start + ahead
         centre, direction, width = ribbon.predict(ahead)
@@ -222,14 +225,20 @@ def follow(
         if step is None:
             gap, ahead = gap + STEP_M, ahead + STEP_M
             continue
-        taken, filled, moved = step
+        taken, span, moved = step
+        # a tapering tip fills less and less of the width: measured against the last filled
+        # step it is still the leaf (touching 4 x 4 seed 87's p23 lost its outer 2 709 points,
+        # -13.1 cm, where its 9 cm wide leaf narrowed to 5)
+        filled = span >= FILL * min(width, last)
         gap, ahead = 0.0, STEP_M
         pending.append((taken[claimable[taken]], past))
         if filled:
-            claimed, pending, patchy = claimed + pending, [], 0.0
+            claimed, pending, patchy, last = claimed + pending, [], 0.0, span
         else:
             patchy += STEP_M
-        ribbon.extend(moved if filled else centre, width)
+        # but a narrow step does not steer: re-centred on a narrow strip beside it (a
+        # neighbour's leaf) the ribbon follows that leaf away (first model, seed 6's p02)
+        ribbon.extend(moved if span >= FILL * width else centre, width)
     if not claimed:
         return np.zeros(0, dtype=np.intp), np.zeros(0)
     index = np.concatenate([c for c, _ in claimed])
@@ -243,10 +252,10 @@ def _step(
     width: float,
     points_m: NDArray[np.float64],
     tree: cKDTree,
-) -> tuple[NDArray[np.intp], bool, NDArray[np.float64]] | None:
-    """The points inside the ribbon's step at ``centre`` (3,) heading ``direction`` (3,),
-    whether they fill its width (:data:`FILL`), and the centre moved onto them; ``None`` when
-    the step holds fewer than :data:`MIN_STEP_POINTS`."""
+) -> tuple[NDArray[np.intp], float, NDArray[np.float64]] | None:
+    """The points inside the ribbon's step at ``centre`` (3,) heading ``direction`` (3,), the
+    span across the ribbon between their 5th and 95th percentiles, and the centre moved onto
+    them; ``None`` when the step holds fewer than :data:`MIN_STEP_POINTS`."""
     normal = ribbon.normal - (ribbon.normal @ direction) * direction
     normal /= max(float(np.linalg.norm(normal)), 1e-12)
     across_dir = np.cross(normal, direction)
@@ -264,7 +273,7 @@ def _step(
     on_plane = inside & (np.abs(off) <= PLANE_TOLERANCE_M / 2)  # not a sheet it lies on
     lift = float(np.median(off[on_plane])) if on_plane.any() else 0.0
     moved = centre + shift * across_dir + lift * normal
-    return near[inside], bool(high - low >= FILL * width), moved
+    return near[inside], float(high - low), moved
 
 
 def _touching(
@@ -355,18 +364,18 @@ def follow_leaves(
     labels: NDArray[np.intp],
     ambiguous: NDArray[np.bool_],
     feet_m: NDArray[np.float64],
-) -> int:
+) -> NDArray[np.intp]:
     """The leaves of every plant with a point ``ambiguous`` (N,) followed across their
     contacts: ``labels`` (N,) (the stem of each point, 0..S-1 for the stems whose feet are
     ``feet_m`` (S, 3); other labels are left alone) are changed in place where a leaf's ribbon
-    runs on through a neighbour's points. Returns how many points changed hands. Every such
+    runs on through a neighbour's points. Returns the points that changed hands. Every such
     plant, not only those over the report's flag: a plant whose share of ambiguous points
     slipped under the flag lost its ribbon, and its leaf, on a 0.1 % change."""
     stems = len(feet_m)
     on_stems = (labels >= 0) & (labels < stems)
     traced = np.flatnonzero(np.bincount(labels[on_stems & ambiguous], minlength=stems))
     if len(traced) == 0:
-        return 0
+        return np.zeros(0, dtype=np.intp)
     tree = cKDTree(points_m)
     ribbons, held = _trace_plants(points_m, labels, ambiguous, feet_m, traced, tree)
     claimer = np.full(len(points_m), -1, dtype=np.intp)
@@ -379,4 +388,4 @@ def follow_leaves(
         nearest[taken[better]] = past[better]
     won = np.flatnonzero(claimer >= 0)
     labels[won] = claimer[won]
-    return len(won)
+    return won

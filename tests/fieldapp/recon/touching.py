@@ -179,3 +179,17 @@ def stacked_plant(rng: np.random.Generator) -> NDArray[np.float64]:
             resting_leaf(rng, (0.15, 0.05), 0.31, 0.12, 60.0, 0.40, 3000),
         ]
     )
+
+
+def tapering_leaf(rng: np.random.Generator, n: int = 8000) -> NDArray[np.float64]:
+    """(n, 3) points spread evenly on a leaf along +x from the stem at (0, 0): it rises over
+    its first 15 cm from 0.15 to 0.30 m and runs level, 7 cm wide out to 55 cm, then narrows
+    evenly to 1 cm at its tip (80 cm): the outer part of a broad leaf (the second model's are
+    9 cm wide and narrow to 5 within 10 cm)."""
+    x = rng.uniform(0.0, 0.8, 3 * n)
+    y = rng.uniform(-0.035, 0.035, 3 * n)
+    half = np.where(x <= 0.55, 0.035, 0.035 - (x - 0.55) / 0.25 * 0.03)
+    kept = np.abs(y) <= half
+    x, y = x[kept][:n], y[kept][:n]
+    ramp = np.minimum(x / 0.15, 1.0)
+    return np.column_stack([x, y, 0.15 + 0.15 * (1.0 - (1.0 - ramp) ** 2)])
