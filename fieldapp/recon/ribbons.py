@@ -159,9 +159,9 @@ def trace_leaf(
     widths = section_widths_m(np.concatenate(parts), counts, tangents)
     shares = np.array([share for _, share, _ in kept])
     first = _first_contact(widths, shares)
-    forked = _forks_at(widths, shares, first)
     if first < 4 or float(np.median(widths[first - 4 : first])) > MAX_WIDTH_M:
         return None
+    forked = _forks_at(widths, shares, first)
     centres, widths = centres[:first], widths[:first]
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(centres, axis=0), axis=1))])
     end = np.concatenate(parts[max(first - 5, 0) : first])
@@ -318,25 +318,27 @@ def _trace_plants(
         # fork only where the branch's trace ends at it or fails: split everywhere, a short arm's
         # trace gave touching seed 10's p07 a neighbour's leaf (+11.7 cm; width RMSE over
         # 48 touching inputs 1.67 cm unsplit, 1.77 split; RECONSTRUCTION.md)
-        branches = Branches.of(points_m[members], feet_m[stem])
+        own = points_m[members]
+        branches = Branches.of(own, feet_m[stem])
         organs = branches.organs(split_forks=False)
         touching[members] |= _touching(points_m, tree, members, on_stems & (labels != stem))
+        near = touching[members]  # which of the plant's points touch another plant
         arms: list[NDArray[np.intp]] | None = None
         foot_xy = organs.axis.foot_m[:2]
         for leaf in organs.leaves:
-            traces = [(leaf, trace_leaf(points_m[members[leaf]], touching[members[leaf]], foot_xy))]
-            if traces[0][1] is None or traces[0][1].forked:
+            whole = trace_leaf(own[leaf], near[leaf], foot_xy)
+            traces = [(leaf, whole)]
+            if whole is None or whole.forked:
                 # its trace stopped where another leaf joins it, or it is too wide to trace:
                 # each arm is traced on its own (touching seed 94's p28: the arm that meets
                 # the neighbour; seed 1's p14: leaves joined near the stem)
                 if arms is None:
                     arms = branches.organs(split_forks=True).leaves
                 split = [
-                    (arm, trace_leaf(points_m[members[arm]], touching[members[arm]], foot_xy))
+                    (arm, trace_leaf(own[arm], near[arm], foot_xy))
                     for arm in _arms_of(leaf, arms, len(members))
                 ]
                 reach = max((f.ribbon.arc_m[-1] for _, f in split if f is not None), default=0.0)
-                whole = traces[0][1]
                 if reach > (0.0 if whole is None else whole.ribbon.arc_m[-1]):
                     traces = split
             for part, found in traces:
