@@ -27,7 +27,7 @@ from fieldapp.recon.filters import FilteredStation
 from fieldapp.recon.levelling import T_field_reference_initial, level_stations
 from fieldapp.recon.mapframe import station_map_poses
 from fieldapp.recon.organ_traits import PlantOrgans
-from fieldapp.recon.plants import PlantSearch
+from fieldapp.recon.plants import MEETS_NOTE, PlantSearch
 from fieldapp.recon.progress import Progress, StageTimer, progress
 from fieldapp.recon.register import StationRegistration
 from fieldapp.recon.result import Reconstruction
@@ -122,7 +122,7 @@ def reconstruct(
         grid.value,
         found.value,
         organs,
-        covered.value,
+        _with_meets(covered.value, found.value.meets),
         crop.radius_m,
     )
     return _result(session.id, plot, settings, timer, warnings)
@@ -398,6 +398,16 @@ class _Plot:
     organs: dict[int, PlantOrgans]
     cautions: dict[int, tuple[str, ...]]
     crop_radius_m: float
+
+
+def _with_meets(
+    cautions: dict[int, tuple[str, ...]], meets: dict[int, int]
+) -> dict[int, tuple[str, ...]]:
+    """Each plant's cautions, with a plant whose widest extent meets another's said so."""
+    notes = dict(cautions)
+    for plant, other in sorted(meets.items()):
+        notes[plant] = (*notes.get(plant, ()), f"{MEETS_NOTE} {other}")
+    return notes
 
 
 def _result(

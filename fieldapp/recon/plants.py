@@ -32,7 +32,15 @@ from fieldapp.recon.grid import (
 from fieldapp.recon.ribbons import follow_leaves
 from fieldapp.recon.settings import GridPrior, PlantSettings, StemSettings
 from fieldapp.recon.stems import Stem, find_stems
-from fieldapp.recon.traits import PlantTraits, measure_plant
+from fieldapp.recon.traits import PlantTraits, measure_plant, smallest_enclosing_circle
+
+WIDEST_M = 0.01
+"""A plant's widest extent: its points within this of the circle that encloses it (plan
+view), the points its width is measured between."""
+MEETS_NOTE = "may be wider than measured: its widest extent meets plant"
+MEETS_WARNING = "may be wider than measured, their widest extent meets another plant"
+"""How a plant whose widest extent meets another (:func:`widest_meets`) is cautioned in its
+report entry (with the other's id) and in the warnings."""
 
 NOISE = -1
 
@@ -150,7 +158,9 @@ class PlantSearch:
       saw the ground there;
     - ``unseen_cells``: grid cells outside what the captures saw (a mission that visited part
       of the plot): neither found nor missing;
-    - ``extra_plants``: ids of plants standing at no grid cell."""
+    - ``extra_plants``: ids of plants standing at no grid cell;
+    - ``meets``: plant id -> the plant its widest extent meets (:func:`widest_meets`): its width
+      may go on into that plant."""
 
     plants: list[Plant]
     splits: list[list[int]] = field(default_factory=list)
@@ -158,6 +168,7 @@ class PlantSearch:
     missing_cells: list[tuple[int, int]] = field(default_factory=list)
     unseen_cells: list[tuple[int, int]] = field(default_factory=list)
     extra_plants: list[int] = field(default_factory=list)
+    meets: dict[int, int] = field(default_factory=dict)
 
     def warnings(self, flag_ambiguous_share: float) -> list[str]:
         """One line per plant that may hold another's points, per missing grid cell (as a
@@ -168,6 +179,9 @@ class PlantSearch:
             for p in self.plants
             if p.ambiguous_share > flag_ambiguous_share
         ]
+        if self.meets:
+            named = ", ".join(f"{p} (plant {o})" for p, o in sorted(self.meets.items()))
+            lines.append(f"plants that {MEETS_WARNING}: {named}")
         if self.missing_cells:
             cells = ", ".join(f"row {r} column {c}" for r, c in self.missing_cells)
             lines.append(f"{len(self.missing_cells)} planting-grid cells without a plant: {cells}")
@@ -229,6 +243,7 @@ def search_plants(
     if grid is not None:
         _place_on_grid(search, grid, soil_m, soil_tree)
     search.splits = _splits(cloud.points, labels, plant_labels, settings.cluster_voxel_m)
+    search.meets = widest_meets(search.plants, search.splits, settings.cluster_voxel_m)
     return search
 
 
@@ -417,6 +432,32 @@ def _place_on_grid(
         if node not in taken:
             cells = search.missing_cells if seen[node] else search.unseen_cells
             cells.append((int(grid.row[node]), int(grid.column[node])))
+
+
+def widest_meets(plants: list[Plant], splits: list[list[int]], reach_m: float) -> dict[int, int]:
+    """Plant id -> the plant (of its ``splits`` group: one density cluster) that its widest
+    extent, its points within :data:`WIDEST_M` of the circle enclosing it (plan view), comes
+    within ``reach_m`` of (the one most of those points are near). Such a plant's width is where
+    it was cut from its neighbour, not where a leaf was seen to end: an unflagged plant 11 cm
+    too narrow, whose leaf tip past a 4 cm gap went to the stem it touched, ended 2 cm from
+    that plant (an unseen touching plot; over the touching bench, 9 of the 23 plants more than
+    3 cm too narrow, and 30 of the 429 within 2 cm, RECONSTRUCTION.md)."""
+    by_id = {plant.id: plant.cloud.points for plant in plants}
+    meets: dict[int, int] = {}
+    for group in splits:
+        clouds = [by_id[plant_id] for plant_id in group]
+        owner = np.repeat(np.array(group), [len(cloud) for cloud in clouds])
+        tree = cKDTree(np.concatenate(clouds))
+        for plant_id, points in zip(group, clouds, strict=True):
+            circle = smallest_enclosing_circle(points[:, :2])
+            off = np.hypot(points[:, 0] - circle.centre_x_m, points[:, 1] - circle.centre_y_m)
+            widest = points[off >= circle.radius_m - WIDEST_M]
+            near = owner[list(itertools.chain(*tree.query_ball_point(widest, reach_m)))]
+            near = near[near != plant_id]
+            if len(near):
+                others, counts = np.unique(near, return_counts=True)
+                meets[plant_id] = int(others[np.argmax(counts)])
+    return meets
 
 
 def _splits(

@@ -13,6 +13,7 @@ from fieldapp.cli import main
 from fieldapp.io.session import load_session
 from fieldapp.recon.outputs import csv_text
 from fieldapp.recon.pipeline import run_reconstruction
+from fieldapp.recon.plants import MEETS_NOTE
 from fieldapp.recon.result import Reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
 
@@ -87,6 +88,19 @@ def test_touching_plants_are_reported_split_and_ambiguous_ones_flagged(
     said = {int(w.split(":")[0].split()[1]) for w in touching.warnings if w.startswith("plant ")}
     assert said == flagged  # and the CLI says so
     assert all(p["from_stem"] for p in report["plants"])
+
+
+def test_a_plant_whose_widest_extent_meets_another_is_cautioned(touching: Reconstruction) -> None:
+    """Its report entry says it may be wider than measured and names the plant it meets, one
+    of its own canopy; no other plant's entry says so."""
+    meets = touching.search.meets
+    assert meets  # measured on this seed: three plants
+    groups = [set(group) for group in touching.search.splits]
+    assert all(any({p, o} <= g for g in groups) for p, o in meets.items())
+    for entry in touching.plant_report()["plants"]:
+        said = [c for c in entry["cautions"] if c.startswith(MEETS_NOTE)]
+        plant = entry["plant"]
+        assert said == ([f"{MEETS_NOTE} {meets[plant]}"] if plant in meets else [])
 
 
 def test_the_planting_grid_from_the_plan_labels_rows_and_columns(
