@@ -96,7 +96,7 @@ class Ribbon:
     def predict(self, ahead_m: float) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
         """The centre (3,), unit direction (3,) and width ``ahead_m`` past the end: the
         parabola (a line with fewer than 6 centres) fitted to the last :data:`FIT_M`, and the
-        taper (never a widening) fitted there, continued."""
+        taper fitted there, continued, never wider than the widest width there."""
         chosen = self.arc_m >= self.arc_m[-1] - FIT_M
         chosen[-2:] = True
         t = self.arc_m[chosen] - self.arc_m[-1]
@@ -106,6 +106,9 @@ class Ribbon:
         slope = np.asarray(poly.polyval(ahead_m, poly.polyder(fit)), dtype=np.float64)
         taper = poly.polyfit(t, self.widths_m[chosen], 1)
         width = float(taper[0]) + min(float(taper[1]), 0.0) * ahead_m
+        # the line fitted to a rise that levels off overshoots at its end, and each step's
+        # width, fed back into the next fit, overshot again: a ribbon grew 1.3 cm in 41 steps
+        width = min(width, float(self.widths_m[chosen].max()))
         norm = float(np.linalg.norm(slope))
         return centre, slope / max(norm, 1e-12), max(width, 0.0)
 
