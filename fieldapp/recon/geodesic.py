@@ -27,6 +27,8 @@ from scipy.sparse import coo_matrix, csr_matrix, identity
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from fieldapp.recon.filters import voxel_keys
+
 UNREACHED = -1
 SHEET_THICKNESS = 0.06
 SHEET_RADIUS_M = 0.035
@@ -75,9 +77,11 @@ def voxel_graph(
     neighbours whose centroid is within ``max_edge_m`` (default 1.5 voxels) of its own, so
     two leaves passing a few centimetres apart are not joined through a corner."""
     max_edge_m = 1.5 * voxel_m if max_edge_m is None else max_edge_m
-    cells = np.floor(points_m / voxel_m).astype(np.int64)
-    keys, first, inverse = np.unique(_pack(cells), return_index=True, return_inverse=True)
-    unique_cells, inverse = cells[first], inverse.ravel()
+    keys, first, inverse = np.unique(
+        voxel_keys(points_m, voxel_m), return_index=True, return_inverse=True
+    )  # packed as _pack packs, the extent checked
+    unique_cells = np.floor(points_m[first] / voxel_m).astype(np.int64)  # in key order
+    inverse = inverse.ravel()
     counts = np.bincount(inverse, minlength=len(unique_cells)).astype(np.float64)
     centres = np.stack(
         [np.bincount(inverse, points_m[:, a], len(unique_cells)) / counts for a in range(3)], 1

@@ -81,10 +81,9 @@ def voxel_components(points_m: NDArray[np.float64], voxel_m: float) -> NDArray[n
     """(N,) component label of every point (0-based) among 26-connected occupied voxels."""
     if len(points_m) == 0:
         return np.zeros(0, dtype=np.intp)
-    voxel_keys(points_m, voxel_m)  # validates the extent
-    cells = np.floor(points_m / voxel_m).astype(np.int64)
-    unique, first, inverse = np.unique(_pack(cells), return_index=True, return_inverse=True)
-    unique_cells = cells[first]  # in the order of their sorted keys
+    keys = voxel_keys(points_m, voxel_m)  # packed as _pack packs (and the extent checked)
+    unique, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    unique_cells = np.floor(points_m[first] / voxel_m).astype(np.int64)  # in key order
     rows, cols = [], []
     for offset in _HALF_NEIGHBOURHOOD:
         neighbour_keys = _pack(unique_cells + np.array(offset, dtype=np.int64))
