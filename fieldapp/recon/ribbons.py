@@ -130,15 +130,17 @@ class Trace(NamedTuple):
 
 
 def trace_leaf(
-    points_m: NDArray[np.float64], touching: NDArray[np.bool_], axis_xy_m: NDArray[np.float64]
+    points_m: NDArray[np.float64], touching: NDArray[np.bool_], radial_m: NDArray[np.float64]
 ) -> Trace | None:
-    """The ribbon of a leaf's points (M, 3) from its base (the points nearest the stem at
-    ``axis_xy_m`` (2,), plan view) up to where it meets another plant (``touching`` (M,): near
-    another plant's points or ambiguous) or its width jumps, and (M,) which points the leaf
-    holds: those of its traced part more than :data:`FIT_M` before its end; ``None`` for a
-    leaf too short or too wide to trace."""
-    radial = np.linalg.norm(points_m[:, :2] - axis_xy_m, axis=1)
-    distance = LeafGraph.of(points_m).geodesic_m(np.flatnonzero(radial <= radial.min() + LEVEL_M))
+    """The ribbon of a leaf's points (M, 3) from its base (the points nearest the stem: least
+    ``radial_m`` (M,), their distance from the stem's axis) up to where it meets another plant
+    (``touching`` (M,): near another plant's points or ambiguous) or its width jumps, and (M,)
+    which points the leaf holds: those of its traced part more than :data:`FIT_M` before its
+    end; ``None`` for a leaf too short or too wide to trace. The axis, not the foot: a stem
+    leaning 15 degrees stands 10 cm off its foot 40 cm up, where a leaf pointing back over the
+    foot is nearer it in plan view half way out than at its base."""
+    base = np.flatnonzero(radial_m <= radial_m.min() + LEVEL_M)
+    distance = LeafGraph.of(points_m).geodesic_m(base)
     levels = np.floor(distance / LEVEL_M).astype(np.intp)
     order = np.argsort(levels, kind="stable")
     _, starts = np.unique(levels[order], return_index=True)
@@ -327,9 +329,9 @@ def _trace_plants(
         touching[members] |= _touching(points_m, tree, members, on_stems & (labels != stem))
         near = touching[members]  # which of the plant's points touch another plant
         arms: list[NDArray[np.intp]] | None = None
-        foot_xy = organs.axis.foot_m[:2]
+        radial = branches.radial  # from the stem's axis
         for leaf in organs.leaves:
-            whole = trace_leaf(own[leaf], near[leaf], foot_xy)
+            whole = trace_leaf(own[leaf], near[leaf], radial[leaf])
             traces = [(leaf, whole)]
             if whole is None or whole.forked:
                 # its trace stopped where another leaf joins it, or it is too wide to trace:
@@ -338,7 +340,7 @@ def _trace_plants(
                 if arms is None:
                     arms = branches.organs(split_forks=True).leaves
                 split = [
-                    (arm, trace_leaf(own[arm], near[arm], foot_xy))
+                    (arm, trace_leaf(own[arm], near[arm], radial[arm]))
                     for arm in _arms_of(leaf, arms, len(members))
                 ]
                 reach = max((f.ribbon.arc_m[-1] for _, f in split if f is not None), default=0.0)

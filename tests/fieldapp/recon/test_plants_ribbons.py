@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from fieldapp.recon.organs import segment_organs
+from fieldapp.recon.organs import StemAxis, segment_organs
 from fieldapp.recon.plants import search_plants
 from fieldapp.recon.ribbons import (
     LEVEL_M,
@@ -23,6 +24,11 @@ from fieldapp.recon.settings import PlantSettings, StemSettings
 from .synthetic import LEAF_RGB, colored
 from .test_plants_stems import NO_SOIL, own_share, width_m
 from .touching import crossing_pair, level_leaf, lying_pair, stacked_plant, tapering_leaf
+
+
+def from_origin(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(N,) the points' distances from an upright stem standing at the origin."""
+    return np.linalg.norm(points[:, :2], axis=1)  # type: ignore[no-any-return]
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
@@ -81,7 +87,7 @@ def test_a_traced_leaf_stops_where_it_meets_another_plant() -> None:
     rng = np.random.default_rng(4)
     points = level_leaf(rng, (0.0, 0.0), 0.0, 0.15, 0.75, 0.30, 6000)
     touching = points[:, 0] > 0.5  # another plant's points near the leaf from 50 cm on
-    found = trace_leaf(points, touching, np.zeros(2))
+    found = trace_leaf(points, touching, from_origin(points))
     assert found is not None and not found.forked
     ribbon, held, _ = found
     assert 0.47 <= ribbon.centres_m[-1, 0] <= 0.5
@@ -101,7 +107,7 @@ def test_a_followed_leaf_is_claimed_out_to_its_narrowing_tip(seed: int) -> None:
     (touching 4 x 4 seed 87's p23: -13.1 cm)."""
     points = tapering_leaf(np.random.default_rng(seed))
     outer = points[:, 0] > 0.45
-    found = trace_leaf(points, outer, np.zeros(2))
+    found = trace_leaf(points, outer, from_origin(points))
     assert found is not None
     taken, _ = follow(found.ribbon, points, cKDTree(points), outer)
     assert outer[taken].all()
@@ -124,7 +130,7 @@ def test_a_trace_stopped_where_another_leaf_joins_it_says_it_forked(seed: int) -
     organs = segment_organs(plant, np.zeros(3), split_forks=False)
     assert len(organs.leaves) == 1  # the two leaves are one branch to the organ step
     leaf = plant[organs.leaves[0]]
-    found = trace_leaf(leaf, np.zeros(len(leaf), dtype=bool), np.zeros(2))
+    found = trace_leaf(leaf, np.zeros(len(leaf), dtype=bool), from_origin(leaf))
     assert found is not None and found.forked
     assert 0.15 <= found.ribbon.arc_m[-1] <= 0.35  # it stops where the second leaf joins
 
@@ -145,7 +151,7 @@ def test_the_arms_of_a_forked_leaf_are_traced_each_on_its_own() -> None:
         longest = max((ribbon.arc_m[-1] for _, ribbon in ribbons), default=0.0)
         organs = segment_organs(plant, feet[0], split_forks=False)
         branch = organs.leaves[0]
-        alone = trace_leaf(plant[branch], none[branch], organs.axis.foot_m[:2])
+        alone = trace_leaf(plant[branch], none[branch], organs.axis.split(plant[branch])[1])
         assert alone is None or longest >= alone.ribbon.arc_m[-1]
         reached.append(longest >= 0.6)  # the long leaf's own arm, out towards its tip (75 cm)
     assert sum(reached) >= 3, reached  # measured: 4 of 6; without the arms none
@@ -154,10 +160,11 @@ def test_the_arms_of_a_forked_leaf_are_traced_each_on_its_own() -> None:
 def test_a_trace_that_meets_another_plant_or_narrows_did_not_fork() -> None:
     rng = np.random.default_rng(4)
     points = level_leaf(rng, (0.0, 0.0), 0.0, 0.15, 0.75, 0.30, 6000)
-    met = trace_leaf(points, points[:, 0] > 0.5, np.zeros(2))
+    met = trace_leaf(points, points[:, 0] > 0.5, from_origin(points))
     assert met is not None and not met.forked
     held_side = ~((points[:, 0] > 0.4) & (points[:, 1] > 0.0))  # a neighbour holds one side
-    narrowed = trace_leaf(points[held_side], np.zeros(int(held_side.sum()), bool), np.zeros(2))
+    kept = points[held_side]
+    narrowed = trace_leaf(kept, np.zeros(len(kept), bool), from_origin(kept))
     assert narrowed is not None and not narrowed.forked
     assert narrowed.ribbon.centres_m[-1, 0] <= 0.42
 
@@ -185,3 +192,21 @@ def test_a_ribbon_followed_on_never_widens_past_its_widest_measured_section() ->
         centre, _, width = ribbon.predict(STEP_M)
         assert width <= widths.max() + 1e-9
         ribbon.extend(centre, width)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_leaning_plants_leaf_is_traced_from_where_it_leaves_the_stem(seed: int) -> None:
+    """A stem leaning 15 degrees stands 11 cm off its foot 40 cm up, where a leaf leaves it
+    pointing back over the foot: in plan view that leaf is nearest the foot 11 cm out, not at
+    its base. Its trace starts where it is nearest the stem's axis."""
+    lean = np.radians(15.0)
+    axis = StemAxis(np.zeros(3), np.array([np.sin(lean), 0.0, np.cos(lean)]))
+    node_x = 0.40 * np.tan(lean)
+    points = level_leaf(np.random.default_rng(seed), (node_x, 0.0), 180.0, 0.40, 0.6, 0.45, 6000)
+    found = trace_leaf(points, np.zeros(len(points), dtype=bool), axis.split(points)[1])
+    assert found is not None
+    assert found.ribbon.centres_m[0, 0] > node_x - 0.03  # from its base
+    assert found.ribbon.arc_m[-1] >= 0.5  # along the whole leaf (60 cm)
+    from_foot = trace_leaf(points, np.zeros(len(points), dtype=bool), from_origin(points))
+    # from the foot: it starts 11 cm out, its level sets run both ways, it stops within 3 cm
+    assert from_foot is None or from_foot.ribbon.arc_m[-1] < 0.1
