@@ -137,7 +137,7 @@ def trace_leaf(
     (``touching`` (M,): near another plant's points or ambiguous) or its width jumps, and (M,)
     which points the leaf holds: those of its traced part more than :data:`FIT_M` before its
     end; ``None`` for a leaf too short or too wide to trace. The axis, not the foot: a stem
-    leaning 15 degrees stands 10 cm off its foot 40 cm up, where a leaf pointing back over the
+    leaning 15 degrees stands 11 cm off its foot 40 cm up, where a leaf pointing back over the
     foot is nearer it in plan view half way out than at its base."""
     base = np.flatnonzero(radial_m <= radial_m.min() + LEVEL_M)
     distance = LeafGraph.of(points_m).geodesic_m(base)
