@@ -1,8 +1,9 @@
 """Organs of one plant: its stem (and the rolled whorl on top of it) and one instance per
 expanded leaf, from the plant's points alone (docs/RECONSTRUCTION.md, "Organs").
 
-1. **Stem axis**: the line through the medians of 1 cm slices of the points near the base's
-   column, refitted with a narrowing radius and without the slices a leaf pulls aside.
+1. **Stem axis**: a line through the stem's foot fitted to the stem-like points near it
+   (neighbourhoods that are thin upright columns, not sheets), refitted on those within a
+   narrowing band of it (:func:`fit_stem_axis`).
 2. **Stem**: the points within a cylinder around the axis a little wider than the stem; the
    part of it above the highest leaf's insertion is the whorl.
 3. **Leaves**: what is left are the leaves, each one a branch that leaves the stem: connected
