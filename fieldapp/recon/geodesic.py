@@ -70,22 +70,17 @@ def _pack(cells: NDArray[np.int64]) -> NDArray[np.int64]:
     return (shifted[:, 0] << 42) | (shifted[:, 1] << 21) | shifted[:, 2]
 
 
-def voxel_graph(
-    points_m: NDArray[np.float64], voxel_m: float, max_edge_m: float | None = None
-) -> VoxelGraph:
-    """The graph of the occupied voxels of ``points_m`` (N, 3): each joined to those of its 26
-    neighbours whose centroid is within ``max_edge_m`` (default 1.5 voxels) of its own, so
-    two leaves passing a few centimetres apart are not joined through a corner."""
-    max_edge_m = 1.5 * voxel_m if max_edge_m is None else max_edge_m
+def voxel_neighbours(
+    points_m: NDArray[np.float64], voxel_m: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], int]:
+    """The occupied ``voxel_m`` voxels of ``points_m`` (N, 3): (N,) each point's voxel, the
+    pairs of 26-neighbouring voxels (each pair once: rows, cols) and the number of voxels.
+    Voxels are numbered in the order of their keys (:func:`filters.voxel_keys`, which also
+    checks the extent)."""
     keys, first, inverse = np.unique(
         voxel_keys(points_m, voxel_m), return_index=True, return_inverse=True
-    )  # packed as _pack packs, the extent checked
-    unique_cells = np.floor(points_m[first] / voxel_m).astype(np.int64)  # in key order
-    inverse = inverse.ravel()
-    counts = np.bincount(inverse, minlength=len(unique_cells)).astype(np.float64)
-    centres = np.stack(
-        [np.bincount(inverse, points_m[:, a], len(unique_cells)) / counts for a in range(3)], 1
     )
+    unique_cells = np.floor(points_m[first] / voxel_m).astype(np.int64)  # packed as _pack packs
     rows, cols = [], []
     for offset in _HALF_NEIGHBOURHOOD:
         wanted = _pack(unique_cells + offset)
@@ -93,11 +88,22 @@ def voxel_graph(
         found = keys[at] == wanted
         rows.append(np.flatnonzero(found))
         cols.append(at[found])
-    row, col = np.concatenate(rows), np.concatenate(cols)
+    return inverse.ravel().astype(np.intp), np.concatenate(rows), np.concatenate(cols), len(keys)
+
+
+def voxel_graph(
+    points_m: NDArray[np.float64], voxel_m: float, max_edge_m: float | None = None
+) -> VoxelGraph:
+    """The graph of the occupied voxels of ``points_m`` (N, 3): each joined to those of its 26
+    neighbours whose centroid is within ``max_edge_m`` (default 1.5 voxels) of its own, so
+    two leaves passing a few centimetres apart are not joined through a corner."""
+    max_edge_m = 1.5 * voxel_m if max_edge_m is None else max_edge_m
+    inverse, row, col, n = voxel_neighbours(points_m, voxel_m)
+    counts = np.bincount(inverse, minlength=n).astype(np.float64)
+    centres = np.stack([np.bincount(inverse, points_m[:, a], n) / counts for a in range(3)], 1)
     length = np.linalg.norm(centres[row] - centres[col], axis=1)
     short = length <= max_edge_m
     row, col, length = row[short], col[short], length[short] + 1e-9
-    n = len(unique_cells)
     edges = coo_matrix(
         (
             np.concatenate([length, length]),
@@ -105,7 +111,7 @@ def voxel_graph(
         ),
         shape=(n, n),
     ).tocsr()
-    return VoxelGraph(centres, inverse.astype(np.intp), edges)
+    return VoxelGraph(centres, inverse, edges)
 
 
 def surface_normals(graph: VoxelGraph) -> NDArray[np.float64]:

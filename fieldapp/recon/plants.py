@@ -21,8 +21,13 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.filters import voxel_keys
-from fieldapp.recon.geodesic import UNREACHED, Assignment, assign_to_stems, voxel_graph
+from fieldapp.recon.geodesic import (
+    UNREACHED,
+    Assignment,
+    assign_to_stems,
+    voxel_graph,
+    voxel_neighbours,
+)
 from fieldapp.recon.grid import (
     GridNodes,
     apply_grid_prior_nodes,
@@ -43,12 +48,6 @@ MEETS_WARNING = "may be wider than measured, their widest extent meets another p
 report entry (with the other's id) and in the warnings."""
 
 NOISE = -1
-
-_HALF_NEIGHBOURHOOD = [
-    offset
-    for offset in itertools.product((-1, 0, 1), repeat=3)
-    if offset > (0, 0, 0)  # 13 of the 26 neighbours: each pair is visited once
-]
 
 
 def assign_by_settings(
@@ -72,29 +71,14 @@ def assign_by_settings(
     )
 
 
-def _pack(cells: NDArray[np.int64]) -> NDArray[np.int64]:
-    shifted = cells + (1 << 20)
-    return (shifted[:, 0] << 42) | (shifted[:, 1] << 21) | shifted[:, 2]
-
-
 def voxel_components(points_m: NDArray[np.float64], voxel_m: float) -> NDArray[np.intp]:
     """(N,) component label of every point (0-based) among 26-connected occupied voxels."""
     if len(points_m) == 0:
         return np.zeros(0, dtype=np.intp)
-    keys = voxel_keys(points_m, voxel_m)  # packed as _pack packs (and the extent checked)
-    unique, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    unique_cells = np.floor(points_m[first] / voxel_m).astype(np.int64)  # in key order
-    rows, cols = [], []
-    for offset in _HALF_NEIGHBOURHOOD:
-        neighbour_keys = _pack(unique_cells + np.array(offset, dtype=np.int64))
-        at = np.clip(np.searchsorted(unique, neighbour_keys), 0, len(unique) - 1)
-        found = unique[at] == neighbour_keys
-        rows.append(np.flatnonzero(found))
-        cols.append(at[found])
-    row, col = np.concatenate(rows), np.concatenate(cols)
-    graph = coo_matrix((np.ones(len(row)), (row, col)), shape=(len(unique), len(unique)))
+    inverse, row, col, voxels = voxel_neighbours(points_m, voxel_m)
+    graph = coo_matrix((np.ones(len(row)), (row, col)), shape=(voxels, voxels))
     _, component = connected_components(graph, directed=False)
-    return component[inverse.ravel()].astype(np.intp)  # type: ignore[no-any-return]
+    return component[inverse].astype(np.intp)  # type: ignore[no-any-return]
 
 
 def drop_small(labels: NDArray[np.intp], min_points: int) -> NDArray[np.intp]:
