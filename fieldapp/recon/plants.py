@@ -37,7 +37,7 @@ from fieldapp.recon.grid import (
 from fieldapp.recon.ribbons import follow_leaves
 from fieldapp.recon.settings import GridPrior, PlantSettings, StemSettings
 from fieldapp.recon.stems import Stem, find_stems
-from fieldapp.recon.traits import PlantTraits, measure_plant, smallest_enclosing_circle
+from fieldapp.recon.traits import PlantTraits, measure_plant
 
 WIDEST_M = 0.01
 """A plant's widest extent: its points within this of the circle that encloses it (plan
@@ -425,14 +425,14 @@ def widest_meets(plants: list[Plant], splits: list[list[int]], reach_m: float) -
     too narrow, whose leaf tip past a 4 cm gap went to the stem it touched, ended 2 cm from
     that plant (an unseen touching plot; over the touching bench, 9 of the 23 plants more than
     3 cm too narrow, and 30 of the 429 within 2 cm, RECONSTRUCTION.md)."""
-    by_id = {plant.id: plant.cloud.points for plant in plants}
+    by_id = {plant.id: plant for plant in plants}
     meets: dict[int, int] = {}
     for group in splits:
-        clouds = [by_id[plant_id] for plant_id in group]
+        clouds = [by_id[plant_id].cloud.points for plant_id in group]
         owner = np.repeat(np.array(group), [len(cloud) for cloud in clouds])
         tree = cKDTree(np.concatenate(clouds))
         for plant_id, points in zip(group, clouds, strict=True):
-            circle = smallest_enclosing_circle(points[:, :2])
+            circle = by_id[plant_id].traits.circle  # measured on these points
             off = np.hypot(points[:, 0] - circle.centre_x_m, points[:, 1] - circle.centre_y_m)
             widest = points[off >= circle.radius_m - WIDEST_M]
             near = owner[list(itertools.chain(*tree.query_ball_point(widest, reach_m)))]

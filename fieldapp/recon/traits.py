@@ -43,12 +43,20 @@ TOP_REACH_M = 0.02
 
 @dataclass(frozen=True)
 class PlantTraits:
+    """A plant's stem base (``x_m``, ``y_m``), height above ``ground_z_m``, point count and
+    ``circle``, the smallest circle enclosing its points in plan view (its width)."""
+
     x_m: float
     y_m: float
     height_m: float
-    width_m: float
     points: int
     ground_z_m: float
+    circle: Circle
+
+    @property
+    def width_m(self) -> float:
+        """Maximum width: the enclosing circle's diameter."""
+        return 2.0 * self.circle.radius_m
 
 
 @dataclass(frozen=True)
@@ -200,7 +208,7 @@ def measure_plant(
         x_m=float(base[0]),
         y_m=float(base[1]),
         height_m=top_z - ground_z,
-        width_m=2.0 * circle.radius_m,
         points=len(points_m),
         ground_z_m=ground_z,
+        circle=circle,
     )
