@@ -5,8 +5,11 @@ BIN    := $(VENV)/bin
 RUN_ARGS ?= gui
 # The suite runs on TEST_WORKERS processes (pytest-xdist), a test file per process at a
 # time; each process one OpenMP thread, so two workers fill two cores without spinning.
-# TEST_WORKERS=0 runs it in this process (a debugger, -x, -s).
+# TEST_WORKERS=0 runs it in this process (a debugger, -x, -s). A worker that crashes
+# (a segfault) ends the run, naming its test: pytest-xdist 3.8 replaces a crashed worker by
+# default, and under --dist loadfile the run can then hang until CI's limit (xdist #784, #1323).
 TEST_WORKERS ?= 2
+XDIST  := -n $(TEST_WORKERS) --dist loadfile --max-worker-restart 0
 LOCK   := requirements.lock
 PIP    := $(BIN)/python -m pip install --quiet -c $(LOCK)
 
@@ -22,7 +25,7 @@ test: $(VENV)/.installed-dev
 	$(BIN)/mypy fieldapp devices ui
 	$(BIN)/lint-imports
 	QT_QPA_PLATFORM=offscreen OMP_NUM_THREADS=$${OMP_NUM_THREADS:-1} \
-	  $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=15 $(PYTEST_ARGS)
+	  $(BIN)/python -m pytest $(XDIST) --durations=15 $(PYTEST_ARGS)
 
 sysdeps:
 	@sh packaging/sysdeps.sh

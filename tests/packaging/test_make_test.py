@@ -1,0 +1,55 @@
+"""`make test` runs the suite on pytest-xdist workers: a worker that crashes (a segfault in a
+binding) must end the run red, naming the test, not hang it. pytest-xdist 3.8 replaces a
+crashed worker by default, and under ``--dist loadfile`` the run can then wait forever on the
+replacement (pytest-xdist #784, #1323); CI saw exactly that, killed at its 90-minute limit."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+MAKEFILE = Path(__file__).resolve().parents[2] / "Makefile"
+HANG_S = 240.0  # a hang detector only (under pytest-timeout's 300 s): the toy suite takes seconds
+
+
+def make_test_xdist_options(workers: int) -> list[str]:
+    """The worker options the Makefile's ``test`` target gives pytest."""
+    text = MAKEFILE.read_text()
+    match = re.search(r"^XDIST\s*:=\s*(.+)$", text, re.MULTILINE)
+    assert match, "Makefile: no XDIST := line"
+    recipe = text.split("\ntest:", 1)[1].split("\n\n", 1)[0]
+    assert "$(XDIST)" in recipe, "the test target does not pass XDIST to pytest"
+    return match.group(1).replace("$(TEST_WORKERS)", str(workers)).split()
+
+
+def test_a_crashing_worker_ends_the_run_and_names_its_test(tmp_path: Path) -> None:
+    for name in ("test_a.py", "test_c.py", "test_d.py"):
+        (tmp_path / name).write_text("def test_one():\n    pass\n\ndef test_two():\n    pass\n")
+    (tmp_path / "test_b.py").write_text(
+        textwrap.dedent(
+            """
+            import ctypes
+
+            def test_before():
+                pass
+
+            def test_crash():
+                ctypes.string_at(0)  # a segfault, as a binding's would be
+
+            def test_after():
+                pass
+            """
+        )
+    )
+    command = [sys.executable, "-m", "pytest", *make_test_xdist_options(2)]
+    command += ["-p", "no:cacheprovider", "-p", "no:dash", "-o", "addopts=", "-q"]
+    run = subprocess.run(
+        command, cwd=tmp_path, capture_output=True, text=True, timeout=HANG_S, check=False
+    )
+    out = run.stdout + run.stderr
+    assert run.returncode != 0, out
+    assert "crashed while running 'test_b.py::test_crash'" in out, out
+    assert "replacing crashed worker" not in out, out
