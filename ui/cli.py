@@ -26,7 +26,7 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(handler=run)
 
 
-QT_PACKAGES = frozenset({"PySide6", "shiboken6", "pyqtgraph", "superqt", "OpenGL"})
+QT_PACKAGES = frozenset({"PySide6", "shiboken6", "pyqtgraph", "OpenGL"})
 
 
 def run(args: argparse.Namespace) -> int:

@@ -5,17 +5,19 @@ worker."""
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
 from PySide6 import QtWidgets
-from superqt.utils import create_worker
+
+from ui.workers import Job
 
 from .thread_guard import ThreadGuard
 
 
-def _run_worker(function: object, qtbot) -> None:
-    worker = create_worker(function, _start_thread=False)
-    with qtbot.waitSignal(worker.finished, timeout=20_000):
-        worker.start()
+def _run_worker(function: Callable[[], object], qtbot) -> None:
+    ended: list[bool] = []
+    Job(function, on_finished=lambda: ended.append(True)).start()
+    qtbot.waitUntil(lambda: bool(ended), timeout=20_000)
 
 
 def test_a_widget_read_from_a_worker_or_a_thread_is_caught(

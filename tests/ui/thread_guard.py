@@ -2,8 +2,9 @@
 
 Qt does not check it: reading ``QSpinBox.value()`` from a worker thread usually works, and now
 and then returns a torn value or crashes. While a GUI test runs, every Python thread and every
-superqt worker runs under a profiler that records each call of a method bound to a
-``QWidget`` (or a graphics item) made off the GUI thread, with the caller's file and line.
+job on Qt's thread pool (:class:`ui.workers.Job`) runs under a profiler that records each call
+of a method bound to a ``QWidget`` (or a graphics item) made off the GUI thread, with the
+caller's file and line.
 The ``no_widgets_off_gui_thread`` fixture fails the test that made any.
 """
 
@@ -17,7 +18,8 @@ from types import FrameType
 from typing import Any
 
 from PySide6 import QtWidgets
-from superqt.utils._qthreading import WorkerBase
+
+from ui.workers import Job
 
 WIDGET_TYPES = (QtWidgets.QWidget, QtWidgets.QGraphicsItem)
 
@@ -42,20 +44,20 @@ class ThreadGuard:
 
     @contextmanager
     def installed(self) -> Iterator[None]:
-        original_run: Callable[..., Any] = WorkerBase.run
+        original_work: Callable[..., Any] = Job._work
         guard = self
 
-        def guarded_run(worker: WorkerBase[Any]) -> None:
+        def guarded_work(job: Job) -> None:
             sys.setprofile(guard.profile)
             try:
-                original_run(worker)
+                original_work(job)
             finally:
                 sys.setprofile(None)
 
         threading.setprofile(self.profile)
-        WorkerBase.run = guarded_run  # type: ignore[method-assign]
+        Job._work = guarded_work  # type: ignore[method-assign]
         try:
             yield
         finally:
-            WorkerBase.run = original_run  # type: ignore[method-assign]
+            Job._work = original_work  # type: ignore[method-assign]
             threading.setprofile(None)  # type: ignore[arg-type]

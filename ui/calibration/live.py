@@ -6,17 +6,18 @@ of where corners have been seen."""
 from __future__ import annotations
 
 import logging
+from functools import partial
 from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 from PySide6 import QtCore, QtGui, QtWidgets
-from superqt.utils import create_worker
 
 from devices.camera.stream import FrameStream
 from fieldapp.calib.board import Board, detect_corners, to_gray8
 from fieldapp.calib.intrinsics import COVERAGE_GRID, missing_regions
+from ui.workers import WorkerSet
 
 log = logging.getLogger(__name__)
 
@@ -69,8 +70,7 @@ class BoardPreview(QtWidgets.QWidget):
         self.stream: FrameStream | None = None
         self.image: NDArray[Any] | None = None
         self.corners: NDArray[np.float32] | None = None
-        self._busy = False
-        self._workers: set[Any] = set()
+        self._workers = WorkerSet()
         self.picture = picture_label("no image yet", 320, 265)
         self.state = QtWidgets.QLabel("")
         self.state.setObjectName("boardState")
@@ -96,17 +96,13 @@ class BoardPreview(QtWidgets.QWidget):
 
     def show_image(self, image: NDArray[Any]) -> None:
         """Detect the board in ``image`` on a worker; the result is drawn when it comes."""
-        if self._busy:
+        if self._workers.busy:  # one detection at a time: frames that come meanwhile are skipped
             return
-        self._busy = True
-        worker: Any = create_worker(
-            detect_corners, image, self.board, _start_thread=False, _ignore_errors=True
+        self._workers.run(
+            partial(detect_corners, image, self.board),
+            lambda corners: self._show(image, corners),
+            lambda error: self._failed(image, error),
         )
-        worker.returned.connect(lambda corners: self._show(image, corners))
-        worker.errored.connect(lambda error: self._failed(image, error))
-        worker.finished.connect(lambda: self._done(worker))
-        self._workers.add(worker)
-        worker.start()
 
     def show_detected(self, image: NDArray[Any], corners: NDArray[np.float32] | None) -> None:
         """Show ``image`` with corners already found (a view taken earlier): no detection."""
@@ -114,11 +110,7 @@ class BoardPreview(QtWidgets.QWidget):
 
     def wait(self, timeout_s: float = 10.0) -> bool:
         """Process events until no detection is running (for closing and tests)."""
-        deadline = QtCore.QDeadlineTimer(int(timeout_s * 1000))
-        while self._workers and not deadline.hasExpired():
-            QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
-            QtCore.QThread.msleep(2)
-        return not self._workers
+        return self._workers.wait(timeout_s)
 
     def stop(self) -> None:
         self.follow(None)
@@ -150,10 +142,6 @@ class BoardPreview(QtWidgets.QWidget):
     def _failed(self, image: NDArray[Any], error: BaseException) -> None:
         log.warning("board detection failed: %s", error)
         self._show(image, None)
-
-    def _done(self, worker: Any) -> None:
-        self._busy = False
-        self._workers.discard(worker)
 
 
 class CoverageMap(QtWidgets.QWidget):

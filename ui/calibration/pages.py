@@ -9,12 +9,12 @@ from pathlib import Path
 from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
-from superqt.utils import create_worker
 
 from fieldapp.calib import service
 from fieldapp.calib.verdict import Level, Verdict
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Calibration
+from ui.workers import Job as WorkerJob
 
 log = logging.getLogger(__name__)
 
@@ -65,7 +65,7 @@ class SolvePage(QtWidgets.QWizardPage):
         self.picture, self.show_picture = picture, show_picture
         self.result: Any = None
         self.error: str | None = None
-        self.worker: Any = None
+        self.worker: WorkerJob | None = None
         self.progress = QtWidgets.QProgressBar()
         self.progress.setRange(0, 0)
         self.status = QtWidgets.QLabel("")
@@ -106,13 +106,11 @@ class SolvePage(QtWidgets.QWizardPage):
             self.completeChanged.emit()
             return
         self.progress.show()
-        worker: Any = create_worker(job, _start_thread=False, _ignore_errors=True)
-        worker.returned.connect(self._solved)
-        worker.errored.connect(self._failed)
-        worker.finished.connect(self._finished)
-        self.worker = worker
+        self.worker = WorkerJob(
+            job, on_done=self._solved, on_error=self._failed, on_finished=self._finished
+        )
         self.completeChanged.emit()
-        worker.start()
+        self.worker.start()
 
     def isComplete(self) -> bool:
         return self.result is not None and not self.running

@@ -29,6 +29,7 @@ from ui.results.scene import CloudScene, build_scene
 from ui.results.tables import PlantTableModel, leaf_model, station_model
 from ui.results.topmap import TopMap
 from ui.results.view3d import CloudView
+from ui.workers import WorkerSet
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +52,7 @@ class ResultsPanel(QtWidgets.QWidget):
         self.runner.succeeded.connect(self._succeeded)
         self.runner.failed.connect(self._failed)
         self.runner.cancelled.connect(self._cancelled)
+        self._export_jobs = WorkerSet()
         layout = self._build()
         self.correction = CorrectionBar(self)  # merge, split, delete, renumber, undo
         layout.insertWidget(3, self.correction)
@@ -191,6 +193,7 @@ class ResultsPanel(QtWidgets.QWidget):
         """Stop a running reconstruction (the main window calls this as it closes)."""
         self.runner.cancel()
         self.runner.wait()
+        self._export_jobs.wait()
         self.correction.shutdown()
 
     # --- building ----------------------------------------------------------------------
@@ -380,17 +383,14 @@ class ResultsPanel(QtWidgets.QWidget):
         name = QtWidgets.QFileDialog.getExistingDirectory(self, "Export into folder")
         if not name:
             return
-        from superqt.utils import create_worker
-
         try:
             job = self.export_job(Path(name))
         except FieldappError as error:
             self.error.emit(f"export: {error}")
             return
-        worker = create_worker(job, _start_thread=False, _ignore_errors=True)
-        worker.returned.connect(
-            lambda paths: self.stage.setText(f"exported {len(paths)} files to {name}")
-        )
-        worker.errored.connect(lambda e: self.error.emit(f"export: {e}"))
         self.stage.setText("exporting…")
-        worker.start()
+        self._export_jobs.run(
+            job,
+            lambda paths: self.stage.setText(f"exported {len(paths)} files to {name}"),
+            lambda e: self.error.emit(f"export: {e}"),
+        )

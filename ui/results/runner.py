@@ -1,6 +1,6 @@
 """The reconstruction off the GUI: it runs in a child process
 (:func:`fieldapp.recon.process.reconstruct_in_process`: Open3D's native work would otherwise
-stall the GUI thread), a superqt generator worker relays every :class:`Progress` to the GUI
+stall the GUI thread), a :class:`ui.workers.Job` relays every :class:`Progress` to the GUI
 thread as a signal and then reads the results back, and cancelling stops the child at its next
 step boundary."""
 
@@ -10,10 +10,8 @@ import logging
 from collections.abc import Generator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from PySide6 import QtCore, QtWidgets
-from superqt.utils import GeneratorWorker, create_worker
 
 from fieldapp.errors import FieldappError
 from fieldapp.io.session import Session
@@ -22,12 +20,9 @@ from fieldapp.recon.progress import Progress
 from fieldapp.recon.settings import ReconstructionSettings
 from ui.results.data import PlotResults, load_results_dir
 from ui.results.scene import CloudScene, build_scene
+from ui.workers import Job
 
 log = logging.getLogger(__name__)
-
-
-class WorkerCrashed(Exception):
-    """A RuntimeError inside the reconstruction, passed on as an ordinary error."""
 
 
 @dataclass
@@ -116,47 +111,40 @@ class ReconstructionRunner(QtCore.QObject):
 
     def __init__(self, parent: QtCore.QObject | None = None) -> None:
         super().__init__(parent)
-        self._worker: GeneratorWorker[Progress, None, Outcome] | None = None
-        self._steps: Generator[Progress, None, Outcome] | None = None
+        self._job: Job | None = None
 
     @property
     def running(self) -> bool:
-        return self._worker is not None
+        return self._job is not None
 
     def start(self, session: Session, settings: ReconstructionSettings, results_dir: Path) -> None:
         """Reconstruct ``session`` into ``results_dir``; refused while one is running."""
-        if self._worker is not None:
+        if self._job is not None:
             raise FieldappError("a reconstruction is already running")
-        self._steps = reconstruction_steps(session, settings, results_dir)
-        steps = self._steps
-
-        def work() -> Generator[Progress, None, Outcome]:
-            try:
-                return (yield from steps)
-            except RuntimeError as error:  # superqt would take it for a deleted worker
-                raise WorkerCrashed(f"{type(error).__name__}: {error}") from error
-
-        worker: Any = create_worker(work, _start_thread=False, _ignore_errors=True)
-        worker.yielded.connect(self.progressed.emit)
-        worker.returned.connect(self._on_returned)
-        worker.errored.connect(self._on_errored)
-        worker.aborted.connect(self._on_aborted)
-        worker.finished.connect(self._on_finished)
-        self._worker = worker
-        worker.start()
+        steps = reconstruction_steps(session, settings, results_dir)
+        self._job = Job(
+            lambda: steps,
+            on_progress=self.progressed.emit,
+            on_done=self._on_returned,
+            on_error=self._on_errored,
+            on_cancelled=self.cancelled.emit,
+            on_finished=self._on_finished,
+        )
+        self._job.start()
 
     def cancel(self) -> None:
-        """Ask the work to stop at its next step boundary (``cancelled`` follows)."""
-        if self._worker is not None:
-            self._worker.quit()
+        """Ask the work to stop at its next step boundary (``cancelled`` follows; the steps
+        are closed on the worker, which stops the child process)."""
+        if self._job is not None:
+            self._job.cancel()
 
     def wait(self, timeout_s: float = 30.0) -> bool:
         """Process events until the run has ended; False on timeout."""
         deadline = QtCore.QDeadlineTimer(int(timeout_s * 1000))
-        while self._worker is not None and not deadline.hasExpired():
+        while self._job is not None and not deadline.hasExpired():
             QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
             QtCore.QThread.msleep(2)
-        return self._worker is None
+        return self._job is None
 
     def _on_returned(self, outcome: Outcome) -> None:
         self.succeeded.emit(outcome)
@@ -169,14 +157,5 @@ class ReconstructionRunner(QtCore.QObject):
             message = f"unexpected error ({type(error).__name__}): {error}"
         self.failed.emit(message)
 
-    def _on_aborted(self) -> None:
-        if self._steps is not None:
-            try:
-                self._steps.close()
-            except ValueError:  # still executing: it is closed when the worker lets go of it
-                log.debug("reconstruction generator still running at cancel")
-        self.cancelled.emit()
-
     def _on_finished(self) -> None:
-        self._worker = None
-        self._steps = None
+        self._job = None
