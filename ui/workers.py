@@ -98,6 +98,7 @@ class Job:
         if self.running:
             raise RuntimeError("this job is already running")
         self._relay = _gui_relay()
+        self._cancel.clear()
         self.running = True
         QtCore.QThreadPool.globalInstance().start(self._work)
 
