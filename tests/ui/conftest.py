@@ -4,10 +4,12 @@ that a test leaves no thread and no top-level widget behind."""
 from __future__ import annotations
 
 import gc
+import re
 import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import shiboken6
@@ -60,6 +62,28 @@ def no_widgets_off_gui_thread() -> Iterator[ThreadGuard]:
         yield guard
     unique = list(dict.fromkeys(guard.violations))
     assert not unique, "widgets touched off the GUI thread:\n" + "\n".join(unique[:20])
+
+
+THREAD_WARNING = re.compile(r"thread", re.IGNORECASE)
+"""Qt's warnings of an object used across threads: "QObject::startTimer: Timers cannot be
+started from another thread", "QObject: Cannot create children for a parent that is in a
+different thread", "QObject::killTimer: Timers cannot be stopped from another thread", ..."""
+
+
+def thread_warnings(messages: list[str]) -> list[str]:
+    return [message for message in messages if THREAD_WARNING.search(message)]
+
+
+@pytest.fixture(autouse=True)
+def no_qt_thread_warnings(request: pytest.FixtureRequest, qtlog: Any) -> Iterator[None]:
+    """Fail the test when Qt warned of an object used across threads. Qt only warns, and
+    carries on with an object whose thread is wrong; what follows can crash much later (the
+    kind of fault that ended a CI run with a segfault inside ``processEvents``)."""
+    yield
+    if request.node.get_closest_marker("qt_thread_warning_expected"):
+        return
+    found = thread_warnings([record.message for record in qtlog.records])
+    assert not found, "Qt warned of a cross-thread use:\n" + "\n".join(found[:20])
 
 
 @pytest.fixture

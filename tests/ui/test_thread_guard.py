@@ -1,16 +1,19 @@
-"""The guard behind every GUI test (``no_widgets_off_gui_thread``) catches a widget read from a
+"""The guards behind every GUI test: ``no_widgets_off_gui_thread`` catches a widget read from a
 worker or a Python thread, and stays quiet for the GUI thread and for plain data handed to a
-worker."""
+worker; ``no_qt_thread_warnings`` catches Qt's own warnings of an object used across threads."""
 
 from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from typing import Any
 
-from PySide6 import QtWidgets
+import pytest
+from PySide6 import QtCore, QtWidgets
 
 from ui.workers import Job
 
+from .conftest import thread_warnings
 from .thread_guard import ThreadGuard
 
 
@@ -48,3 +51,14 @@ def test_plain_data_handed_to_a_worker_is_fine(
     value = spin.value()
     _run_worker(lambda: value * 2, qtbot)
     assert no_widgets_off_gui_thread.violations == []
+
+
+@pytest.mark.qt_thread_warning_expected
+def test_qt_warning_of_a_timer_started_from_another_thread_is_caught(qtlog: Any) -> None:
+    timer = QtCore.QTimer()  # lives on the GUI thread
+    thread = threading.Thread(target=lambda: timer.start(1000), name="bad")
+    thread.start()
+    thread.join(20)
+    timer.deleteLater()
+    found = thread_warnings([record.message for record in qtlog.records])
+    assert any("Timers cannot be started from another thread" in m for m in found), found
