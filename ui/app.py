@@ -24,6 +24,9 @@ from ui.state import UiState
 log = logging.getLogger(__name__)
 
 STARTUP_PROBE_ENV = "FIELDAPP_STARTUP_PROBE"
+
+EXIT_WAIT_MS = 30_000
+"""How long the closed application waits for background jobs still on Qt's thread pool."""
 """A file path: once the first window is shown, write when, and close (the start-up benchmark)."""
 HEAVY_MODULES = ("open3d", "scipy", "matplotlib", "dask", "cv2", "sklearn", "small_gicp")
 """Imported only when used, never to show the first window."""
@@ -106,6 +109,10 @@ def run_gui(settings_path: Path | None = None, connect: bool = True) -> int:
         return int(app.exec())
     finally:
         quitting.restore()
+        # No job may still run Python on a pool thread while the interpreter shuts down (an
+        # abort at exit); the pages already waited for their own when the window closed.
+        if not QtCore.QThreadPool.globalInstance().waitForDone(EXIT_WAIT_MS):
+            log.warning("background work still running at exit")
 
 
 def _window_shown(path: Path, window: QtWidgets.QWidget) -> None:
