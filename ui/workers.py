@@ -108,10 +108,6 @@ class Job:
         result is dropped. ``on_cancelled`` follows, unless it had already ended."""
         self._cancel.set()
 
-    @property
-    def cancel_requested(self) -> bool:
-        return self._cancel.is_set()
-
     # --- on the pool's thread -----------------------------------------------------------------
 
     def _work(self) -> None:
