@@ -9,9 +9,11 @@ import re
 import subprocess
 import sys
 import textwrap
+import tomllib
 from pathlib import Path
 
 MAKEFILE = Path(__file__).resolve().parents[2] / "Makefile"
+PYPROJECT = MAKEFILE.with_name("pyproject.toml")
 HANG_S = 240.0  # a hang detector only (under pytest-timeout's 300 s): the toy suite takes seconds
 
 
@@ -53,3 +55,31 @@ def test_a_crashing_worker_ends_the_run_and_names_its_test(tmp_path: Path) -> No
     assert run.returncode != 0, out
     assert "crashed while running 'test_b.py::test_crash'" in out, out
     assert "replacing crashed worker" not in out, out
+
+
+def test_a_test_stuck_in_c_code_ends_the_run_and_names_itself(tmp_path: Path) -> None:
+    """A test blocked inside C code (a Qt wait here) never returns to the interpreter, so
+    pytest-timeout's signal method would wait with it, and the run with it; the project's
+    method (``timeout_method`` in pyproject.toml) ends it: the worker is ended (its stacks go
+    to its own stderr), and the run with it, naming the test."""
+    (tmp_path / "test_a.py").write_text("def test_one():\n    pass\n")
+    (tmp_path / "test_stuck.py").write_text(
+        textwrap.dedent(
+            """
+            from PySide6 import QtCore
+
+            def test_stuck():
+                QtCore.QThread.sleep(3600)  # retried on EINTR: no signal handler ever runs
+            """
+        )
+    )
+    options = tomllib.loads(PYPROJECT.read_text())["tool"]["pytest"]["ini_options"]
+    command = [sys.executable, "-m", "pytest", *make_test_xdist_options(2)]
+    command += ["-p", "no:cacheprovider", "-p", "no:dash", "-o", "addopts=", "-q"]
+    command += ["-o", "timeout=2", "-o", f"timeout_method={options['timeout_method']}"]
+    run = subprocess.run(
+        command, cwd=tmp_path, capture_output=True, text=True, timeout=HANG_S, check=False
+    )
+    out = run.stdout + run.stderr
+    assert run.returncode != 0, out
+    assert "crashed while running 'test_stuck.py::test_stuck'" in out, out
