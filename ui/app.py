@@ -24,10 +24,9 @@ from ui.state import UiState
 log = logging.getLogger(__name__)
 
 STARTUP_PROBE_ENV = "FIELDAPP_STARTUP_PROBE"
-
+"""A file path: once the first window is shown, write when, and close (the start-up benchmark)."""
 EXIT_WAIT_MS = 30_000
 """How long the closed application waits for background jobs still on Qt's thread pool."""
-"""A file path: once the first window is shown, write when, and close (the start-up benchmark)."""
 HEAVY_MODULES = ("open3d", "scipy", "matplotlib", "dask", "cv2", "sklearn", "small_gicp")
 """Imported only when used, never to show the first window."""
 

@@ -163,14 +163,9 @@ class Background(Generic[T]):
 
 def _process_events_until(condition: Callable[[], bool], deadline_s: float) -> bool:
     """Process Qt events until ``condition()`` holds or the monotonic deadline passes."""
-    from PySide6 import QtCore
+    from ui.workers import process_events_until
 
-    while time.monotonic() < deadline_s:
-        QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
-        if condition():
-            return True
-        time.sleep(0.005)
-    return condition()
+    return process_events_until(condition, max(deadline_s - time.monotonic(), 0.0))
 
 
 class Watchdog:

@@ -197,11 +197,17 @@ class WorkerSet:
 
     def wait(self, timeout_s: float = 10.0) -> bool:
         """Process events until every job has finished; False on timeout."""
-        deadline = QtCore.QDeadlineTimer(int(timeout_s * 1000))
-        while self._running and not deadline.hasExpired():
-            QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
-            QtCore.QThread.msleep(5)
-        return not self._running
+        return process_events_until(lambda: not self._running, timeout_s)
+
+
+def process_events_until(ended: Callable[[], bool], timeout_s: float) -> bool:
+    """Process the GUI thread's events until ``ended()`` (a job's owner waiting for it, as a
+    window closes); False when ``timeout_s`` passed first."""
+    deadline = QtCore.QDeadlineTimer(int(timeout_s * 1000))
+    while not ended() and not deadline.hasExpired():
+        QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
+        QtCore.QThread.msleep(2)
+    return ended()
 
 
 def _log_error(error: BaseException) -> None:

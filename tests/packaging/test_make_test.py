@@ -27,6 +27,17 @@ def make_test_xdist_options(workers: int) -> list[str]:
     return match.group(1).replace("$(TEST_WORKERS)", str(workers)).split()
 
 
+def run_like_make_test(folder: Path, *options: str) -> tuple[int, str]:
+    """pytest over the toy suite in ``folder`` with the Makefile's worker options (and
+    ``options``): its exit code and output."""
+    command = [sys.executable, "-m", "pytest", *make_test_xdist_options(2), *options]
+    command += ["-p", "no:cacheprovider", "-p", "no:dash", "-o", "addopts=", "-q"]
+    run = subprocess.run(
+        command, cwd=folder, capture_output=True, text=True, timeout=HANG_S, check=False
+    )
+    return run.returncode, run.stdout + run.stderr
+
+
 def test_a_crashing_worker_ends_the_run_and_names_its_test(tmp_path: Path) -> None:
     for name in ("test_a.py", "test_c.py", "test_d.py"):
         (tmp_path / name).write_text("def test_one():\n    pass\n\ndef test_two():\n    pass\n")
@@ -46,13 +57,8 @@ def test_a_crashing_worker_ends_the_run_and_names_its_test(tmp_path: Path) -> No
             """
         )
     )
-    command = [sys.executable, "-m", "pytest", *make_test_xdist_options(2)]
-    command += ["-p", "no:cacheprovider", "-p", "no:dash", "-o", "addopts=", "-q"]
-    run = subprocess.run(
-        command, cwd=tmp_path, capture_output=True, text=True, timeout=HANG_S, check=False
-    )
-    out = run.stdout + run.stderr
-    assert run.returncode != 0, out
+    code, out = run_like_make_test(tmp_path)
+    assert code != 0, out
     assert "crashed while running 'test_b.py::test_crash'" in out, out
     assert "replacing crashed worker" not in out, out
 
@@ -74,12 +80,7 @@ def test_a_test_stuck_in_c_code_ends_the_run_and_names_itself(tmp_path: Path) ->
         )
     )
     options = tomllib.loads(PYPROJECT.read_text())["tool"]["pytest"]["ini_options"]
-    command = [sys.executable, "-m", "pytest", *make_test_xdist_options(2)]
-    command += ["-p", "no:cacheprovider", "-p", "no:dash", "-o", "addopts=", "-q"]
-    command += ["-o", "timeout=2", "-o", f"timeout_method={options['timeout_method']}"]
-    run = subprocess.run(
-        command, cwd=tmp_path, capture_output=True, text=True, timeout=HANG_S, check=False
-    )
-    out = run.stdout + run.stderr
-    assert run.returncode != 0, out
+    method = f"timeout_method={options['timeout_method']}"
+    code, out = run_like_make_test(tmp_path, "-o", "timeout=2", "-o", method)
+    assert code != 0, out
     assert "crashed while running 'test_stuck.py::test_stuck'" in out, out

@@ -12,7 +12,6 @@ from collections.abc import Generator
 from typing import Any
 
 import pytest
-from pytestqt.qtbot import QtBot
 
 from ui.workers import Job, WorkerSet
 
@@ -26,7 +25,7 @@ def on_gui_thread() -> bool:
 
 
 def test_progress_then_the_result_then_finished_all_on_the_gui_thread(
-    qtbot: QtBot, wait_until: WaitUntil
+    wait_until: WaitUntil,
 ) -> None:
     seen: list[tuple[str, Any, bool]] = []
     ran_on: list[bool] = []
@@ -111,7 +110,7 @@ def test_a_worker_set_is_idle_when_its_callback_runs(wait_until: WaitUntil) -> N
     assert busy_in_callback == [False]
 
 
-def test_nothing_a_job_was_given_outlives_it(qtbot: QtBot, wait_until: WaitUntil) -> None:
+def test_nothing_a_job_was_given_outlives_it(wait_until: WaitUntil) -> None:
     class Frame:  # what a live view hands its detection jobs
         pass
 

@@ -15,6 +15,7 @@ from fieldapp.calib.verdict import Level, Verdict
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import Calibration
 from ui.workers import Job as WorkerJob
+from ui.workers import process_events_until
 
 log = logging.getLogger(__name__)
 
@@ -116,11 +117,7 @@ class SolvePage(QtWidgets.QWizardPage):
         return self.result is not None and not self.running
 
     def wait(self, timeout_s: float = 60.0) -> bool:
-        deadline = QtCore.QDeadlineTimer(int(timeout_s * 1000))
-        while self.worker is not None and not deadline.hasExpired():
-            QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
-            QtCore.QThread.msleep(2)
-        return self.worker is None
+        return process_events_until(lambda: self.worker is None, timeout_s)
 
     def _solved(self, result: Any) -> None:
         lines, verdict = self.describe(result)

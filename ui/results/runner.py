@@ -20,7 +20,7 @@ from fieldapp.recon.progress import Progress
 from fieldapp.recon.settings import ReconstructionSettings
 from ui.results.data import PlotResults, load_results_dir
 from ui.results.scene import CloudScene, build_scene
-from ui.workers import Job
+from ui.workers import Job, process_events_until
 
 log = logging.getLogger(__name__)
 
@@ -140,11 +140,7 @@ class ReconstructionRunner(QtCore.QObject):
 
     def wait(self, timeout_s: float = 30.0) -> bool:
         """Process events until the run has ended; False on timeout."""
-        deadline = QtCore.QDeadlineTimer(int(timeout_s * 1000))
-        while self._job is not None and not deadline.hasExpired():
-            QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
-            QtCore.QThread.msleep(2)
-        return self._job is None
+        return process_events_until(lambda: self._job is None, timeout_s)
 
     def _on_returned(self, outcome: Outcome) -> None:
         self.succeeded.emit(outcome)
