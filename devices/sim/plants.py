@@ -30,6 +30,10 @@ GROWTH_PER_DAY = 0.05
 
 STAGES = ("seedling", "touching")
 PLANT_MODELS = ("distichous", "irregular")
+LEAN_DEG = (1.0, 5.0)
+"""This model's stems lean this many degrees (uniform), each in its own direction."""
+MAX_LEAN_DEG = 30.0
+"""The largest lean a plot can be asked for (``max_lean_deg``): lodging is not simulated."""
 """``distichous`` (the default, this module's) and ``irregular``
 (:mod:`devices.sim.plants_irregular`, held out from the plants step's tuning)."""
 TOUCHING_HEIGHT_M = (0.55, 0.90)
@@ -88,6 +92,13 @@ def leaves_on_day(base_leaves: int, day: int) -> int:
     return int(min(MAX_LEAVES, base_leaves + max(day, 0) // 5))
 
 
+def check_lean(max_lean_deg: float) -> float:
+    """``max_lean_deg`` if it is a lean a plot can have (0 to :data:`MAX_LEAN_DEG`)."""
+    if not 0.0 <= max_lean_deg <= MAX_LEAN_DEG:
+        raise ValueError(f"max_lean_deg must be within 0..{MAX_LEAN_DEG:g}, got {max_lean_deg!r}")
+    return max_lean_deg
+
+
 def growth_factor(day: int) -> float:
     """Height relative to day 0."""
     return 1.0 + GROWTH_PER_DAY * max(day, 0)
@@ -100,9 +111,12 @@ def make_plant(
     ground_z_m: float,
     stage: str = "seedling",
     model: str = "distichous",
+    max_lean_deg: float | None = None,
 ) -> PlantMesh:
     """Draw the plant of ``seed`` on ``day`` at ``stage`` (one of :data:`STAGES`), standing at
     ``base_xy_m`` on ground ``ground_z_m``, from plant ``model`` (one of :data:`PLANT_MODELS`).
+    ``max_lean_deg``: the model's lean range scaled to end there (same draws, so the same plant
+    leaning more or less); ``None``: the model's own.
 
     Leaf tips may droop below uneven soil: lift them with :func:`settle_on_ground`.
     """
@@ -113,12 +127,14 @@ def make_plant(
     if model == "irregular":
         from devices.sim.plants_irregular import make_irregular_plant
 
-        return make_irregular_plant(seed, day, base_xy_m, ground_z_m, stage)
+        return make_irregular_plant(seed, day, base_xy_m, ground_z_m, stage, max_lean_deg)
     rng = np.random.default_rng([seed, 7])
     base_leaves = int(rng.integers(5, 8))
     count = leaves_on_day(base_leaves, day)
     azimuth0, lean_dir = rng.uniform(0.0, 2 * np.pi, 2)
-    lean_deg = rng.uniform(1.0, 5.0)
+    lean_deg = rng.uniform(*LEAN_DEG)
+    if max_lean_deg is not None:
+        lean_deg *= check_lean(max_lean_deg) / LEAN_DEG[1]
     size = rng.uniform(0.85, 1.15)
     height_m = HEIGHT_DAY0_M * size * growth_factor(day)
     reach = 1.0

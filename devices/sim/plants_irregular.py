@@ -43,6 +43,7 @@ from devices.sim.plants import (
     PlantMesh,
     _offset_triangles,
     _strip,
+    check_lean,
     growth_factor,
     leaves_on_day,
 )
@@ -58,12 +59,20 @@ SEEDLING_LONGEST_LEAF = (0.8, 1.1)
 TOUCHING_LONGEST_LEAF = (0.95, 1.15)
 """The longest leaf relative to the plant's height (touching stage: 55-100 cm long)."""
 HABITS = ("erect", "arching", "drooping")
+LEAN_DEG = (0.0, 6.0)
+"""This model's stems lean this many degrees (uniform), each in its own direction."""
 
 
 def make_irregular_plant(
-    seed: int, day: int, base_xy_m: tuple[float, float], ground_z_m: float, stage: str
+    seed: int,
+    day: int,
+    base_xy_m: tuple[float, float],
+    ground_z_m: float,
+    stage: str,
+    max_lean_deg: float | None = None,
 ) -> PlantMesh:
-    """The ``irregular`` plant of ``seed`` on ``day`` at ``stage`` standing at ``base_xy_m``."""
+    """The ``irregular`` plant of ``seed`` on ``day`` at ``stage`` standing at ``base_xy_m``
+    (``max_lean_deg``: as :func:`devices.sim.plants.make_plant`'s)."""
     rng = np.random.default_rng([seed, 29])
     base_leaves = int(rng.integers(4, 8))
     count = leaves_on_day(base_leaves, day)
@@ -80,7 +89,9 @@ def make_irregular_plant(
         breadth = 0.10
     azimuth0 = float(rng.uniform(0.0, 2 * np.pi))
     lean_dir = float(rng.uniform(0.0, 360.0))
-    lean_deg = float(rng.uniform(0.0, 6.0))
+    lean_deg = float(rng.uniform(*LEAN_DEG))
+    if max_lean_deg is not None:
+        lean_deg *= check_lean(max_lean_deg) / LEAN_DEG[1]
     ellipse = float(rng.uniform(1.15, 1.35))
     internodes = np.cumsum(np.linspace(1.0, 2.2, MAX_LEAVES) * rng.lognormal(0.0, 0.2, MAX_LEAVES))
     insertion_span = float(rng.uniform(0.40, 0.55)) * height_m

@@ -80,6 +80,13 @@ def register(subparsers: Any) -> None:
         "turned at random, twisted wavy leaves, erect to drooping)",
     )
     parser.add_argument(
+        "--lean",
+        default=None,
+        metavar="DEG",
+        help="plot scene: the largest lean of a plant's stem in degrees, 0..30 (default: the "
+        "plant model's own, 5 or 6); each plant leans its own share of it, its own way",
+    )
+    parser.add_argument(
         "--stations", default=None, help="stations to visit, e.g. 4,5 or 1-9 (default: all)"
     )
     parser.add_argument("--views", default="0-7", help="views per station, e.g. 0,1 or 0-7")
@@ -159,6 +166,22 @@ def parse_arrival(text: str | None) -> tuple[float, float] | None:
     return sigma_m, sigma_deg
 
 
+def parse_lean(text: str | None) -> float | None:
+    """``"15"`` -> 15.0 degrees, within 0..:data:`~devices.sim.plants.MAX_LEAN_DEG`; ``None``
+    stays (the plant model's own leans)."""
+    if text is None:
+        return None
+    from devices.sim.plants import MAX_LEAN_DEG
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise FieldappError(f"--lean: {text!r} is not a number of degrees") from None
+    if not 0.0 <= value <= MAX_LEAN_DEG:
+        raise FieldappError(f"--lean: {value:g} is outside 0..{MAX_LEAN_DEG:g} degrees")
+    return value
+
+
 def run(args: argparse.Namespace) -> int:
     from devices.sim.rig import MAX_GRID, RigGeometry, StopErrors
 
@@ -183,6 +206,7 @@ def run(args: argparse.Namespace) -> int:
     views = parse_list("views", args.views, 0, rig.views - 1)
     shots = parse_int("intrinsics-images", args.intrinsics_images, 0, 100)
     arrival = parse_arrival(args.arrival_error)
+    lean = parse_lean(args.lean)
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
     if args.scene == "checkerboard" and rig.grid != 3:
         raise FieldappError("--grid: the checkerboard scene is laid out for the 3 x 3 plan")
@@ -193,12 +217,14 @@ def run(args: argparse.Namespace) -> int:
             count = _write_turntable(args.out, seed, day, views, args.depth_only)
         else:
             world = build_world(
-                args.scene, seed, day, rig, args.plants, args.stage, args.plant_model
+                args.scene, seed, day, rig, args.plants, args.stage, args.plant_model, lean
             )
             about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
             about |= {"stage": args.stage, "grid": rig.grid}
             if args.plant_model != "distichous":  # absent: the first model (sessions unchanged)
                 about["plant_model"] = args.plant_model
+            if lean is not None:  # absent: the model's own leans (sessions unchanged)
+                about["max_lean_deg"] = lean
             if arrival:
                 about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
             if args.depth_only:
@@ -231,6 +257,7 @@ def build_world(
     plants: bool,
     stage: str = "seedling",
     plant_model: str = "distichous",
+    max_lean_deg: float | None = None,
 ) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.scene import (
@@ -245,7 +272,7 @@ def build_world(
     layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
     soil = soil_for_plot(rig.plot_half_extent_m)
     if scene_name == "plot":
-        scene = plot_scene(seed, day, layout, soil, stage, plant_model)
+        scene = plot_scene(seed, day, layout, soil, stage, plant_model, max_lean_deg)
     elif scene_name == "spheres":
         scene = spheres_scene(seed, day, plants, layout, soil)
     elif scene_name == "soil":
