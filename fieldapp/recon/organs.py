@@ -1,9 +1,9 @@
 """Organs of one plant: its stem (and the rolled whorl on top of it) and one instance per
 expanded leaf, from the plant's points alone (docs/RECONSTRUCTION.md, "Organs").
 
-1. **Stem axis**: a line through the stem's foot fitted to the stem-like points near it
-   (neighbourhoods that are thin upright columns, not sheets), refitted on those within a
-   narrowing band of it (:func:`fit_stem_axis`).
+1. **Stem axis**: the stem traced up from its foot as a circle in each slice, the line through
+   the circles' centres (refined on the stem-like points of a thin stem), at any lean up to
+   31 degrees (:func:`fit_stem_axis`).
 2. **Stem**: the points within a cylinder around the axis a little wider than the stem; the
    part of it above the highest leaf's insertion is the whorl.
 3. **Leaves**: what is left are the leaves, each one a branch that leaves the stem: connected
@@ -35,22 +35,62 @@ FOOT_HEIGHT_M = 0.03
 """The foot is the median of the points within this of the base, this high above the ground
 (below the lowest leaf)."""
 
+SLICE_M = 0.02
+MAX_LEAN = 0.6
+"""The stem's axis is traced up the plant in slices this thick, along a line leaning at most
+this much (horizontal drift per metre of height: 31 degrees), through the plant's lower half
+(:data:`AXIS_HEIGHT`)."""
+
+AXIS_HEIGHT = 0.5
+
+RING_RADII = (0.7, 1.35)
+RING_BAND = (0.0025, 0.25)
+RING_TRIALS = 256
+"""In each slice the stem is the circle, of a radius within :data:`RING_RADII` of the foot's,
+with the most points within its band (the larger of :data:`RING_BAND`'s metres and share of
+the radius): the best of :data:`RING_TRIALS` circles through three of the slice's points."""
+
+RING_MIN_SHARE = 0.35
+RING_GATE = (0.5, 0.006)
+RING_MISSES = 3
+"""A slice's circle is the stem if it holds at least :data:`RING_MIN_SHARE` of the foot's
+circle's points and lies within :data:`RING_GATE` (share of the radius plus metres) of where
+the line traced so far puts the stem; :data:`RING_MISSES` slices in a row without it end the
+trace."""
+
+TRUST_SPAN_M = 0.10
+TRUST_SLICES = 5
+TRUST_OFF_M = 0.003
+"""The trace is used when it is a clean cylinder: at least :data:`TRUST_SLICES` circles over
+:data:`TRUST_SPAN_M` of height, their centres within :data:`TRUST_OFF_M` of the line (median).
+A seedling's short stem, hidden by its leaves in a rendered plot, is often not: its trace was
+4-6 cm long and up to 30 degrees off, and the stem-like fit (:func:`_fit_to_stem_like`) is
+used there."""
+
 TILT_SEARCH_M = 0.06
 TILT_HEIGHT = 0.5
+FIRST_KEEP_M = (0.02, 0.012, 0.008)
+MAX_TILT = 0.2
+"""The stem-like fit: points within this of the foot, up to this share of the plant's height,
+fitted within these bands of the line in turn (starting at 8 mm, a stem leaning 4-5 degrees
+kept too few points and stayed vertical), its tilt capped at 11 degrees."""
+
+TRIM_M = 0.0025
+"""The line through the slices' centres is refitted without the centres farther from it than
+this or 2.5 times their median distance (a leaf's sheath pulling a node's circle aside)."""
+
 SHAPE_RADIUS_M = 0.012
 MIN_LINEARITY = 0.6
 COS_UPRIGHT = 0.9
-LINE_KEEP_M = (0.02, 0.012, 0.008)
-"""The tilt: a line through the foot fitted to the stem-like points (their neighbourhood within
-:data:`SHAPE_RADIUS_M` an upright column: linearity above :data:`MIN_LINEARITY`, long axis within
-:data:`COS_UPRIGHT` of the vertical) within :data:`TILT_SEARCH_M` of the foot, up to
-:data:`TILT_HEIGHT` of the plant; fitted on those within the first of :data:`LINE_KEEP_M` of the
-vertical, then refitted on those within the next ones of the line. Starting at 8 mm, a stem
-leaning 4-5 degrees (1 cm off the vertical 12 cm up, plus its radius) kept too few points and
-stayed vertical: 8 of 80 plants on seeds 0-4, their leaves' angles off by up to 34 degrees."""
-
-MAX_TILT = 0.2
-"""Largest horizontal drift of the axis per metre of height (11 degrees)."""
+LINE_KEEP_M = (0.012, 0.008)
+MIN_REFINE_POINTS = 40
+"""A thin stem (a seedling's, 5-7 mm) has few points in a slice; its axis is refined on the
+stem-like points (their neighbourhood within :data:`SHAPE_RADIUS_M` an upright column:
+linearity above :data:`MIN_LINEARITY`, long axis within :data:`COS_UPRIGHT` of the vertical)
+within :data:`LINE_KEEP_M` of the line, while at least :data:`MIN_REFINE_POINTS` are. On a
+thicker stem (8-12 mm, grown plants) few points are stem-like: a 2.4 cm neighbourhood of it is
+no column, and the first fit of the axis, to those points alone, came out 2.5 degrees off
+upright stems on average and 6-12 degrees off stems leaning 15-25 degrees."""
 
 CUT_MARGIN_M = 0.016
 """The stem's cylinder: its radius plus this margin (noise, the leaf sheath, the error of the
@@ -127,23 +167,49 @@ class Organs:
     leaves: list[NDArray[np.intp]]
 
 
-def fit_stem_axis(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -> StemAxis:
+def fit_stem_axis(
+    points_m: NDArray[np.float64], foot_m: NDArray[np.float64], trace: bool = True
+) -> StemAxis:
     """The stem's axis from the plant's points (N, 3) and a first guess of the stem's foot (3,)
-    (base xy, local ground z): the foot is re-centred on the points of the stem's lowest
-    centimetres (below any leaf), then the tilt is that of the line through the foot fitted to
-    the stem-like points (:func:`_stem_like`), refitted on those nearer and nearer to it."""
+    (base xy, local ground z). The stem is traced up from its foot as a circle in each slice
+    (:func:`_ring`; the foot's radius from the points of its lowest centimetres, below any
+    leaf), each slice searched where the line through the circles below puts it; the axis is
+    the line through the circles' centres (:data:`TRIM_M`), refined on the stem-like points
+    of a thin stem (:data:`MIN_REFINE_POINTS`). Any lean up to :data:`MAX_LEAN`: the trace
+    does not assume the stem upright. ``trace=False``: the stem-like fit alone (the plants
+    step's ribbons, tuned with it: RECONSTRUCTION.md, "Organs")."""
     guess = StemAxis(foot_m, np.array([0.0, 0.0, 1.0]))
     along, radial = guess.split(points_m)
     low = (radial < FOOT_SEARCH_M) & (along > 0.005) & (along < FOOT_HEIGHT_M)
     foot = foot_m.copy()
     if low.sum() >= 5:
         foot[:2] = np.median(points_m[low, :2], axis=0)
-    near = points_m[np.linalg.norm(points_m[:, :2] - foot[:2], axis=1) < TILT_SEARCH_M]
     height = float(points_m[:, 2].max() - foot[2])
+    top = AXIS_HEIGHT * height
+    dz = points_m[:, 2] - foot[2]
+    lower = (dz > 0.005) & (dz < top)
+    xy, dz = points_m[lower, :2], dz[lower]
+    traced = _trace_rings(xy, dz, foot, top) if trace else None
+    if traced is None:
+        tilt = _fit_to_stem_like(points_m, foot, height)
+    else:
+        tilt = _refine_on_stem_like(points_m, foot, traced, top)
+    direction = np.array([tilt[0], tilt[1], 1.0])
+    return StemAxis(foot, direction / np.linalg.norm(direction))
+
+
+def _fit_to_stem_like(
+    points_m: NDArray[np.float64], foot: NDArray[np.float64], height: float
+) -> NDArray[np.float64]:
+    """Where no clean cylinder was traced: the tilt of the line through the foot fitted to the
+    stem-like points within :data:`TILT_SEARCH_M` of the foot, up to :data:`TILT_HEIGHT` of
+    the plant, within the first of :data:`FIRST_KEEP_M` of the vertical, then refitted on
+    those within the next ones of the line (capped at :data:`MAX_TILT`)."""
+    near = points_m[np.linalg.norm(points_m[:, :2] - foot[:2], axis=1) < TILT_SEARCH_M]
     near = near[(near[:, 2] > foot[2] + 0.005) & (near[:, 2] < foot[2] + TILT_HEIGHT * height)]
     stem_like = near[_stem_like(near)]
     tilt = np.zeros(2)
-    for keep_m in LINE_KEEP_M:
+    for keep_m in FIRST_KEEP_M:
         dz = stem_like[:, 2] - foot[2]
         residual = np.linalg.norm(stem_like[:, :2] - foot[:2] - dz[:, None] * tilt, axis=1)
         keep = residual < keep_m
@@ -151,8 +217,159 @@ def fit_stem_axis(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) ->
             break
         dxy = stem_like[keep, :2] - foot[:2]
         tilt = np.clip((dz[keep] @ dxy) / float(dz[keep] @ dz[keep]), -MAX_TILT, MAX_TILT)
-    direction = np.array([tilt[0], tilt[1], 1.0])
-    return StemAxis(foot, direction / np.linalg.norm(direction))
+    return tilt
+
+
+def _trace_rings(
+    xy: NDArray[np.float64], dz: NDArray[np.float64], foot: NDArray[np.float64], top: float
+) -> NDArray[np.float64] | None:
+    """The stem's tilt (2,) traced in slices from the points' plan positions ``xy`` (N, 2) and
+    heights above the foot ``dz`` (N,), ``foot[:2]`` moved onto the traced line; None (``foot``
+    unchanged) unless the trace is a clean cylinder (:data:`TRUST_SPAN_M`)."""
+    start = foot.copy()
+    tilt = _traced(xy, dz, foot, top)
+    if tilt is None:
+        foot[:] = start
+    return tilt
+
+
+def _traced(
+    xy: NDArray[np.float64], dz: NDArray[np.float64], foot: NDArray[np.float64], top: float
+) -> NDArray[np.float64] | None:
+    rng = np.random.default_rng(0)  # the same points, the same axis
+    tilt = np.zeros(2)
+    radius = count = None
+    heights: list[float] = []
+    centres: list[NDArray[np.float64]] = []
+    weights: list[int] = []
+    misses = 0
+    for bottom in np.arange(0.005, top, SLICE_M):
+        middle = bottom + SLICE_M / 2
+        predicted = foot[:2] + middle * tilt
+        slack = MAX_LEAN * (middle - heights[-1]) if 0 < len(heights) < 3 else 0.0
+        reach = (2.0 * FOOT_SEARCH_M if radius is None else 1.6 * radius + 0.012) + slack
+        inside = (dz >= bottom) & (dz < bottom + SLICE_M)
+        chosen = xy[inside]
+        chosen = chosen[np.linalg.norm(chosen - predicted, axis=1) < reach]
+        if radius is None and len(chosen) >= 8:
+            spread = np.linalg.norm(chosen - chosen.mean(axis=0), axis=1)
+            radius = float(np.clip(np.median(spread), 0.003, 0.02))
+        found = _ring(chosen, radius, rng) if radius is not None and len(chosen) >= 8 else None
+        if found is not None:
+            centre, support = found
+            count = count or support
+            gate = RING_GATE[0] * radius + RING_GATE[1] + slack if heights else reach  # type: ignore[operator]
+            if support < RING_MIN_SHARE * count or np.linalg.norm(centre - predicted) > gate:
+                found = None
+        if found is None:
+            misses += 1
+            if misses >= RING_MISSES:
+                break
+            continue
+        misses = 0
+        heights.append(middle)
+        centres.append(centre)
+        weights.append(support)
+        if len(heights) == 1:
+            foot[:2] = centre - middle * tilt
+        else:
+            tilt = _line_through(np.array(heights), np.array(centres), np.array(weights), foot)
+    if len(heights) >= 3:
+        z, c, w = np.array(heights), np.array(centres), np.array(weights, dtype=np.float64)
+        use = np.ones(len(z), dtype=bool)
+        for _ in range(3):
+            tilt = _line_through(z[use], c[use], w[use], foot)
+            off = np.linalg.norm(c - foot[:2] - z[:, None] * tilt, axis=1)
+            keep = off < max(TRIM_M, 2.5 * float(np.median(off)))
+            if keep.sum() < 3 or (keep == use).all():
+                break
+            use = keep
+        off = np.linalg.norm(c - foot[:2] - z[:, None] * tilt, axis=1)
+        span = float(z[use].max() - z[use].min())
+        if (
+            span >= TRUST_SPAN_M
+            and use.sum() >= TRUST_SLICES
+            and np.median(off[use]) <= TRUST_OFF_M
+        ):
+            return tilt
+    return None
+
+
+def _line_through(
+    z: NDArray[np.float64],
+    centres: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    foot: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """The tilt (2,) of the weighted least-squares line through ``centres`` (K, 2) at heights
+    ``z`` (K,), capped at :data:`MAX_LEAN`; ``foot[:2]`` is set to the line at height 0."""
+    root = np.sqrt(weights)[:, None]
+    design = np.stack([np.ones_like(z), z], axis=1) * root
+    solution = np.linalg.lstsq(design, centres * root, rcond=None)[0]
+    tilt = solution[1]
+    lean = float(np.linalg.norm(tilt))
+    if lean > MAX_LEAN:
+        tilt = tilt * (MAX_LEAN / lean)
+    foot[:2] = solution[0]
+    return tilt  # type: ignore[no-any-return]
+
+
+def _ring(
+    xy: NDArray[np.float64], radius: float, rng: np.random.Generator
+) -> tuple[NDArray[np.float64], int] | None:
+    """Centre (2,) and support of the best circle through ``xy`` (N, 2) of a radius near
+    ``radius`` (:data:`RING_RADII`), or None."""
+    a, b, c = (xy[k] for k in rng.integers(0, len(xy), (3, RING_TRIALS)))
+    det = 2.0 * (
+        a[:, 0] * (b[:, 1] - c[:, 1])
+        + b[:, 0] * (c[:, 1] - a[:, 1])
+        + c[:, 0] * (a[:, 1] - b[:, 1])
+    )
+    valid = np.abs(det) > 1e-12
+    det = np.where(valid, det, 1.0)
+    a2, b2, c2 = (a * a).sum(1), (b * b).sum(1), (c * c).sum(1)
+    ux = (a2 * (b[:, 1] - c[:, 1]) + b2 * (c[:, 1] - a[:, 1]) + c2 * (a[:, 1] - b[:, 1])) / det
+    uy = (a2 * (c[:, 0] - b[:, 0]) + b2 * (a[:, 0] - c[:, 0]) + c2 * (b[:, 0] - a[:, 0])) / det
+    centres = np.stack([ux, uy], axis=1)
+    radii = np.linalg.norm(a - centres, axis=1)
+    valid &= (radii > RING_RADII[0] * radius) & (radii < RING_RADII[1] * radius)
+    if not valid.any():
+        return None
+    centres, radii = centres[valid], radii[valid]
+    band = max(RING_BAND[0], RING_BAND[1] * radius)
+    distance = np.linalg.norm(xy[None, :, :] - centres[:, None, :], axis=2)
+    support = (np.abs(distance - radii[:, None]) < band).sum(axis=1)
+    best = int(np.argmax(support))
+    near = np.abs(distance[best] - radii[best]) < band
+    return _circle_centre(xy[near], centres[best]), int(support[best])
+
+
+def _circle_centre(xy: NDArray[np.float64], guess: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The centre of the least-squares circle through ``xy`` (N, 2) (algebraic fit), or
+    ``guess`` where the points do not fix one."""
+    shifted = xy - guess
+    design = np.c_[2.0 * shifted, np.ones(len(xy))]
+    solution, _, rank, _ = np.linalg.lstsq(design, (shifted * shifted).sum(axis=1), rcond=None)
+    return guess + solution[:2] if rank == 3 else guess
+
+
+def _refine_on_stem_like(
+    points_m: NDArray[np.float64], foot: NDArray[np.float64], tilt: NDArray[np.float64], top: float
+) -> NDArray[np.float64]:
+    """``tilt`` refitted, through the foot, on the stem-like points near the line
+    (:data:`MIN_REFINE_POINTS`)."""
+    dz = points_m[:, 2] - foot[2]
+    off = np.linalg.norm(points_m[:, :2] - foot[:2] - dz[:, None] * tilt, axis=1)
+    near = points_m[(off < 0.03) & (dz > 0.005) & (dz < top)]
+    stem_like = near[_stem_like(near)]
+    dz = stem_like[:, 2] - foot[2]
+    for keep_m in LINE_KEEP_M:
+        off = np.linalg.norm(stem_like[:, :2] - foot[:2] - dz[:, None] * tilt, axis=1)
+        keep = off < keep_m
+        if keep.sum() < MIN_REFINE_POINTS:
+            break
+        tilt = (dz[keep] @ (stem_like[keep, :2] - foot[:2])) / float(dz[keep] @ dz[keep])
+    return tilt
 
 
 def _stem_like(points_m: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -210,9 +427,12 @@ class Branches:
     pieces: list[NDArray[np.intp]]
 
     @staticmethod
-    def of(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -> Branches:
-        """The plant's points (N, 3) and a first guess of its stem's foot (3,)."""
-        axis = fit_stem_axis(points_m, foot_m)
+    def of(
+        points_m: NDArray[np.float64], foot_m: NDArray[np.float64], trace: bool = True
+    ) -> Branches:
+        """The plant's points (N, 3) and a first guess of its stem's foot (3,); ``trace``: as
+        :func:`fit_stem_axis`'s."""
+        axis = fit_stem_axis(points_m, foot_m, trace)
         along, radial = axis.split(points_m)
         foot_ring = (along > 0.005) & (along < FOOT_HEIGHT_M) & (radial < FOOT_SEARCH_M)
         stem_radius = float(np.median(radial[foot_ring])) if foot_ring.sum() >= 5 else 0.006

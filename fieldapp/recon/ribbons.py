@@ -324,7 +324,10 @@ def _trace_plants(
         # trace gave touching seed 10's p07 a neighbour's leaf (+11.7 cm; width RMSE over
         # 48 touching inputs 1.67 cm unsplit, 1.77 split; RECONSTRUCTION.md)
         own = points_m[members]
-        branches = Branches.of(own, feet_m[stem])
+        # The stem-like axis, not the traced one (organs.fit_stem_axis): traced, the bench's
+        # touching widths moved 1.74 -> 1.87 cm mean RMSE over seeds 0-11, knife edges
+        # falling both ways (RECONSTRUCTION.md, "Organs")
+        branches = Branches.of(own, feet_m[stem], trace=False)
         organs = branches.organs(split_forks=False)
         touching[members] |= _touching(points_m, tree, members, on_stems & (labels != stem))
         near = touching[members]  # which of the plant's points touch another plant
