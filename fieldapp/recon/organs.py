@@ -61,11 +61,16 @@ trace."""
 TRUST_SPAN_M = 0.10
 TRUST_SLICES = 5
 TRUST_OFF_M = 0.003
-"""The trace is used when it is a clean cylinder: at least :data:`TRUST_SLICES` circles over
-:data:`TRUST_SPAN_M` of height, their centres within :data:`TRUST_OFF_M` of the line (median).
-A seedling's short stem, hidden by its leaves in a rendered plot, is often not: its trace was
-4-6 cm long and up to 30 degrees off, and the stem-like fit (:func:`_fit_to_stem_like`) is
-used there."""
+PREFER_SPAN_M = 0.16
+PREFER_LEAN = 0.14
+"""The trace is used when it is a clean cylinder (at least :data:`TRUST_SLICES` circles over
+:data:`TRUST_SPAN_M` of height, their centres within :data:`TRUST_OFF_M` of the line, median)
+and either that long (:data:`PREFER_SPAN_M`, a grown plant's stem) or leaning more than the
+stem-like fit follows (:data:`PREFER_LEAN`, 8 degrees: its first band, 2 cm about the
+vertical, holds such a stem for 14 cm only). Elsewhere the stem-like fit
+(:func:`_fit_to_stem_like`) is used: on a seedling's short stem, hidden by its leaves in a
+rendered plot, a trace is 4-14 cm long and was 3-6 degrees off where the stem-like fit was
+within 1 (and up to 30 off where it is shorter than :data:`TRUST_SPAN_M`)."""
 
 TILT_SEARCH_M = 0.06
 TILT_HEIGHT = 0.5
@@ -290,6 +295,7 @@ def _traced(
             span >= TRUST_SPAN_M
             and use.sum() >= TRUST_SLICES
             and np.median(off[use]) <= TRUST_OFF_M
+            and (span >= PREFER_SPAN_M or np.linalg.norm(tilt) >= PREFER_LEAN)
         ):
             return tilt
     return None
@@ -340,17 +346,7 @@ def _ring(
     distance = np.linalg.norm(xy[None, :, :] - centres[:, None, :], axis=2)
     support = (np.abs(distance - radii[:, None]) < band).sum(axis=1)
     best = int(np.argmax(support))
-    near = np.abs(distance[best] - radii[best]) < band
-    return _circle_centre(xy[near], centres[best]), int(support[best])
-
-
-def _circle_centre(xy: NDArray[np.float64], guess: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The centre of the least-squares circle through ``xy`` (N, 2) (algebraic fit), or
-    ``guess`` where the points do not fix one."""
-    shifted = xy - guess
-    design = np.c_[2.0 * shifted, np.ones(len(xy))]
-    solution, _, rank, _ = np.linalg.lstsq(design, (shifted * shifted).sum(axis=1), rcond=None)
-    return guess + solution[:2] if rank == 3 else guess
+    return centres[best], int(support[best])
 
 
 def _refine_on_stem_like(
