@@ -90,6 +90,7 @@ def labels(folder: Path, session: str) -> tuple[NDArray[np.intp], list[str]]:
         PlotLayout.for_stations(int(rig["grid"]), float(rig["station_spacing_m"])),
         stage=truth["stage"],
         plant_model=truth.get("plant_model", "distichous"),
+        max_lean_deg=truth.get("max_lean_deg"),  # simulate --lean
     )
     samples, owner, names = _surface_samples(scene, offset)
     tree = cKDTree(samples)
