@@ -12,7 +12,7 @@ of width RMSE over the perturbations (``--shift``: also over rigid shifts of a f
 move only where the voxel grid cuts the plants):
 
     .venv/bin/python benchmarks/bench_touching.py prepare --dir /tmp/touching \
-        --touching 0-8 --seedling 0-2 [--plant-model irregular]
+        --touching 0-8 --seedling 0-2 [--plant-model irregular] [--lean 20]
     .venv/bin/python benchmarks/bench_touching.py run --dir /tmp/touching [--perturb 3] \
         [--shift 5] [--set stems.follow_leaves=false] [--only t3,t8] [--plants]
 
@@ -66,7 +66,11 @@ def _keeper(target: Path) -> Any:
 
 
 def prepare(
-    folder: Path, touching: list[int], seedling: list[int], plant_model: str = "distichous"
+    folder: Path,
+    touching: list[int],
+    seedling: list[int],
+    plant_model: str = "distichous",
+    lean: str | None = None,
 ) -> None:
     from fieldapp.io.session import load_session
     from fieldapp.recon import stages
@@ -80,7 +84,7 @@ def prepare(
         session = folder / name
         if not (session / "truth.json").exists():
             cmd = [sys.executable, "-m", "fieldapp", "simulate", "--out", str(session)]
-            cmd += ["--plant-model", plant_model]
+            cmd += ["--plant-model", plant_model] + (["--lean", lean] if lean else [])
             subprocess.run([*cmd, "--seed", str(seed), "--stage", stage], check=True)
         target = folder / f"{name}.pkl"
         if target.exists():
@@ -220,6 +224,7 @@ def main() -> int:
     p.add_argument("--touching", type=_seeds, default=_seeds("0-8"))
     p.add_argument("--seedling", type=_seeds, default=_seeds("0-2"))
     p.add_argument("--plant-model", default="distichous")
+    p.add_argument("--lean", default=None, help="simulate --lean DEG (stems leaning more)")
     r = sub.add_parser("run")
     r.add_argument("--dir", type=Path, required=True)
     r.add_argument("--only", type=lambda t: t.split(","), default=[])
@@ -231,7 +236,7 @@ def main() -> int:
     r.add_argument("--plants", action="store_true")
     args = parser.parse_args()
     if args.command == "prepare":
-        prepare(args.dir, args.touching, args.seedling, args.plant_model)
+        prepare(args.dir, args.touching, args.seedling, args.plant_model, args.lean)
     else:
         run(args.dir, args.only, args.perturb, args.set, args.plants, args.shift)
     return 0
