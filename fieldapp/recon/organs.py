@@ -3,7 +3,8 @@ expanded leaf, from the plant's points alone (docs/RECONSTRUCTION.md, "Organs").
 
 1. **Stem axis**: the stem traced up from its foot as a circle in each slice, the line through
    the circles' centres (refined on the stem-like points of a thin stem), at any lean up to
-   31 degrees (:func:`fit_stem_axis`).
+   31 degrees, where that trace is a long clean cylinder or leans; otherwise (a seedling's
+   short stem) a line through the foot fitted to the stem-like points (:func:`fit_stem_axis`).
 2. **Stem**: the points within a cylinder around the axis a little wider than the stem; the
    part of it above the highest leaf's insertion is the whorl.
 3. **Leaves**: what is left are the leaves, each one a branch that leaves the stem: connected
@@ -181,8 +182,10 @@ def fit_stem_axis(
     leaf), each slice searched where the line through the circles below puts it; the axis is
     the line through the circles' centres (:data:`TRIM_M`), refined on the stem-like points
     of a thin stem (:data:`MIN_REFINE_POINTS`). Any lean up to :data:`MAX_LEAN`: the trace
-    does not assume the stem upright. ``trace=False``: the stem-like fit alone (the plants
-    step's ribbons, tuned with it: RECONSTRUCTION.md, "Organs")."""
+    does not assume the stem upright. Where the trace is not to be trusted
+    (:data:`TRUST_SPAN_M`, :data:`PREFER_SPAN_M`) or ``trace=False`` (the plants step's
+    ribbons, tuned with it: RECONSTRUCTION.md, "Organs"), the stem-like fit
+    (:func:`_fit_to_stem_like`)."""
     guess = StemAxis(foot_m, np.array([0.0, 0.0, 1.0]))
     along, radial = guess.split(points_m)
     low = (radial < FOOT_SEARCH_M) & (along > 0.005) & (along < FOOT_HEIGHT_M)
