@@ -30,12 +30,12 @@ GROWTH_PER_DAY = 0.05
 
 STAGES = ("seedling", "touching")
 PLANT_MODELS = ("distichous", "irregular")
+"""``distichous`` (the default, this module's) and ``irregular``
+(:mod:`devices.sim.plants_irregular`, held out from the plants step's tuning)."""
 LEAN_DEG = (1.0, 5.0)
 """This model's stems lean this many degrees (uniform), each in its own direction."""
 MAX_LEAN_DEG = 30.0
 """The largest lean a plot can be asked for (``max_lean_deg``): lodging is not simulated."""
-"""``distichous`` (the default, this module's) and ``irregular``
-(:mod:`devices.sim.plants_irregular`, held out from the plants step's tuning)."""
 TOUCHING_HEIGHT_M = (0.55, 0.90)
 """Heights of the ``touching`` stage (uniform; ``--day`` does not change them)."""
 TOUCHING_LEAF_REACH = 1.8

@@ -194,14 +194,12 @@ def fit_stem_axis(
         foot[:2] = np.median(points_m[low, :2], axis=0)
     height = float(points_m[:, 2].max() - foot[2])
     top = AXIS_HEIGHT * height
-    dz = points_m[:, 2] - foot[2]
-    lower = (dz > 0.005) & (dz < top)
-    xy, dz = points_m[lower, :2], dz[lower]
-    traced = _trace_rings(xy, dz, foot, top) if trace else None
+    traced = _trace_rings(points_m, foot, top) if trace else None
     if traced is None:
         tilt = _fit_to_stem_like(points_m, foot, height)
     else:
-        tilt = _refine_on_stem_like(points_m, foot, traced, top)
+        foot[:2], tilt = traced
+        tilt = _refine_on_stem_like(points_m, foot, tilt, top)
     direction = np.array([tilt[0], tilt[1], 1.0])
     return StemAxis(foot, direction / np.linalg.norm(direction))
 
@@ -215,37 +213,45 @@ def _fit_to_stem_like(
     those within the next ones of the line (capped at :data:`MAX_TILT`)."""
     near = points_m[np.linalg.norm(points_m[:, :2] - foot[:2], axis=1) < TILT_SEARCH_M]
     near = near[(near[:, 2] > foot[2] + 0.005) & (near[:, 2] < foot[2] + TILT_HEIGHT * height)]
-    stem_like = near[_stem_like(near)]
-    tilt = np.zeros(2)
-    for keep_m in FIRST_KEEP_M:
-        dz = stem_like[:, 2] - foot[2]
+    return _refit_through_foot(
+        near[_stem_like(near)], foot, np.zeros(2), FIRST_KEEP_M, 10, MAX_TILT
+    )
+
+
+def _refit_through_foot(
+    stem_like: NDArray[np.float64],
+    foot: NDArray[np.float64],
+    tilt: NDArray[np.float64],
+    bands_m: tuple[float, ...],
+    min_points: int,
+    cap: float | None = None,
+) -> NDArray[np.float64]:
+    """``tilt`` (2,) of the line through ``foot`` refitted (least squares) on the points
+    ``stem_like`` (N, 3) within each of ``bands_m`` of the line in turn, while at least
+    ``min_points`` are; each component clipped to ``cap`` when given."""
+    dz = stem_like[:, 2] - foot[2]
+    for band_m in bands_m:
         residual = np.linalg.norm(stem_like[:, :2] - foot[:2] - dz[:, None] * tilt, axis=1)
-        keep = residual < keep_m
-        if keep.sum() < 10:
+        keep = residual < band_m
+        if keep.sum() < min_points:
             break
-        dxy = stem_like[keep, :2] - foot[:2]
-        tilt = np.clip((dz[keep] @ dxy) / float(dz[keep] @ dz[keep]), -MAX_TILT, MAX_TILT)
+        tilt = (dz[keep] @ (stem_like[keep, :2] - foot[:2])) / float(dz[keep] @ dz[keep])
+        if cap is not None:
+            tilt = np.clip(tilt, -cap, cap)
     return tilt
 
 
 def _trace_rings(
-    xy: NDArray[np.float64], dz: NDArray[np.float64], foot: NDArray[np.float64], top: float
-) -> NDArray[np.float64] | None:
-    """The stem's tilt (2,) traced in slices from the points' plan positions ``xy`` (N, 2) and
-    heights above the foot ``dz`` (N,), ``foot[:2]`` moved onto the traced line; None (``foot``
-    unchanged) unless the trace is a clean cylinder (:data:`TRUST_SPAN_M`)."""
-    start = foot.copy()
-    tilt = _traced(xy, dz, foot, top)
-    if tilt is None:
-        foot[:] = start
-    return tilt
-
-
-def _traced(
-    xy: NDArray[np.float64], dz: NDArray[np.float64], foot: NDArray[np.float64], top: float
-) -> NDArray[np.float64] | None:
+    points_m: NDArray[np.float64], foot: NDArray[np.float64], top: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """The stem traced in slices up to ``top`` above ``foot`` (3,): the traced line's plan
+    position at the foot's height (2,) and its tilt (2,), or None unless the trace is a clean
+    cylinder (:data:`TRUST_SPAN_M`, :data:`PREFER_SPAN_M`)."""
+    dz = points_m[:, 2] - foot[2]
+    lower = (dz > 0.005) & (dz < top)
+    xy, dz = points_m[lower, :2], dz[lower]
     rng = np.random.default_rng(0)  # the same points, the same axis
-    tilt = np.zeros(2)
+    origin, tilt = foot[:2].copy(), np.zeros(2)
     radius = count = None
     heights: list[float] = []
     centres: list[NDArray[np.float64]] = []
@@ -253,7 +259,7 @@ def _traced(
     misses = 0
     for bottom in np.arange(0.005, top, SLICE_M):
         middle = bottom + SLICE_M / 2
-        predicted = foot[:2] + middle * tilt
+        predicted = origin + middle * tilt
         slack = MAX_LEAN * (middle - heights[-1]) if 0 < len(heights) < 3 else 0.0
         reach = (2.0 * FOOT_SEARCH_M if radius is None else 1.6 * radius + 0.012) + slack
         inside = (dz >= bottom) & (dz < bottom + SLICE_M)
@@ -263,10 +269,10 @@ def _traced(
             spread = np.linalg.norm(chosen - chosen.mean(axis=0), axis=1)
             radius = float(np.clip(np.median(spread), 0.003, 0.02))
         found = _ring(chosen, radius, rng) if radius is not None and len(chosen) >= 8 else None
-        if found is not None:
+        if found is not None and radius is not None:
             centre, support = found
             count = count or support
-            gate = RING_GATE[0] * radius + RING_GATE[1] + slack if heights else reach  # type: ignore[operator]
+            gate = RING_GATE[0] * radius + RING_GATE[1] + slack if heights else reach
             if support < RING_MIN_SHARE * count or np.linalg.norm(centre - predicted) > gate:
                 found = None
         if found is None:
@@ -279,48 +285,40 @@ def _traced(
         centres.append(centre)
         weights.append(support)
         if len(heights) == 1:
-            foot[:2] = centre - middle * tilt
+            origin = centre - middle * tilt
         else:
-            tilt = _line_through(np.array(heights), np.array(centres), np.array(weights), foot)
-    if len(heights) >= 3:
-        z, c, w = np.array(heights), np.array(centres), np.array(weights, dtype=np.float64)
-        use = np.ones(len(z), dtype=bool)
-        for _ in range(3):
-            tilt = _line_through(z[use], c[use], w[use], foot)
-            off = np.linalg.norm(c - foot[:2] - z[:, None] * tilt, axis=1)
-            keep = off < max(TRIM_M, 2.5 * float(np.median(off)))
-            if keep.sum() < 3 or (keep == use).all():
-                break
-            use = keep
-        off = np.linalg.norm(c - foot[:2] - z[:, None] * tilt, axis=1)
-        span = float(z[use].max() - z[use].min())
-        if (
-            span >= TRUST_SPAN_M
-            and use.sum() >= TRUST_SLICES
-            and np.median(off[use]) <= TRUST_OFF_M
-            and (span >= PREFER_SPAN_M or np.linalg.norm(tilt) >= PREFER_LEAN)
-        ):
-            return tilt
-    return None
+            origin, tilt = _line_through(np.array(heights), np.array(centres), np.array(weights))
+    if len(heights) < 3:
+        return None
+    z, c, w = np.array(heights), np.array(centres), np.array(weights, dtype=np.float64)
+    use = np.ones(len(z), dtype=bool)
+    for _ in range(3):
+        origin, tilt = _line_through(z[use], c[use], w[use])
+        off = np.linalg.norm(c - origin - z[:, None] * tilt, axis=1)
+        keep = off < max(TRIM_M, 2.5 * float(np.median(off)))
+        if keep.sum() < 3 or (keep == use).all():
+            break
+        use = keep
+    off = np.linalg.norm(c - origin - z[:, None] * tilt, axis=1)
+    span = float(z[use].max() - z[use].min())
+    clean = use.sum() >= TRUST_SLICES and np.median(off[use]) <= TRUST_OFF_M
+    better = span >= PREFER_SPAN_M or np.linalg.norm(tilt) >= PREFER_LEAN
+    return (origin, tilt) if clean and span >= TRUST_SPAN_M and better else None
 
 
 def _line_through(
-    z: NDArray[np.float64],
-    centres: NDArray[np.float64],
-    weights: NDArray[np.float64],
-    foot: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """The tilt (2,) of the weighted least-squares line through ``centres`` (K, 2) at heights
-    ``z`` (K,), capped at :data:`MAX_LEAN`; ``foot[:2]`` is set to the line at height 0."""
+    z: NDArray[np.float64], centres: NDArray[np.float64], weights: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The weighted least-squares line through ``centres`` (K, 2) at heights ``z`` (K,) above
+    the foot: its plan position at height 0 (2,) and its tilt (2,), capped at
+    :data:`MAX_LEAN`."""
     root = np.sqrt(weights)[:, None]
     design = np.stack([np.ones_like(z), z], axis=1) * root
-    solution = np.linalg.lstsq(design, centres * root, rcond=None)[0]
-    tilt = solution[1]
+    origin, tilt = np.linalg.lstsq(design, centres * root, rcond=None)[0]
     lean = float(np.linalg.norm(tilt))
     if lean > MAX_LEAN:
         tilt = tilt * (MAX_LEAN / lean)
-    foot[:2] = solution[0]
-    return tilt  # type: ignore[no-any-return]
+    return origin, tilt
 
 
 def _ring(
@@ -360,15 +358,7 @@ def _refine_on_stem_like(
     dz = points_m[:, 2] - foot[2]
     off = np.linalg.norm(points_m[:, :2] - foot[:2] - dz[:, None] * tilt, axis=1)
     near = points_m[(off < 0.03) & (dz > 0.005) & (dz < top)]
-    stem_like = near[_stem_like(near)]
-    dz = stem_like[:, 2] - foot[2]
-    for keep_m in LINE_KEEP_M:
-        off = np.linalg.norm(stem_like[:, :2] - foot[:2] - dz[:, None] * tilt, axis=1)
-        keep = off < keep_m
-        if keep.sum() < MIN_REFINE_POINTS:
-            break
-        tilt = (dz[keep] @ (stem_like[keep, :2] - foot[:2])) / float(dz[keep] @ dz[keep])
-    return tilt
+    return _refit_through_foot(near[_stem_like(near)], foot, tilt, LINE_KEEP_M, MIN_REFINE_POINTS)
 
 
 def _stem_like(points_m: NDArray[np.float64]) -> NDArray[np.bool_]:
