@@ -19,7 +19,7 @@ plan), at the field origin for odd G.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +30,8 @@ from devices.sim.soil import Soil
 STATIONS = tuple(range(1, 10))
 REFERENCE_STATION = 5
 MAX_GRID = 9
+MAX_TABLE_ERROR_DEG = 3.0
+"""The furthest a simulated table may be asked to stop off its target (``--table-error``)."""
 
 
 @dataclass(frozen=True)
@@ -154,6 +156,9 @@ class StopErrors:
     locate_m: float = 0.015
     locate_deg: float = 0.6
     table_deg: float = 0.03
+    table_max_deg: float = 0.1
+    table_reports_reached: bool = False
+    """The table reports the angle it reached (an encoder), not its target (open-loop steps)."""
 
     @classmethod
     def arrival(cls, sigma_m: float, sigma_deg: float) -> StopErrors:
@@ -169,9 +174,26 @@ class StopErrors:
         reported = _jitter(goal, self.stop_m, self.stop_deg, rng)
         return reported, _jitter(reported, self.locate_m, self.locate_deg, rng)
 
+    @classmethod
+    def table(cls, max_deg: float, base: StopErrors | None = None) -> StopErrors:
+        """``base``'s errors with a table that stops up to ``max_deg`` off its target (standard
+        deviation half that) and reports the angle it reached, as a table with an encoder
+        does (a loaded or slipping table, a recorder that writes the angle it measured)."""
+        if not 0.0 <= max_deg <= MAX_TABLE_ERROR_DEG:
+            raise ValueError(f"table error must be within 0..{MAX_TABLE_ERROR_DEG:g} degrees")
+        return replace(
+            base or cls(), table_deg=max_deg / 2, table_max_deg=max_deg, table_reports_reached=True
+        )
+
     def table_stop(self, target_deg: float, rng: np.random.Generator) -> float:
-        """True angle the table reached when it reports ``target_deg``."""
-        return float(target_deg + np.clip(rng.normal(0.0, self.table_deg), -0.1, 0.1))
+        """True angle the table reached when it is sent to ``target_deg``."""
+        off = np.clip(rng.normal(0.0, self.table_deg), -self.table_max_deg, self.table_max_deg)
+        return float(target_deg + off)
+
+    def table_report(self, target_deg: float, true_deg: float) -> float:
+        """The angle the table reports when sent to ``target_deg`` and stopped at
+        ``true_deg``."""
+        return true_deg if self.table_reports_reached else target_deg
 
 
 def _jitter(pose: Pose2D, sigma_m: float, sigma_deg: float, rng: np.random.Generator) -> Pose2D:

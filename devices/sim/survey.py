@@ -78,5 +78,13 @@ def survey(
             for shot, target in enumerate(shots):
                 frame = world.render(np.random.default_rng([seed, 19, station, view, shot]))
                 yield SimCapture(
-                    station, view, target, frame, reported, target_deg, true, true_angle, T
+                    station,
+                    view,
+                    target,
+                    frame,
+                    reported,
+                    errors.table_report(target_deg, true_angle),
+                    true,
+                    true_angle,
+                    T,
                 )

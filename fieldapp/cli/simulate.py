@@ -58,6 +58,14 @@ def register(subparsers: Any) -> None:
         "metres per axis and degrees of yaw, up to 0.1,5 (default about 0.025,1)",
     )
     parser.add_argument(
+        "--table-error",
+        default=None,
+        metavar="DEG",
+        help="the table stops up to DEG degrees off each view's angle (0..3) and reports the "
+        "angle it reached, as a table with an encoder does (default: a few hundredths, "
+        "reporting its target as Grbl does)",
+    )
+    parser.add_argument(
         "--camera",
         default=None,
         metavar="M,DEG",
@@ -166,6 +174,24 @@ def parse_arrival(text: str | None) -> tuple[float, float] | None:
     return sigma_m, sigma_deg
 
 
+def parse_table_error(text: str | None) -> float | None:
+    """``"1.5"`` -> 1.5 degrees, within 0..:data:`~devices.sim.rig.MAX_TABLE_ERROR_DEG`;
+    ``None`` stays (the default table)."""
+    if text is None:
+        return None
+    from devices.sim.rig import MAX_TABLE_ERROR_DEG
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise FieldappError(f"--table-error: {text!r} is not a number of degrees") from None
+    if not 0.0 <= value <= MAX_TABLE_ERROR_DEG:
+        raise FieldappError(
+            f"--table-error: {value:g} is outside 0..{MAX_TABLE_ERROR_DEG:g} degrees"
+        )
+    return value
+
+
 def parse_lean(text: str | None) -> float | None:
     """``"15"`` -> 15.0 degrees, within 0..:data:`~devices.sim.plants.MAX_LEAN_DEG`; ``None``
     stays (the plant model's own leans)."""
@@ -207,7 +233,10 @@ def run(args: argparse.Namespace) -> int:
     shots = parse_int("intrinsics-images", args.intrinsics_images, 0, 100)
     arrival = parse_arrival(args.arrival_error)
     lean = parse_lean(args.lean)
+    table_error = parse_table_error(args.table_error)
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
+    if table_error is not None:
+        errors = StopErrors.table(table_error, errors)
     if args.scene == "checkerboard" and rig.grid != 3:
         raise FieldappError("--grid: the checkerboard scene is laid out for the 3 x 3 plan")
     if args.out.exists() and not args.out.is_dir():
@@ -227,6 +256,8 @@ def run(args: argparse.Namespace) -> int:
                 about["max_lean_deg"] = lean
             if arrival:
                 about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
+            if table_error is not None:  # absent: the default table (sessions unchanged)
+                about["table_error_deg"] = table_error
             if args.depth_only:
                 about["depth_only"] = True
             if camera:  # absent: the paper's rig (sessions unchanged)

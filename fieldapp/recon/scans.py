@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from devices.geometry import Matrix4
 from fieldapp.errors import FieldappError, FormatError
+from fieldapp.io.calibration import ViewStep
 from fieldapp.io.session import Capture, CaptureImages, Session
 from fieldapp.recon.backproject import backproject_pixels
 from fieldapp.recon.cloud import Cloud
@@ -41,7 +42,13 @@ from fieldapp.recon.exg import (
     otsu_threshold,
 )
 from fieldapp.recon.settings import CropSettings
-from fieldapp.recon.station import T_view0_view, station_cloud
+from fieldapp.recon.station import (
+    MAX_ANGLE_OFF_DEG,
+    T_view0_reached,
+    T_view0_view,
+    angle_off_deg,
+    station_cloud,
+)
 
 log = logging.getLogger(__name__)
 
@@ -214,13 +221,14 @@ def read_station(
             lambda frame: _green_and_soil(frame, separation, green_key, grid, rays, crop), frames
         )
     views = [frame.capture.view for frame in frames]
+    placed = _placed_at_reached_angles(station, frames, view_step, warnings)
     scan = StationScan(
         station,
         station_cloud(
-            dict(zip(views, (green for green, _ in clouds), strict=True)), view_step.matrix
+            dict(zip(views, (green for green, _ in clouds), strict=True)), view_step.matrix, placed
         ),
         station_cloud(
-            dict(zip(views, (soil for _, soil in clouds), strict=True)), view_step.matrix
+            dict(zip(views, (soil for _, soil in clouds), strict=True)), view_step.matrix, placed
         ),
         sorted(views),
         threshold,
@@ -228,6 +236,26 @@ def read_station(
         separation,
     )
     return scan, warnings
+
+
+def _placed_at_reached_angles(
+    station: int, frames: list[ReadFrame], view_step: ViewStep, warnings: list[str]
+) -> dict[int, Matrix4]:
+    """Each view whose recorded angle (``angle_deg``) is off its nominal one, placed at the
+    angle reached (:func:`station.T_view0_reached`); one warning per view whose angle is too
+    far off to be trusted (:data:`station.MAX_ANGLE_OFF_DEG`), which keeps the chain."""
+    placed = {}
+    for frame in frames:
+        view, angle = frame.capture.view, frame.capture.angle_deg
+        off = angle_off_deg(view, angle, view_step.angle_deg)
+        if abs(off) > MAX_ANGLE_OFF_DEG:
+            warnings.append(
+                f"station {station} view {view}: angle_deg {angle:g} is {off:+.1f} degrees off "
+                f"view {view} x {view_step.angle_deg:g}; placed at the nominal angle"
+            )
+        elif off != 0.0:
+            placed[view] = T_view0_reached(view_step.matrix, view_step.angle_deg, view, off)
+    return placed
 
 
 def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame | str:
