@@ -100,3 +100,20 @@ def flying_pixels(
             target = out[side]
             target[chosen] = (depth[side] + sign * mix * step)[chosen]
     return out
+
+
+MAX_COLOR_SHIFT_PX = 3
+"""The furthest a simulated colour image may be registered off its depth (pixels a side)."""
+
+
+def misregistered(color: NDArray[np.uint8], dx_px: int, dy_px: int) -> NDArray[np.uint8]:
+    """``color`` (H, W, 3) registered ``dx_px`` pixels right and ``dy_px`` down of where it
+    belongs on the depth image, as a registration calibration a pixel or two off leaves a
+    Kinect v2's colour (the rows and columns it uncovers repeat the image's edge)."""
+    if max(abs(dx_px), abs(dy_px)) > MAX_COLOR_SHIFT_PX:
+        raise ValueError(f"colour shift must be within {MAX_COLOR_SHIFT_PX} pixels a side")
+    h, w = color.shape[:2]
+    top, left = max(dy_px, 0), max(dx_px, 0)
+    padded = np.pad(color, ((top, max(-dy_px, 0)), (left, max(-dx_px, 0)), (0, 0)), mode="edge")
+    y0, x0 = max(-dy_px, 0), max(-dx_px, 0)
+    return padded[y0 : y0 + h, x0 : x0 + w]

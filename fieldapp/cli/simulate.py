@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import logging
 from collections import deque
+from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
@@ -64,6 +65,13 @@ def register(subparsers: Any) -> None:
         help="the table stops up to DEG degrees off each view's angle (0..3) and reports the "
         "angle it reached, as a table with an encoder does (default: a few hundredths, "
         "reporting its target as Grbl does)",
+    )
+    parser.add_argument(
+        "--color-shift",
+        default=None,
+        metavar="DX,DY",
+        help="colour images registered DX, DY pixels off the depth (integers, up to 3 a side), "
+        "as a Kinect v2's registration can leave them (default: exact)",
     )
     parser.add_argument(
         "--camera",
@@ -192,6 +200,27 @@ def parse_table_error(text: str | None) -> float | None:
     return value
 
 
+def parse_color_shift(text: str | None) -> tuple[int, int] | None:
+    """``"1,-2"`` -> (1, -2) pixels, each within
+    :data:`~devices.sim.sensor.MAX_COLOR_SHIFT_PX`; ``None`` stays (exact registration)."""
+    if text is None:
+        return None
+    from devices.sim.sensor import MAX_COLOR_SHIFT_PX
+
+    try:
+        dx, dy = (int(part) for part in text.split(","))
+    except ValueError:
+        raise FieldappError(
+            f"--color-shift: {text!r} is not two whole numbers of pixels DX,DY (e.g. 1,-1)"
+        ) from None
+    if max(abs(dx), abs(dy)) > MAX_COLOR_SHIFT_PX:
+        raise FieldappError(
+            f"--color-shift: {text!r} is outside -{MAX_COLOR_SHIFT_PX}..{MAX_COLOR_SHIFT_PX} "
+            "pixels a side"
+        )
+    return dx, dy
+
+
 def parse_lean(text: str | None) -> float | None:
     """``"15"`` -> 15.0 degrees, within 0..:data:`~devices.sim.plants.MAX_LEAN_DEG`; ``None``
     stays (the plant model's own leans)."""
@@ -234,6 +263,7 @@ def run(args: argparse.Namespace) -> int:
     arrival = parse_arrival(args.arrival_error)
     lean = parse_lean(args.lean)
     table_error = parse_table_error(args.table_error)
+    color_shift = parse_color_shift(args.color_shift)
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
     if table_error is not None:
         errors = StopErrors.table(table_error, errors)
@@ -258,6 +288,8 @@ def run(args: argparse.Namespace) -> int:
                 about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
             if table_error is not None:  # absent: the default table (sessions unchanged)
                 about["table_error_deg"] = table_error
+            if color_shift is not None:  # absent: exact registration (sessions unchanged)
+                about["color_shift_px"] = list(color_shift)
             if args.depth_only:
                 about["depth_only"] = True
             if camera:  # absent: the paper's rig (sessions unchanged)
@@ -386,7 +418,13 @@ def write_session(
         pending: deque[Future[Any]] = deque()
         for capture in survey(world, stations, views, seed, errors, tag_boards=tag_boards):
             pending.append(
-                saver.submit(save_capture, writer, capture, bool(about.get("depth_only")))
+                saver.submit(
+                    save_capture,
+                    writer,
+                    capture,
+                    bool(about.get("depth_only")),
+                    about.get("color_shift_px"),
+                )
             )
             truths.append(capture.truth())
             while len(pending) > 2:
@@ -398,17 +436,27 @@ def write_session(
     return len(truths)
 
 
-def save_capture(writer: SessionWriter, capture: SimCapture, depth_only: bool = False) -> None:
+def save_capture(
+    writer: SessionWriter,
+    capture: SimCapture,
+    depth_only: bool = False,
+    color_shift_px: Sequence[int] | None = None,
+) -> None:
     """Write one simulated capture as the devices would have reported it (without its colour
-    image when ``depth_only``)."""
+    image when ``depth_only``; with it registered ``color_shift_px`` (DX, DY) off the depth,
+    :func:`devices.sim.sensor.misregistered`)."""
+    from devices.sim.sensor import misregistered
     from fieldapp.io.session import BasePose
 
     pose = capture.reported_pose
+    color = capture.frame.color
+    if color_shift_px is not None and color is not None:
+        color = misregistered(color, *color_shift_px)
     writer.add_capture(
         capture.station,
         capture.view,
         capture.frame.depth_m,
-        None if depth_only else capture.frame.color,
+        None if depth_only else color,
         ir=capture.frame.ir,
         angle_deg=capture.reported_angle_deg,
         base_pose=BasePose(x=pose.x_m, y=pose.y_m, yaw_deg=pose.yaw_deg),
