@@ -30,9 +30,9 @@ def local_ground_m(
     (M, 3) (which may hold some plant points: a low percentile per cell ignores them)."""
     if len(soil_m) < MIN_CELL_POINTS:
         return np.zeros(len(xy_m))
-    both = np.concatenate([soil_m[:, :2], xy_m])
-    origin = both.min(axis=0)
-    shape = tuple(np.floor((both.max(axis=0) - origin) / cell_m).astype(int) + 1)
+    origin = np.minimum(soil_m[:, :2].min(axis=0), xy_m.min(axis=0, initial=np.inf))
+    top = np.maximum(soil_m[:, :2].max(axis=0), xy_m.max(axis=0, initial=-np.inf))
+    shape = tuple(np.floor((top - origin) / cell_m).astype(int) + 1)
     grid = _cell_percentiles(soil_m, origin, cell_m, shape)
     empty = np.isnan(grid)
     if empty.all():

@@ -19,6 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Literal, TypeVar
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -51,6 +52,16 @@ from fieldapp.recon.station import (
 )
 
 log = logging.getLogger(__name__)
+
+REGISTRATION_PX = 2
+"""How far (pixels) a colour image registered to its depth may be off at a surface's edge:
+Kinect v2 registration (libfreenect2, the SDK) is within a pixel or two."""
+CONTINUOUS_SHARE = 0.03
+"""Neighbouring pixels within this share of their distance lie on one surface: at 2 m, 6 cm
+over the two pixels' reach, so a surface seen up to about 75 degrees from face-on is continuous,
+and a leaf 5 cm or more above the soil is not continuous with the soil beside it."""
+NOT_MEASURED_M = 1e3
+"""The distance given to unmeasured pixels in the image filters (far behind everything)."""
 
 A = TypeVar("A")
 B = TypeVar("B")
@@ -258,6 +269,31 @@ def _placed_at_reached_angles(
     return placed
 
 
+def grown_over_edges(
+    green: NDArray[np.bool_], depth_m: NDArray[np.float32], measured: NDArray[np.bool_]
+) -> NDArray[np.bool_]:
+    """(H, W) the green pixels (``green`` (H, W)) and the measured ones within
+    :data:`REGISTRATION_PX` of them that continue their surface: within
+    :data:`CONTINUOUS_SHARE` of the distance of the nearest green pixel there, and not behind
+    a nearer surface (by more than that share) within the same reach.
+
+    A Kinect v2's colour image is registered to its depth through a calibration that leaves it
+    a pixel or two off at the edges, so a leaf's rim (and the whole of a tip a few pixels
+    wide) takes the colour of the soil beside it and is not green. Those pixels are in front:
+    nothing nearer lies beside them, and the leaf's green pixels next to them are at their
+    distance. The soil beside a leaf that takes the leaf's green is behind the leaf, far
+    beyond it: nothing is grown from it, and its points lie on the local ground, where the
+    pass-through drops them (``filters.filter_station``)."""
+    kernel = np.ones((2 * REGISTRATION_PX + 1,) * 2, np.uint8)
+    far = np.where(measured, depth_m, NOT_MEASURED_M).astype(np.float32)
+    share = CONTINUOUS_SHARE * far
+    behind = far - cv2.erode(far, kernel) > share  # a nearer surface within reach
+    in_front = green & ~behind  # the soil beside a leaf that took its green grows nothing
+    nearest_green = cv2.erode(np.where(in_front, far, NOT_MEASURED_M).astype(np.float32), kernel)
+    grown: NDArray[np.bool_] = green | (measured & ~behind & (np.abs(far - nearest_green) <= share))
+    return grown
+
+
 def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame | str:
     """A capture's measured pixels, or the warning saying why it was skipped."""
     try:
@@ -295,17 +331,19 @@ def _green_and_soil(
     crop: CropSettings,
 ) -> tuple[Cloud, Cloud]:
     """One frame's green points (``green_key`` (EXG_KEYS + 1,): which colour keys are green,
-    ``NO_KEY`` not) and its soil sample (the measured ``grid`` pixels (M,) not green), in its
-    camera frame; by geometry every measured point is "green" and the soil the whole grid."""
+    ``NO_KEY`` not; grown over the leaves' rims, :func:`grown_over_edges`) and its soil sample
+    (the measured ``grid`` pixels (M,) not green), in its camera frame; by geometry every
+    measured point is "green" and the soil the whole grid."""
     if frame.measured.shape != rays.shape[:2]:
         raise ValueError(f"depth {frame.measured.shape} does not match the camera {rays.shape[:2]}")
     if separation.by_geometry or frame.keys is None:
         measured = frame.measured.reshape(-1)
         green, soil = np.flatnonzero(measured), grid[measured[grid]]
     else:
-        green = np.flatnonzero(np.take(green_key, frame.keys))  # take: twice as fast
-        on_grid = frame.keys[grid]
-        soil = grid[(on_grid != NO_KEY) & ~green_key[on_grid]]
+        by_colour = np.take(green_key, frame.keys).reshape(frame.measured.shape)  # take: 2 x
+        mask = grown_over_edges(by_colour, frame.images.depth_m, frame.measured).reshape(-1)
+        green = np.flatnonzero(mask)
+        soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
 
     def cloud(pixels: NDArray[np.intp]) -> Cloud:
         depth_m = frame.images.depth_m.reshape(-1)[pixels]

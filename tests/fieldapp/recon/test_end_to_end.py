@@ -113,8 +113,13 @@ def test_rejected_refinements_keep_the_coarse_poses_and_are_visibly_worse(
     coarse = run_reconstruction(load_session(plot_session.folder), settings)
     kept = [w for w in coarse.warnings if "coarse pose kept" in w]
     assert len(kept) == 8
-    # the rest: plants drawn twice by misplaced stations overlap and are flagged
-    assert all(w.startswith("plant ") for w in coarse.warnings if w not in kept)
+    # the rest: plants drawn twice by misplaced stations overlap and are flagged (the copies
+    # meet each other, one may stand off the planting grid)
+    assert all(
+        w.startswith(("plant ", "plants that may be wider")) or "off the planting grid" in w
+        for w in coarse.warnings
+        if w not in kept
+    )
     assert coarse.plants  # still a result
     errors = _station_errors(coarse, plot_session.truth)
     assert max(t for t, _ in errors.values()) > 0.02  # centimetres off, not millimetres

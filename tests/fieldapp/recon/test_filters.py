@@ -23,6 +23,7 @@ from fieldapp.recon.filters import (
     statistical_outliers,
     voxel_mean,
 )
+from fieldapp.recon.geometry_split import local_ground_m
 from fieldapp.recon.settings import FilterSettings
 
 from .synthetic import LEAF_RGB, SOIL_RGB, colored, cylinder, ground_patch
@@ -166,8 +167,9 @@ def test_filter_chain_keeps_the_plant_and_drops_soil_and_strays() -> None:
     )
     assert list(result.kept) == ["excess_green", "pass_through", "voxel_mean"]
     z = green.points[:, 2]
+    clear = z - local_ground_m(soil[np.abs(soil[:, 2]) <= 0.03], green.points[:, :2])
     assert result.kept["excess_green"] == 20_002
-    assert result.kept["pass_through"] == int(np.sum((z >= 0.01) & (z <= 1.5))) < 20_001
+    assert result.kept["pass_through"] == int(np.sum((clear >= 0.01) & (z <= 1.5))) < 20_001
     assert result.kept["voxel_mean"] < 20_001
     assert len(result.soil_m) > 1000 and np.abs(result.soil_m[:, 2]).max() < 0.03
     assert np.any(result.plants.points[:, 2] > 0.35)  # the stray is still there
@@ -175,7 +177,8 @@ def test_filter_chain_keeps_the_plant_and_drops_soil_and_strays() -> None:
     kept, counts_after = remove_outliers(result.plants, FilterSettings())
     points = kept.points
     assert np.all(np.hypot(points[:, 0] - 0.2, points[:, 1] - 0.1) < 0.0125)
-    assert points[:, 2].min() >= 0.01 and points[:, 2].max() <= 0.3 + 1e-9
+    ground = local_ground_m(soil[np.abs(soil[:, 2]) <= 0.03], points[:, :2])
+    assert (points[:, 2] - ground).min() >= 0.0099 and points[:, 2].max() <= 0.3 + 1e-9
     assert list(counts_after) == ["statistical_outliers", "radius_outliers"]
     assert counts_after["radius_outliers"] == len(kept) > 0.95 * len(result.plants)
 
