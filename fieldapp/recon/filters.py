@@ -133,51 +133,31 @@ def filter_station(
         )
         kept = {"geometry": int(is_plant.sum())}
         plants = green_field.select(is_plant & (height_m <= settings.pass_through_max_m))
-        soil_m = _soil_sample(
-            soil_field.select(soil_height_m < LOCAL_SOIL_M), soil_band_m, soil_voxel_m
-        )
+        soil_field = soil_field.select(soil_height_m < LOCAL_SOIL_M)
     else:
-        soil_m = _soil_sample(soil_field, soil_band_m, soil_voxel_m)
         kept = {"excess_green": len(green_field)}
+        clear = _above_local_ground(green_field.points, soil_field.points, soil_band_m)
         plants = green_field.select(
-            _clear_of_local_ground(green_field.points, soil_m, settings.pass_through_min_m)
-            & (green_field.points[:, 2] <= settings.pass_through_max_m)  # over the plane
+            (clear >= settings.pass_through_min_m)  # off the soil where it lies
+            & (green_field.points[:, 2] <= settings.pass_through_max_m)  # above the plane
         )
     kept["pass_through"] = len(plants)
     plants = voxel_mean(plants, settings.voxel_size_m)
     kept["voxel_mean"] = len(plants)
-    return FilteredStation(plants, soil_m, kept)
+    soil = soil_field.select(np.abs(soil_field.points[:, 2]) <= soil_band_m)
+    return FilteredStation(plants, voxel_mean(soil, soil_voxel_m).points, kept)
 
 
-def _soil_sample(soil_field: Cloud, soil_band_m: float, voxel_m: float) -> NDArray[np.float64]:
-    """The station's soil sample: the voxel means of its soil points near the plane."""
-    return voxel_mean(
-        soil_field.select(np.abs(soil_field.points[:, 2]) <= soil_band_m), voxel_m
-    ).points
-
-
-LOW_POINT_MARGIN_M = 0.05
-"""Only points lower than the highest soil sample and this margin are measured against the
-local ground (:func:`_clear_of_local_ground`), which lies below the highest sample: a leaf
-higher up is clear of it whatever it is, and the filter costs a fraction of the points."""
-
-
-def _clear_of_local_ground(
-    points_m: NDArray[np.float64], soil_m: NDArray[np.float64], min_m: float
-) -> NDArray[np.bool_]:
-    """(N,) which of ``points_m`` stand at least ``min_m`` above the local ground of the
-    station's soil sample ``soil_m`` (its voxel means near the plane:
-    :func:`geometry_split.local_ground_m`; the plane where the sample is empty). Real soil
-    is not the station's plane (clods, ridges, furrows: the simulated soil too), so "1 cm
-    above the plane" lets through green that lies on a rise of the soil: weeds and moss, and
-    the soil beside a leaf that takes the leaf's colour where the colour image is registered
-    a pixel or two off."""
-    height = points_m[:, 2].copy()
-    if len(soil_m):
-        low = np.flatnonzero(height < soil_m[:, 2].max() + LOW_POINT_MARGIN_M)
-        height[low] -= local_ground_m(soil_m, points_m[low, :2])
-    clear: NDArray[np.bool_] = height >= min_m
-    return clear
+def _above_local_ground(
+    points_m: NDArray[np.float64], soil_m: NDArray[np.float64], soil_band_m: float
+) -> NDArray[np.float64]:
+    """(N,) the height of each of ``points_m`` above the local ground of the station's soil
+    sample (:func:`geometry_split.local_ground_m`). Real soil is not the station's plane
+    (clods, ridges, furrows: the simulated soil too), so "1 cm above the plane" lets through
+    green that lies on a rise of the soil: weeds and moss, and the soil beside a leaf that
+    takes the leaf's colour where the colour image is registered a pixel or two off."""
+    near = soil_m[np.abs(soil_m[:, 2]) <= soil_band_m]
+    return points_m[:, 2] - local_ground_m(near, points_m[:, :2])
 
 
 def remove_outliers(
