@@ -222,12 +222,48 @@ def search_plants(
     plants, plant_labels = _measured(
         cloud, soil_m, soil_tree, labels, ambiguous, len(stems), settings, ground_radius_m
     )
+    if _merge_shared_bases(labels, plants, plant_labels, settings.stems.min_separation_m, merges):
+        plants, plant_labels = _measured(
+            cloud, soil_m, soil_tree, labels, ambiguous, len(stems), settings, ground_radius_m
+        )
     search = PlantSearch(plants, merges=merges)
     if grid is not None:
         _place_on_grid(search, grid, soil_m, soil_tree)
     search.splits = _splits(cloud.points, labels, plant_labels, settings.cluster_voxel_m)
     search.meets = widest_meets(search.plants, search.splits, settings.cluster_voxel_m)
     return search
+
+
+def _merge_shared_bases(
+    labels: NDArray[np.intp],
+    plants: list[Plant],
+    plant_labels: dict[int, int],
+    min_separation_m: float,
+    merges: list[str],
+) -> bool:
+    """Plants whose measured bases stand within ``min_separation_m`` of a taller one's are
+    parts of it: their labels become its label (in place). Two stems are never kept that
+    close (:func:`stems.find_stems`), but a stem found a little farther off (a drooping leaf's
+    tip in very noisy depth, its veil of mixed pixels read as a column) can take a plant's
+    lower part along the plant, and both then stand on the one base. Returns whether any
+    plant was merged."""
+    taller = sorted(plants, key=lambda p: -p.traits.height_m)
+    kept: list[Plant] = []
+    merged = 0
+    for plant in taller:
+        xy = np.array([plant.traits.x_m, plant.traits.y_m])
+        host = next(
+            (k for k in kept if np.hypot(*(xy - [k.traits.x_m, k.traits.y_m])) < min_separation_m),
+            None,
+        )
+        if host is None:
+            kept.append(plant)
+            continue
+        labels[labels == plant_labels[plant.id]] = plant_labels[host.id]
+        merged += 1
+    if merged:
+        merges.append(f"{merged} plants standing on another plant's base merged into it")
+    return merged > 0
 
 
 def _labels(
