@@ -187,8 +187,17 @@ def _local_reconstruction(
     else:
         local = yield from _station_scans(session, settings, stations, timer, stream)
     if not local.value.scans:
-        raise NothingUsable(f"{session.folder}: no capture could be read")
+        raise NothingUsable(f"{session.folder}: no capture could be read{_why(local.warnings)}")
     return local
+
+
+def _why(warnings: tuple[str, ...], shown: int = 2) -> str:
+    """The first of the reasons captures were skipped, for an error that ends the run (its
+    warnings are never printed): ": station 1 view 0 skipped: ...; and 71 more"."""
+    if not warnings:
+        return ""
+    more = f"; and {len(warnings) - shown} more" if len(warnings) > shown else ""
+    return ": " + "; ".join(warnings[:shown]) + more
 
 
 def _station_scans(

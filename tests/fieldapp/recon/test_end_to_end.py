@@ -216,6 +216,9 @@ def test_nothing_usable_is_one_clear_line(
     assert main(["reconstruct", str(empty), "--out", str(tmp_path / "out"), "--quiet"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("fieldapp reconstruct: ") and "no capture could be read" in err[-1]
+    # and why, with the first file named: the run ends before its warnings are printed
+    assert "station 1 view 0 skipped: " in err[-1] and "s01/v0/depth.png" in err[-1]
+    assert err[-1].endswith(f"and {len(plot_session.truth['captures']) - 2} more")
     assert not (tmp_path / "out").exists()
 
 
