@@ -60,6 +60,13 @@ CONTINUOUS_SHARE = 0.03
 """Neighbouring pixels within this share of their distance lie on one surface: at 2 m, 6 cm
 over the two pixels' reach, so a surface seen up to about 75 degrees from face-on is continuous,
 and a leaf 5 cm or more above the soil is not continuous with the soil beside it."""
+WEAK_SHARE = 0.5
+"""A pixel beside green is weakly green when its ExG is past this share of the way from the
+soil's mean ExG to the threshold (:func:`grown_into_weak_green`): halfway, the hysteresis an
+edge detector's two thresholds make."""
+WEAK_REACH_PX = 4
+"""How far (pixels) green grows into weak green: a JPEG's chroma is at half resolution in 8 x
+8 blocks, so a leaf's colour bleeds over two to four pixels of its edge."""
 NOT_MEASURED_M = 1e3
 """The distance given to unmeasured pixels in the image filters (far behind everything)."""
 
@@ -225,11 +232,12 @@ def read_station(
         warnings = [warning for warning in read if isinstance(warning, str)]
         if not frames:
             return None, warnings
-        separation, threshold = _separation(frames, exg_threshold)
+        separation, threshold, weak = _separation(frames, exg_threshold)
         grid = _soil_grid(frames[0].measured.shape, soil_pixel_stride)
-        green_key = np.append(exg_of_keys() > threshold, False)  # which keys are green
+        exg = exg_of_keys()
+        keys = (np.append(exg > threshold, False), np.append(exg > weak, False))  # green, weak
         clouds = workers.map(
-            lambda frame: _green_and_soil(frame, separation, green_key, grid, rays, crop), frames
+            lambda frame: _green_and_soil(frame, separation, keys, grid, rays, crop), frames
         )
     views = [frame.capture.view for frame in frames]
     placed = _placed_at_reached_angles(station, frames, view_step, warnings)
@@ -294,6 +302,33 @@ def grown_over_edges(
     return grown
 
 
+def grown_into_weak_green(
+    green: NDArray[np.bool_],
+    weak: NDArray[np.bool_],
+    depth_m: NDArray[np.float32],
+    measured: NDArray[np.bool_],
+) -> NDArray[np.bool_]:
+    """(H, W) ``green`` grown, pixel by pixel up to :data:`WEAK_REACH_PX`, into the weakly
+    green pixels (``weak``) beside it that are not behind a nearer surface: hysteresis, as an
+    edge detector keeps a weak edge that continues a strong one.
+
+    A colour image compressed with its chroma at half resolution (JPEG, and the Kinect v2's own
+    colour stream) or blurred by its registration to the depth mixes a leaf's green with the
+    soil's colour over its last few pixels: the rim, and the whole of a tip a few pixels wide,
+    falls below the threshold though still greener than the soil. The soil beside a leaf
+    is behind it and is not grown into; soil a little green that continues a stem's foot lies
+    on the local ground, where the pass-through drops it."""
+    far = np.where(measured, depth_m, NOT_MEASURED_M).astype(np.float32)
+    window = np.ones((2 * REGISTRATION_PX + 1,) * 2, np.uint8)
+    behind = far - cv2.erode(far, window) > CONTINUOUS_SHARE * far
+    allowed = (green | (weak & ~behind)).astype(np.uint8)
+    grown = green.astype(np.uint8)
+    step = np.ones((3, 3), np.uint8)
+    for _ in range(WEAK_REACH_PX):
+        grown = cv2.dilate(grown, step) & allowed
+    return grown.astype(bool)
+
+
 def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame | str:
     """A capture's measured pixels, or the warning saying why it was skipped."""
     try:
@@ -304,13 +339,15 @@ def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame |
 
 def _separation(
     frames: list[ReadFrame], exg_threshold: float | Literal["otsu"]
-) -> tuple[Separation, float]:
-    """How the station's plants are told from its soil, and the ExG threshold (infinite by
-    geometry), judged on every measured pixel of the station: from their tally by colour
-    key, the same threshold as of the pixels' values one by one, at a fraction of the cost."""
+) -> tuple[Separation, float, float]:
+    """How the station's plants are told from its soil, the ExG threshold and the weaker one a
+    pixel next to green needs (:data:`WEAK_SHARE` of the way from the soil's mean ExG to the
+    threshold; both infinite by geometry), judged on every measured pixel of the station:
+    from their tally by colour key, the same threshold as of the pixels' values one by one,
+    at a fraction of the cost."""
     tallies = [frame.tally for frame in frames if frame.tally is not None]
     if len(tallies) < len(frames):
-        return choose_separation(None), np.inf
+        return choose_separation(None), np.inf, np.inf
     station_tally = tallies[0].copy()
     for tally in tallies[1:]:
         station_tally += tally  # in place: np.sum over the list is 200 times slower
@@ -319,19 +356,25 @@ def _separation(
     separation = choose_separation(values, weights, otsu)
     threshold = otsu if exg_threshold == "otsu" else float(exg_threshold)
     separation = keep_soil(separation, values, threshold, weights)
-    return separation, np.inf if separation.by_geometry else threshold
+    if separation.by_geometry:
+        return separation, np.inf, np.inf
+    soil = values <= threshold
+    soil_mean = float(np.average(values[soil], weights=weights[soil])) if soil.any() else threshold
+    return separation, threshold, soil_mean + WEAK_SHARE * (threshold - soil_mean)
 
 
 def _green_and_soil(
     frame: ReadFrame,
     separation: Separation,
-    green_key: NDArray[np.bool_],
+    green_keys: tuple[NDArray[np.bool_], NDArray[np.bool_]],
     grid: NDArray[np.intp],
     rays: NDArray[np.float64],
     crop: CropSettings,
 ) -> tuple[Cloud, Cloud]:
-    """One frame's green points (``green_key`` (EXG_KEYS + 1,): which colour keys are green,
-    ``NO_KEY`` not; grown over the leaves' rims, :func:`grown_over_edges`) and its soil sample
+    """One frame's green points (``green_keys``: (EXG_KEYS + 1,) which colour keys are green,
+    and which weakly green, ``NO_KEY`` neither; grown into the weak green next to the green,
+    :func:`grown_into_weak_green`, and over the leaves' rims, :func:`grown_over_edges`) and
+    its soil sample
     (the measured ``grid`` pixels (M,) not green), in its camera frame; by geometry every
     measured point is "green" and the soil the whole grid."""
     if frame.measured.shape != rays.shape[:2]:
@@ -340,8 +383,10 @@ def _green_and_soil(
         measured = frame.measured.reshape(-1)
         green, soil = np.flatnonzero(measured), grid[measured[grid]]
     else:
-        by_colour = np.take(green_key, frame.keys).reshape(frame.measured.shape)  # take: 2 x
-        mask = grown_over_edges(by_colour, frame.images.depth_m, frame.measured).reshape(-1)
+        shape, depth_m = frame.measured.shape, frame.images.depth_m
+        strong, weak = (np.take(key, frame.keys).reshape(shape) for key in green_keys)  # 2 x
+        grown = grown_into_weak_green(strong, weak, depth_m, frame.measured)
+        mask = grown_over_edges(grown, depth_m, frame.measured).reshape(-1)
         green = np.flatnonzero(mask)
         soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
 
