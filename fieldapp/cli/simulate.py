@@ -182,24 +182,6 @@ def parse_arrival(text: str | None) -> tuple[float, float] | None:
     return sigma_m, sigma_deg
 
 
-def parse_table_error(text: str | None) -> float | None:
-    """``"1.5"`` -> 1.5 degrees, within 0..:data:`~devices.sim.rig.MAX_TABLE_ERROR_DEG`;
-    ``None`` stays (the default table)."""
-    if text is None:
-        return None
-    from devices.sim.rig import MAX_TABLE_ERROR_DEG
-
-    try:
-        value = float(text)
-    except ValueError:
-        raise FieldappError(f"--table-error: {text!r} is not a number of degrees") from None
-    if not 0.0 <= value <= MAX_TABLE_ERROR_DEG:
-        raise FieldappError(
-            f"--table-error: {value:g} is outside 0..{MAX_TABLE_ERROR_DEG:g} degrees"
-        )
-    return value
-
-
 def parse_color_shift(text: str | None) -> tuple[int, int] | None:
     """``"1,-2"`` -> (1, -2) pixels, each within
     :data:`~devices.sim.sensor.MAX_COLOR_SHIFT_PX`; ``None`` stays (exact registration)."""
@@ -221,28 +203,26 @@ def parse_color_shift(text: str | None) -> tuple[int, int] | None:
     return dx, dy
 
 
-def parse_lean(text: str | None) -> float | None:
-    """``"15"`` -> 15.0 degrees, within 0..:data:`~devices.sim.plants.MAX_LEAN_DEG`; ``None``
-    stays (the plant model's own leans)."""
+def parse_degrees(option: str, text: str | None, limit: float) -> float | None:
+    """``"15"`` -> 15.0 degrees for ``option`` (``--lean``, ``--table-error``), within
+    0..``limit``; ``None`` stays (the simulator's own)."""
     if text is None:
         return None
-    from devices.sim.plants import MAX_LEAN_DEG
-
     try:
         value = float(text)
     except ValueError:
-        raise FieldappError(f"--lean: {text!r} is not a number of degrees") from None
-    if not 0.0 <= value <= MAX_LEAN_DEG:
-        raise FieldappError(f"--lean: {value:g} is outside 0..{MAX_LEAN_DEG:g} degrees")
+        raise FieldappError(f"{option}: {text!r} is not a number of degrees") from None
+    if not 0.0 <= value <= limit:
+        raise FieldappError(f"{option}: {value:g} is outside 0..{limit:g} degrees")
     return value
 
 
 def run(args: argparse.Namespace) -> int:
-    from devices.sim.rig import MAX_GRID, RigGeometry, StopErrors
+    from devices.sim.rig import MAX_GRID, MAX_TABLE_ERROR_DEG, RigGeometry, StopErrors
 
     if args.scene not in SCENES:
         raise FieldappError(f"--scene: {args.scene!r} is not one of {', '.join(SCENES)}")
-    from devices.sim.plants import PLANT_MODELS, STAGES
+    from devices.sim.plants import MAX_LEAN_DEG, PLANT_MODELS, STAGES
 
     seed = parse_int("seed", args.seed, 0, 2**31 - 1)
     day = parse_int("day", args.day, 0, 120)
@@ -261,8 +241,8 @@ def run(args: argparse.Namespace) -> int:
     views = parse_list("views", args.views, 0, rig.views - 1)
     shots = parse_int("intrinsics-images", args.intrinsics_images, 0, 100)
     arrival = parse_arrival(args.arrival_error)
-    lean = parse_lean(args.lean)
-    table_error = parse_table_error(args.table_error)
+    lean = parse_degrees("--lean", args.lean, MAX_LEAN_DEG)
+    table_error = parse_degrees("--table-error", args.table_error, MAX_TABLE_ERROR_DEG)
     color_shift = parse_color_shift(args.color_shift)
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
     if table_error is not None:
