@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.geometry_split import LOW_M as LOCAL_SOIL_M
-from fieldapp.recon.geometry_split import local_ground_m, plants_above_local_ground
+from fieldapp.recon.geometry_split import height_above_local_ground, plants_above_local_ground
 from fieldapp.recon.settings import FilterSettings
 
 log = logging.getLogger(__name__)
@@ -136,7 +136,12 @@ def filter_station(
         soil_field = soil_field.select(soil_height_m < LOCAL_SOIL_M)
     else:
         kept = {"excess_green": len(green_field)}
-        clear = _above_local_ground(green_field.points, soil_field.points, soil_band_m)
+        # over the local ground, not the plane: real soil has clods, ridges and furrows (the
+        # simulated soil too), and "1 cm above the plane" let through green lying on a rise of
+        # it: weeds, moss, and the soil beside a leaf that took its colour where the colour
+        # image is registered a pixel or two off (RECONSTRUCTION.md, "Colour a pixel or two
+        # off the depth")
+        clear = height_above_local_ground(green_field.points, soil_field.points, soil_band_m)
         plants = green_field.select(
             (clear >= settings.pass_through_min_m)  # off the soil where it lies
             & (green_field.points[:, 2] <= settings.pass_through_max_m)  # above the plane
@@ -146,18 +151,6 @@ def filter_station(
     kept["voxel_mean"] = len(plants)
     soil = soil_field.select(np.abs(soil_field.points[:, 2]) <= soil_band_m)
     return FilteredStation(plants, voxel_mean(soil, soil_voxel_m).points, kept)
-
-
-def _above_local_ground(
-    points_m: NDArray[np.float64], soil_m: NDArray[np.float64], soil_band_m: float
-) -> NDArray[np.float64]:
-    """(N,) the height of each of ``points_m`` above the local ground of the station's soil
-    sample (:func:`geometry_split.local_ground_m`). Real soil is not the station's plane
-    (clods, ridges, furrows: the simulated soil too), so "1 cm above the plane" lets through
-    green that lies on a rise of the soil: weeds and moss, and the soil beside a leaf that
-    takes the leaf's colour where the colour image is registered a pixel or two off."""
-    near = soil_m[np.abs(soil_m[:, 2]) <= soil_band_m]
-    return points_m[:, 2] - local_ground_m(near, points_m[:, :2])
 
 
 def remove_outliers(

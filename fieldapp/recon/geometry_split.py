@@ -73,6 +73,16 @@ def connected_to_tall(
     return np.isin(point_label, np.unique(point_label[tall]))
 
 
+def height_above_local_ground(
+    points_m: NDArray[np.float64], soil_m: NDArray[np.float64], soil_band_m: float
+) -> NDArray[np.float64]:
+    """(N,) the height of each of ``points_m`` (N, 3) above the local ground
+    (:func:`local_ground_m`) of the soil sample's points within ``soil_band_m`` of the
+    station's plane (z = 0)."""
+    near = soil_m[np.abs(soil_m[:, 2]) <= soil_band_m]
+    return points_m[:, 2] - local_ground_m(near, points_m[:, :2])
+
+
 def plants_above_local_ground(
     points_m: NDArray[np.float64], soil_m: NDArray[np.float64], soil_band_m: float
 ) -> tuple[NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
@@ -82,9 +92,8 @@ def plants_above_local_ground(
     pixels of a sparse grid). Returns (is_plant (N,), the height of each soil-sample point
     above the local ground (M,)).
     """
-    near = soil_m[np.abs(soil_m[:, 2]) <= soil_band_m]
-    height = points_m[:, 2] - local_ground_m(near, points_m[:, :2])
-    soil_height = soil_m[:, 2] - local_ground_m(near, soil_m[:, :2])
+    height = height_above_local_ground(points_m, soil_m, soil_band_m)
+    soil_height = height_above_local_ground(soil_m, soil_m, soil_band_m)
     low = height > LOW_M
     is_plant = np.zeros(len(points_m), dtype=bool)
     candidates = np.flatnonzero(low)

@@ -36,7 +36,7 @@ from fieldapp.recon.grid import (
 )
 from fieldapp.recon.ribbons import follow_leaves
 from fieldapp.recon.settings import GridPrior, PlantSettings, StemSettings
-from fieldapp.recon.stems import Stem, find_stems
+from fieldapp.recon.stems import Stem, find_stems, merged_into
 from fieldapp.recon.traits import PlantTraits, measure_plant
 
 WIDEST_M = 0.01
@@ -242,25 +242,17 @@ def _merge_shared_bases(
     merges: list[str],
 ) -> bool:
     """Plants whose measured bases stand within ``min_separation_m`` of a taller one's are
-    parts of it: their labels become its label (in place). Two stems are never kept that
-    close (:func:`stems.find_stems`), but a stem found a little farther off (a drooping leaf's
-    tip in very noisy depth, its veil of mixed pixels read as a column) can take a plant's
-    lower part along the plant, and both then stand on the one base. Returns whether any
-    plant was merged."""
-    taller = sorted(plants, key=lambda p: -p.traits.height_m)
-    kept: list[Plant] = []
-    merged = 0
-    for plant in taller:
-        xy = np.array([plant.traits.x_m, plant.traits.y_m])
-        host = next(
-            (k for k in kept if np.hypot(*(xy - [k.traits.x_m, k.traits.y_m])) < min_separation_m),
-            None,
-        )
-        if host is None:
-            kept.append(plant)
-            continue
-        labels[labels == plant_labels[plant.id]] = plant_labels[host.id]
-        merged += 1
+    parts of it: their labels become its label (in place), by the rule stems are kept by
+    (:func:`stems.merged_into`). Two stems are never kept that close, but a stem found farther
+    off (a drooping leaf's tip in very noisy depth, its veil of mixed pixels read as a column)
+    can take a plant's lower part along the plant, and both then stand on the one base.
+    Returns whether any plant was merged."""
+    xy = np.array([[p.traits.x_m, p.traits.y_m] for p in plants]).reshape(-1, 2)
+    into = merged_into(xy, np.array([p.traits.height_m for p in plants]), min_separation_m)
+    for plant, host in zip(plants, into, strict=True):
+        if plants[host] is not plant:
+            labels[labels == plant_labels[plant.id]] = plant_labels[plants[host].id]
+    merged = int(np.count_nonzero(into != np.arange(len(plants))))
     if merged:
         merges.append(f"{merged} plants standing on another plant's base merged into it")
     return merged > 0

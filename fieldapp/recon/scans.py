@@ -277,13 +277,33 @@ def _placed_at_reached_angles(
     return placed
 
 
-def grown_over_edges(
-    green: NDArray[np.bool_], depth_m: NDArray[np.float32], measured: NDArray[np.bool_]
-) -> NDArray[np.bool_]:
+_REACH = np.ones((2 * REGISTRATION_PX + 1,) * 2, np.uint8)
+"""The square of pixels within :data:`REGISTRATION_PX` of one (OpenCV's structuring element)."""
+
+
+@dataclass(frozen=True)
+class DepthEdges:
+    """A frame's depth as the colour filters see it: ``far_m`` (H, W) the distance of each
+    pixel (:data:`NOT_MEASURED_M` where none is measured) and ``behind`` (H, W) whether a
+    nearer surface lies within :data:`REGISTRATION_PX` of it (nearer by more than
+    :data:`CONTINUOUS_SHARE` of its distance): computed once for both growth steps."""
+
+    far_m: NDArray[np.float32]
+    behind: NDArray[np.bool_]
+    measured: NDArray[np.bool_]
+
+    @classmethod
+    def of(cls, depth_m: NDArray[np.float32], measured: NDArray[np.bool_]) -> DepthEdges:
+        far = np.where(measured, depth_m, NOT_MEASURED_M).astype(np.float32)
+        behind = far - cv2.erode(far, _REACH) > CONTINUOUS_SHARE * far
+        return cls(far, behind, measured)
+
+
+def grown_over_edges(green: NDArray[np.bool_], edges: DepthEdges) -> NDArray[np.bool_]:
     """(H, W) the green pixels (``green`` (H, W)) and the measured ones within
     :data:`REGISTRATION_PX` of them that continue their surface: within
     :data:`CONTINUOUS_SHARE` of the distance of the nearest green pixel there, and not behind
-    a nearer surface (by more than that share) within the same reach.
+    a nearer surface (``edges``).
 
     A Kinect v2's colour image is registered to its depth through a calibration that leaves it
     a pixel or two off at the edges, so a leaf's rim (and the whole of a tip a few pixels
@@ -292,25 +312,20 @@ def grown_over_edges(
     distance. The soil beside a leaf that takes the leaf's green is behind the leaf, far
     beyond it: nothing is grown from it, and its points lie on the local ground, where the
     pass-through drops them (``filters.filter_station``)."""
-    kernel = np.ones((2 * REGISTRATION_PX + 1,) * 2, np.uint8)
-    far = np.where(measured, depth_m, NOT_MEASURED_M).astype(np.float32)
-    share = CONTINUOUS_SHARE * far
-    behind = far - cv2.erode(far, kernel) > share  # a nearer surface within reach
-    in_front = green & ~behind  # the soil beside a leaf that took its green grows nothing
-    nearest_green = cv2.erode(np.where(in_front, far, NOT_MEASURED_M).astype(np.float32), kernel)
-    grown: NDArray[np.bool_] = green | (measured & ~behind & (np.abs(far - nearest_green) <= share))
+    far = edges.far_m
+    in_front = green & ~edges.behind  # the soil beside a leaf that took its green grows nothing
+    nearest_green = cv2.erode(np.where(in_front, far, NOT_MEASURED_M).astype(np.float32), _REACH)
+    continues = np.abs(far - nearest_green) <= CONTINUOUS_SHARE * far
+    grown: NDArray[np.bool_] = green | (edges.measured & ~edges.behind & continues)
     return grown
 
 
 def grown_into_weak_green(
-    green: NDArray[np.bool_],
-    weak: NDArray[np.bool_],
-    depth_m: NDArray[np.float32],
-    measured: NDArray[np.bool_],
+    green: NDArray[np.bool_], weak: NDArray[np.bool_], edges: DepthEdges
 ) -> NDArray[np.bool_]:
     """(H, W) ``green`` grown, pixel by pixel up to :data:`WEAK_REACH_PX`, into the weakly
-    green pixels (``weak``) beside it that are not behind a nearer surface: hysteresis, as an
-    edge detector keeps a weak edge that continues a strong one.
+    green pixels (``weak``) beside it that are not behind a nearer surface (``edges``):
+    hysteresis, as an edge detector keeps a weak edge that continues a strong one.
 
     A colour image compressed with its chroma at half resolution (JPEG, and the Kinect v2's own
     colour stream) or blurred by its registration to the depth mixes a leaf's green with the
@@ -318,10 +333,7 @@ def grown_into_weak_green(
     falls below the threshold though still greener than the soil. The soil beside a leaf
     is behind it and is not grown into; soil a little green that continues a stem's foot lies
     on the local ground, where the pass-through drops it."""
-    far = np.where(measured, depth_m, NOT_MEASURED_M).astype(np.float32)
-    window = np.ones((2 * REGISTRATION_PX + 1,) * 2, np.uint8)
-    behind = far - cv2.erode(far, window) > CONTINUOUS_SHARE * far
-    allowed = (green | (weak & ~behind)).astype(np.uint8)
+    allowed = (green | (weak & ~edges.behind)).astype(np.uint8)
     grown = green.astype(np.uint8)
     step = np.ones((3, 3), np.uint8)
     for _ in range(WEAK_REACH_PX):
@@ -383,10 +395,10 @@ def _green_and_soil(
         measured = frame.measured.reshape(-1)
         green, soil = np.flatnonzero(measured), grid[measured[grid]]
     else:
-        shape, depth_m = frame.measured.shape, frame.images.depth_m
+        shape = frame.measured.shape
         strong, weak = (np.take(key, frame.keys).reshape(shape) for key in green_keys)  # 2 x
-        grown = grown_into_weak_green(strong, weak, depth_m, frame.measured)
-        mask = grown_over_edges(grown, depth_m, frame.measured).reshape(-1)
+        edges = DepthEdges.of(frame.images.depth_m, frame.measured)
+        mask = grown_over_edges(grown_into_weak_green(strong, weak, edges), edges).reshape(-1)
         green = np.flatnonzero(mask)
         soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
 

@@ -118,6 +118,24 @@ def find_stems(
     return _merge_close(stems, soil_m, settings.min_separation_m, soil_tree)
 
 
+def merged_into(
+    xy_m: NDArray[np.float64], strength: NDArray[np.float64], min_separation_m: float
+) -> NDArray[np.intp]:
+    """(N,) for each of the places ``xy_m`` (N, 2), the one it is merged into (itself when
+    kept): strongest first (the earlier of equals), each kept unless it stands within
+    ``min_separation_m`` of one kept before it, then merged into the first such. Two stems,
+    or two plants' bases, are never that close."""
+    into = np.arange(len(xy_m))
+    kept: list[int] = []
+    for i in sorted(range(len(xy_m)), key=lambda i: -strength[i]):
+        near = [k for k in kept if np.linalg.norm(xy_m[i] - xy_m[k]) < min_separation_m]
+        if near:
+            into[i] = near[0]
+        else:
+            kept.append(i)
+    return into
+
+
 def _merge_close(
     stems: list[tuple[float, NDArray[np.float64]]],
     soil_m: NDArray[np.float64],
@@ -125,10 +143,13 @@ def _merge_close(
     soil_tree: cKDTree | None,
 ) -> tuple[list[Stem], int]:
     """Strongest first; a stem within ``min_separation_m`` of a kept one is merged into it."""
-    kept: list[tuple[float, NDArray[np.float64]]] = []
-    for strength, xy in sorted(stems, key=lambda s: -s[0]):
-        if all(np.linalg.norm(xy - other) >= min_separation_m for _, other in kept):
-            kept.append((strength, xy))
+    into = merged_into(
+        np.array([xy for _, xy in stems]).reshape(-1, 2),
+        np.array([strength for strength, _ in stems]),
+        min_separation_m,
+    )
+    order = sorted(np.flatnonzero(into == np.arange(len(stems))), key=lambda i: -stems[i][0])
+    kept = [stems[i] for i in order]
     xy_all = np.array([xy for _, xy in kept]).reshape(-1, 2)
     ground = local_ground_z_m(soil_m, xy_all, soil_tree=soil_tree)
     result = [Stem(xy, float(z), strength) for (strength, xy), z in zip(kept, ground, strict=True)]

@@ -26,6 +26,7 @@ from fieldapp.recon.filters import filter_station
 from fieldapp.recon.scans import (
     REGISTRATION_PX,
     WEAK_REACH_PX,
+    DepthEdges,
     grown_into_weak_green,
     grown_over_edges,
 )
@@ -51,7 +52,7 @@ def _leaf_over_soil() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def test_a_leafs_rim_with_the_soils_colour_is_grown_back(shift: tuple[int, int]) -> None:
     depth, measured, leaf = _leaf_over_soil()
     painted = np.roll(leaf, shift, axis=(1, 0))  # the colour's green, registered off
-    grown = grown_over_edges(painted & measured, depth, measured)
+    grown = grown_over_edges(painted & measured, DepthEdges.of(depth, measured))
     assert grown[leaf].all()  # the whole leaf, its rim included
     # the soil that took the leaf's green stays green (it is behind: the pass-through over the
     # local ground drops it), but no soil beyond it is grown into
@@ -62,13 +63,13 @@ def test_nothing_is_grown_across_a_jump_or_into_what_is_not_measured() -> None:
     depth, measured, _ = _leaf_over_soil()
     green = np.zeros(depth.shape, bool)
     green[5:25, 36:40] = True  # soil beside the nearer stalk
-    grown = grown_over_edges(green, depth, measured)
+    grown = grown_over_edges(green, DepthEdges.of(depth, measured))
     assert not grown[:, 40:42].any()  # the stalk is 40 cm nearer: another surface
     assert grown[5:25, 36 - REGISTRATION_PX : 36].all()  # the soil continues the soil
     assert not grown[5:25, 36 - REGISTRATION_PX - 1].any()  # within reach only
     green[0:3, 0:3] = True
     green[0, 0] = False  # unmeasured pixels have no colour key: never green
-    assert not grown_over_edges(green, depth, measured)[0, 0]
+    assert not grown_over_edges(green, DepthEdges.of(depth, measured))[0, 0]
 
 
 def test_a_tip_blurred_below_the_threshold_is_grown_into_as_weak_green() -> None:
@@ -77,13 +78,14 @@ def test_a_tip_blurred_below_the_threshold_is_grown_into_as_weak_green() -> None
     strong[:, 26:30] = False  # the leaf's last four columns: its tip, only weakly green
     weak = leaf | np.roll(leaf, 1, axis=1)  # and the soil beside it took a little green
     weak[:, 35:38] = True  # a weakly green patch of soil, away from any leaf
-    grown = grown_into_weak_green(strong, weak, depth, measured)
+    grown = grown_into_weak_green(strong, weak, DepthEdges.of(depth, measured))
     assert grown[leaf].all()  # the tip, within reach
     assert not grown[:, 30].any()  # the soil beside the leaf is behind it
     assert not grown[:, 35:38].any()  # weak green on its own stays soil
     far_tip = strong.copy()
     far_tip[:, 30 - WEAK_REACH_PX - 2 : 30] = False
-    assert not grown_into_weak_green(far_tip, weak, depth, measured)[:, 29].any()  # reach
+    edges = DepthEdges.of(depth, measured)
+    assert not grown_into_weak_green(far_tip, weak, edges)[:, 29].any()  # within reach only
 
 
 def test_green_lying_on_a_rise_of_the_soil_is_not_a_plant() -> None:
