@@ -105,3 +105,22 @@ def small_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
             base_pose=capture.base_pose,
         )
     return root / "half"
+
+
+SimulateRefuses = Callable[[str, list[tuple[str, str]]], None]
+
+
+@pytest.fixture
+def simulate_refuses(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> SimulateRefuses:
+    """``simulate_refuses(option, [(bad value, message), ...])``: ``fieldapp simulate`` with
+    each bad value of ``option`` exits 1, says the message and writes no session."""
+    from fieldapp.cli import main
+
+    def check(option: str, cases: list[tuple[str, str]]) -> None:
+        out = tmp_path / "refused"
+        for bad, message in cases:
+            assert main(["simulate", "--out", str(out), option, bad]) == 1
+            assert message in capsys.readouterr().err
+            assert not out.exists()
+
+    return check

@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -11,6 +13,9 @@ import pytest
 from devices.sim.organ_truth import _stem_rings
 from devices.sim.plants import MAX_LEAN_DEG, PLANT_MODELS, PlantMesh, make_plant
 from fieldapp.cli import main
+
+if TYPE_CHECKING:
+    from tests.conftest import SimulateRefuses
 
 
 def lean_deg(mesh: PlantMesh) -> float:
@@ -37,7 +42,7 @@ def test_a_plant_leans_its_own_share_of_the_largest_lean(model: str, stage: str)
 
 
 def test_the_session_records_the_lean_and_the_cli_checks_it(
-    tmp_path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, simulate_refuses: SimulateRefuses
 ) -> None:
     out = tmp_path / "s"
     options = ["--stations", "5", "--views", "0", "--lean", "18"]
@@ -46,12 +51,12 @@ def test_the_session_records_the_lean_and_the_cli_checks_it(
     plain = tmp_path / "plain"
     assert main(["simulate", "--out", str(plain), "--stations", "5", "--views", "0"]) == 0
     assert "max_lean_deg" not in json.loads((plain / "truth.json").read_text())
-    for bad, message in [
-        ("40", "--lean: 40 is outside 0..30 degrees"),
-        ("steep", "--lean: 'steep' is not a number of degrees"),
-    ]:
-        assert main(["simulate", "--out", str(tmp_path / "x"), "--lean", bad]) == 1
-        assert message in capsys.readouterr().err
-        assert not (tmp_path / "x").exists()
+    simulate_refuses(
+        "--lean",
+        [
+            ("40", "--lean: 40 is outside 0..30 degrees"),
+            ("steep", "--lean: 'steep' is not a number of degrees"),
+        ],
+    )
     with pytest.raises(ValueError, match="max_lean_deg"):
         make_plant(1, 0, (0.0, 0.0), 0.0, "seedling", "distichous", MAX_LEAN_DEG + 1)

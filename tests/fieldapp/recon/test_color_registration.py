@@ -14,6 +14,7 @@ import csv
 import hashlib
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -31,6 +32,9 @@ from fieldapp.recon.scans import (
     grown_over_edges,
 )
 from fieldapp.recon.settings import FilterSettings
+
+if TYPE_CHECKING:
+    from tests.conftest import SimulateRefuses
 
 
 def _leaf_over_soil() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -138,16 +142,14 @@ def test_a_plot_with_colour_a_pixel_off_is_measured_as_the_paper_did(
     assert float(metrics["width"]["mape_percent"]) <= 2.29  # measured 1.56 (paper 2.29)
 
 
-def test_the_cli_checks_the_colour_shift(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    for bad, message in [
-        ("4,0", "--color-shift: '4,0' is outside -3..3 pixels a side"),
-        ("1.5,0", "--color-shift: '1.5,0' is not two whole numbers of pixels"),
-    ]:
-        assert main(["simulate", "--out", str(tmp_path / "x"), "--color-shift", bad]) == 1
-        assert message in capsys.readouterr().err
-        assert not (tmp_path / "x").exists()
+def test_the_cli_checks_the_colour_shift(simulate_refuses: SimulateRefuses) -> None:
+    simulate_refuses(
+        "--color-shift",
+        [
+            ("4,0", "--color-shift: '4,0' is outside -3..3 pixels a side"),
+            ("1.5,0", "--color-shift: '1.5,0' is not two whole numbers of pixels"),
+        ],
+    )
 
 
 def _to_jpeg(session: Path, quality: int) -> None:
