@@ -28,6 +28,8 @@ from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from fieldapp.recon.traits import circumcentres
+
 ORGAN_NONE, ORGAN_STEM, ORGAN_LEAF, ORGAN_WHORL = 0, 1, 2, 3
 """Per-point organ codes (``organ`` in the PLY files)."""
 
@@ -327,17 +329,7 @@ def _ring(
     """Centre (2,) and support of the best circle through ``xy`` (N, 2) of a radius near
     ``radius`` (:data:`RING_RADII`), or None."""
     a, b, c = (xy[k] for k in rng.integers(0, len(xy), (3, RING_TRIALS)))
-    det = 2.0 * (
-        a[:, 0] * (b[:, 1] - c[:, 1])
-        + b[:, 0] * (c[:, 1] - a[:, 1])
-        + c[:, 0] * (a[:, 1] - b[:, 1])
-    )
-    valid = np.abs(det) > 1e-12
-    det = np.where(valid, det, 1.0)
-    a2, b2, c2 = (a * a).sum(1), (b * b).sum(1), (c * c).sum(1)
-    ux = (a2 * (b[:, 1] - c[:, 1]) + b2 * (c[:, 1] - a[:, 1]) + c2 * (a[:, 1] - b[:, 1])) / det
-    uy = (a2 * (c[:, 0] - b[:, 0]) + b2 * (a[:, 0] - c[:, 0]) + c2 * (b[:, 0] - a[:, 0])) / det
-    centres = np.stack([ux, uy], axis=1)
+    centres, valid = circumcentres(a, b, c, 1e-12)
     radii = np.linalg.norm(a - centres, axis=1)
     valid &= (radii > RING_RADII[0] * radius) & (radii < RING_RADII[1] * radius)
     if not valid.any():

@@ -75,14 +75,31 @@ def _circle_two(a: NDArray[np.float64], b: NDArray[np.float64]) -> Circle:
     return Circle(float(centre[0]), float(centre[1]), float(np.linalg.norm(a - b)) / 2.0)
 
 
+def circumcentres(
+    a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64], min_det: float
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """The centres (K, 2) of the circles through the points ``a``, ``b``, ``c`` (each (K, 2)),
+    and (K,) which are defined (the triple not collinear: twice its signed area above
+    ``min_det``); the others' centres are meaningless."""
+    d = 2.0 * (
+        a[:, 0] * (b[:, 1] - c[:, 1])
+        + b[:, 0] * (c[:, 1] - a[:, 1])
+        + c[:, 0] * (a[:, 1] - b[:, 1])
+    )
+    valid = np.abs(d) >= min_det
+    d = np.where(valid, d, 1.0)
+    sa, sb, sc = (a * a).sum(1), (b * b).sum(1), (c * c).sum(1)
+    ux = (sa * (b[:, 1] - c[:, 1]) + sb * (c[:, 1] - a[:, 1]) + sc * (a[:, 1] - b[:, 1])) / d
+    uy = (sa * (c[:, 0] - b[:, 0]) + sb * (a[:, 0] - c[:, 0]) + sc * (b[:, 0] - a[:, 0])) / d
+    return np.stack([ux, uy], axis=1), valid
+
+
 def _circle_three(a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64]) -> Circle:
-    d = 2.0 * (a[0] * (b[1] - c[1]) + b[0] * (c[1] - a[1]) + c[0] * (a[1] - b[1]))
-    if abs(d) < 1e-15:  # collinear: the widest pair's circle
+    centres, valid = circumcentres(a[None], b[None], c[None], 1e-15)
+    if not valid[0]:  # collinear: the widest pair's circle
         pairs = [(a, b), (a, c), (b, c)]
         return max((_circle_two(p, q) for p, q in pairs), key=lambda circle: circle.radius_m)
-    sa, sb, sc = a @ a, b @ b, c @ c
-    ux = (sa * (b[1] - c[1]) + sb * (c[1] - a[1]) + sc * (a[1] - b[1])) / d
-    uy = (sa * (c[0] - b[0]) + sb * (a[0] - c[0]) + sc * (b[0] - a[0])) / d
+    ux, uy = centres[0]
     return Circle(float(ux), float(uy), float(np.hypot(a[0] - ux, a[1] - uy)))
 
 
