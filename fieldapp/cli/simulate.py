@@ -32,6 +32,8 @@ log = logging.getLogger(__name__)
 SCENES = ("plot", "spheres", "soil", "checkerboard", "turntable")
 MAX_ARRIVAL_M = 0.10
 MAX_ARRIVAL_DEG = 5.0
+MAX_LOCALISATION_M = 0.25
+MAX_LOCALISATION_DEG = 10.0
 
 
 def register(subparsers: Any) -> None:
@@ -57,6 +59,15 @@ def register(subparsers: Any) -> None:
         metavar="M,DEG",
         help="standard deviation of the base's true arrival from the nominal station pose: "
         "metres per axis and degrees of yaw, up to 0.1,5 (default about 0.025,1)",
+    )
+    parser.add_argument(
+        "--localisation-error",
+        default=None,
+        metavar="M,DEG",
+        help="standard deviation of the base's error in its own estimate of where it stopped, "
+        "the part of its arrival error it does not report (a base localising poorly): metres "
+        "per axis and degrees of yaw, up to 0.25,10 (default: the share of the arrival error, "
+        "about 0.015,0.6)",
     )
     parser.add_argument(
         "--table-error",
@@ -163,8 +174,12 @@ def parse_camera(text: str | None) -> dict[str, float]:
     return {"camera_height_m": height_m, "pitch_deg": pitch_deg}
 
 
-def parse_arrival(text: str | None) -> tuple[float, float] | None:
-    """``"0.03,1.5"`` -> (0.03 m, 1.5 deg), each within the option's range; ``None`` stays."""
+def parse_arrival(
+    text: str | None,
+    option: str = "--arrival-error",
+    limits: tuple[float, float] = (MAX_ARRIVAL_M, MAX_ARRIVAL_DEG),
+) -> tuple[float, float] | None:
+    """``"0.03,1.5"`` -> (0.03 m, 1.5 deg), each within ``limits``; ``None`` stays."""
     if text is None:
         return None
     parts = text.split(",")
@@ -172,12 +187,11 @@ def parse_arrival(text: str | None) -> tuple[float, float] | None:
         sigma_m, sigma_deg = (float(p) for p in parts)
     except ValueError:
         raise FieldappError(
-            f"--arrival-error: {text!r} is not two numbers M,DEG (e.g. 0.03,1.5)"
+            f"{option}: {text!r} is not two numbers M,DEG (e.g. 0.03,1.5)"
         ) from None
-    if not (0.0 <= sigma_m <= MAX_ARRIVAL_M and 0.0 <= sigma_deg <= MAX_ARRIVAL_DEG):
+    if not (0.0 <= sigma_m <= limits[0] and 0.0 <= sigma_deg <= limits[1]):
         raise FieldappError(
-            f"--arrival-error: {text!r} is outside "
-            f"0..{MAX_ARRIVAL_M:g} m, 0..{MAX_ARRIVAL_DEG:g} deg"
+            f"{option}: {text!r} is outside 0..{limits[0]:g} m, 0..{limits[1]:g} deg"
         )
     return sigma_m, sigma_deg
 
@@ -241,10 +255,17 @@ def run(args: argparse.Namespace) -> int:
     views = parse_list("views", args.views, 0, rig.views - 1)
     shots = parse_int("intrinsics-images", args.intrinsics_images, 0, 100)
     arrival = parse_arrival(args.arrival_error)
+    localisation = parse_arrival(
+        args.localisation_error,
+        "--localisation-error",
+        (MAX_LOCALISATION_M, MAX_LOCALISATION_DEG),
+    )
     lean = parse_degrees("--lean", args.lean, MAX_LEAN_DEG)
     table_error = parse_degrees("--table-error", args.table_error, MAX_TABLE_ERROR_DEG)
     color_shift = parse_color_shift(args.color_shift)
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
+    if localisation is not None:
+        errors = replace(errors, locate_m=localisation[0], locate_deg=localisation[1])
     if table_error is not None:
         errors = StopErrors.table(table_error, errors)
     if args.scene == "checkerboard" and rig.grid != 3:
@@ -266,6 +287,10 @@ def run(args: argparse.Namespace) -> int:
                 about["max_lean_deg"] = lean
             if arrival:
                 about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
+            if localisation is not None:  # absent: the arrival's share (sessions unchanged)
+                about["localisation_error"] = dict(
+                    zip(("sigma_m", "sigma_deg"), localisation, strict=True)
+                )
             if table_error is not None:  # absent: the default table (sessions unchanged)
                 about["table_error_deg"] = table_error
             if color_shift is not None:  # absent: exact registration (sessions unchanged)

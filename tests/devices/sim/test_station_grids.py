@@ -48,6 +48,25 @@ def test_arrival_errors_have_the_set_spread() -> None:
     assert np.std(dyaw) == pytest.approx(5.0, rel=0.08)
 
 
+def test_a_poorly_localised_base_reports_stops_off_by_the_localisation_error(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "lost"
+    options = ["--stations", "1-9", "--views", "0", "--localisation-error", "0.2,8"]
+    assert main(["simulate", "--out", str(out), *options]) == 0
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["localisation_error"] == {"sigma_m": 0.2, "sigma_deg": 8.0}
+    session = load_session(out)
+    reported = {c.station: c.base_pose for c in session.captures}
+    off = []
+    for station, entry in truth["stations"].items():
+        pose = reported[int(station)]
+        assert pose is not None
+        true = entry["true_pose"]
+        off.append(np.hypot(pose.x - true["x"], pose.y - true["y"]))
+    assert 0.1 < max(off) < 0.6  # far more than the default's 1.5 cm, within 3 sigma
+
+
 def test_bare_soil_has_nothing_but_soil() -> None:
     scene = bare_soil_scene(0)
     assert [body.kind for body in scene.bodies] == ["soil"]
@@ -82,6 +101,9 @@ def test_a_5x5_session_has_its_stations_and_their_true_poses(tmp_path: Path) -> 
         (["--arrival-error", "0.2,1"], "--arrival-error"),
         (["--arrival-error", "0.05"], "--arrival-error"),
         (["--arrival-error", "a,b"], "--arrival-error"),
+        (["--localisation-error", "0.3,1"], "--localisation-error"),
+        (["--localisation-error", "0.1,11"], "--localisation-error"),
+        (["--localisation-error", "0.1"], "--localisation-error"),
         (["--scene", "checkerboard", "--grid", "5"], "--grid"),
     ],
 )
