@@ -52,6 +52,19 @@ def transform_points(T: Matrix4, points: NDArray[np.floating]) -> NDArray[np.flo
     return np.asarray(points, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
 
 
+def fit_plan_motion(source_xy: NDArray[np.float64], target_xy: NDArray[np.float64]) -> Matrix4:
+    """The motion in plan view (a turn about z and a shift in x and y, z unchanged) taking
+    ``source_xy`` (N, 2) onto the corresponding ``target_xy`` (N, 2) in the least squares
+    sense (Kabsch in 2-D, no reflection); N >= 2 with two distinct points."""
+    source_mean, target_mean = source_xy.mean(axis=0), target_xy.mean(axis=0)
+    covariance = (source_xy - source_mean).T @ (target_xy - target_mean)
+    u, _, vt = np.linalg.svd(covariance)
+    sign = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+    turn = vt.T @ np.diag([1.0, sign]) @ u.T
+    R = rotation_z(float(np.degrees(np.arctan2(turn[1, 0], turn[0, 0]))))
+    return make_transform(R, np.append(target_mean - R[:2, :2] @ source_mean, 0.0))
+
+
 def rigidity_problem(T: NDArray[np.float64]) -> str | None:
     """Why ``T`` is not a finite 4 x 4 rigid transform, or ``None`` when it is one."""
     if T.shape != (4, 4):

@@ -4,25 +4,38 @@ The user gives the grid in the map frame (``plan.planting_grid`` of the session,
 session-format spec): ``rows`` x ``columns`` nodes, plants ``plant_spacing_m`` apart along a
 row (direction ``row_direction_deg`` from the map's x axis, counter-clockwise), rows
 ``row_spacing_m`` apart to its left, row 1 column 1 at ``origin``. :func:`grid_nodes` puts the
-nodes into the field frame. The prior never forces a plant: a node with no stem is searched
-again with a weaker stem test (:func:`stems_at_empty_nodes`) and otherwise reported missing; a
-plant at no node is kept and reported extra.
+nodes into the field frame. The grid is then fitted to the stems found
+(:func:`fitted_to_stems`): the map frame is only as good as the base's localisation, and a base
+a decimetre off would put the nodes beside their plants. The prior never forces a plant: a node
+with no stem is searched again with a weaker stem test (:func:`stems_at_empty_nodes`) and
+otherwise reported missing; a plant at no node is kept and reported extra.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from devices.geometry import Matrix4
+from devices.geometry import Matrix4, fit_plan_motion, rotation_angle_deg, transform_points
 from fieldapp.io.planting import PlantingGrid
 from fieldapp.recon.settings import GridPrior, StemSettings
 from fieldapp.recon.stems import Stem, local_ground_z_m, stem_columns
 
 DEFAULT_SNAP_RADIUS_M = 0.15
+FIT_MIN_STEMS = 3
+"""Stems at distinct nodes a fit of the grid rests on (a turn and a shift: three unknowns)."""
+FIT_REACH_SHARE = 0.45
+"""How far from a node (a share of the nodes' spacing) a stem may stand to be paired with it
+while the grid is fitted: under half the spacing, so a stem pairs with its own node when the
+grid is off by less than half a spacing (40 cm on the 80 cm grid), never with the next."""
+FIT_ROUNDS = 20
+FIT_MIN_MOVE_SHARE = 1 / 3
+"""A fit moving no node farther than this share of the snap radius (5 cm of 15) is not
+applied: the grid stands on its plants as well as plants stand on their nodes, and moving it
+would only chase their scatter (and change the weak-stem search at empty nodes)."""
 
 
 @dataclass(frozen=True)
@@ -61,6 +74,74 @@ def grid_nodes(
     return GridNodes(
         xy_field, (row + 1).astype(np.intp), (column + 1).astype(np.intp), snap_radius_m
     )
+
+
+@dataclass(frozen=True)
+class GridFit:
+    """How :func:`fitted_to_stems` fitted the grid: the stems (at distinct nodes) the fit rests
+    on, how far it moves the node that moves most, how far it turns, and whether it was
+    applied (``moved_m`` beyond :data:`FIT_MIN_MOVE_SHARE` of the snap radius)."""
+
+    stems: int
+    moved_m: float
+    turned_deg: float
+    applied: bool
+
+
+def fitted_to_stems(
+    grid: GridNodes, stems_xy_m: NDArray[np.float64]
+) -> tuple[GridNodes, GridFit | None]:
+    """The grid turned and shifted (plan view, least squares) onto the stems ``stems_xy_m``
+    (S, 2) standing near its nodes, and the fit; the grid unchanged (and ``None``) when
+    fewer than :data:`FIT_MIN_STEMS` stems pair with nodes or the fit would leave fewer
+    stems within the snap radius of a node than before; unchanged (the fit not applied) when
+    it would move no node farther than :data:`FIT_MIN_MOVE_SHARE` of the snap radius.
+
+    Stems pair with the nearest node within :data:`FIT_REACH_SHARE` of the spacing (one stem
+    a node, the nearest), the grid is fitted to them and the pairs are taken again until they
+    hold; then again within the snap radius only, so a stem standing off the grid (a weed, a
+    plant sown astray) does not pull it."""
+    if len(stems_xy_m) < FIT_MIN_STEMS or len(grid.xy_m) < 2:
+        return grid, None
+    spacing = float(cKDTree(grid.xy_m).query(grid.xy_m, k=2)[0][:, 1].min())
+    T = np.eye(4)
+    for reach in (FIT_REACH_SHARE * spacing, grid.snap_radius_m):
+        pairs: tuple[int, ...] = ()
+        for _ in range(FIT_ROUNDS):
+            nodes, stems = _paired(_moved(T, grid.xy_m), stems_xy_m, reach)
+            if len(nodes) < FIT_MIN_STEMS:
+                return grid, None
+            if tuple(nodes) + tuple(stems) == pairs:
+                break
+            pairs = tuple(nodes) + tuple(stems)
+            T = fit_plan_motion(grid.xy_m[nodes], stems_xy_m[stems])
+    moved = _moved(T, grid.xy_m)
+    before = len(_paired(grid.xy_m, stems_xy_m, grid.snap_radius_m)[0])
+    after = len(_paired(moved, stems_xy_m, grid.snap_radius_m)[0])
+    if after < max(before, FIT_MIN_STEMS):
+        return grid, None
+    moved_m = float(np.linalg.norm(moved - grid.xy_m, axis=1).max())
+    applied = moved_m > FIT_MIN_MOVE_SHARE * grid.snap_radius_m
+    fit = GridFit(after, moved_m, rotation_angle_deg(T[:3, :3]), applied)
+    return (replace(grid, xy_m=moved) if applied else grid), fit
+
+
+def _moved(T: Matrix4, xy_m: NDArray[np.float64]) -> NDArray[np.float64]:
+    return transform_points(T, np.column_stack([xy_m, np.zeros(len(xy_m))]))[:, :2]
+
+
+def _paired(
+    nodes_xy_m: NDArray[np.float64], stems_xy_m: NDArray[np.float64], reach_m: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """(node, stem) index pairs: each stem with its nearest node within ``reach_m``, one stem a
+    node (the nearest), in node order."""
+    distance, node = cKDTree(nodes_xy_m).query(stems_xy_m, distance_upper_bound=reach_m)
+    stems = np.flatnonzero(np.isfinite(distance))
+    order = stems[np.lexsort((distance[stems], node[stems]))]
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = node[order][1:] != node[order][:-1]
+    kept = order[first]
+    return node[kept].astype(np.intp), kept.astype(np.intp)
 
 
 def plan_nodes(grid: PlantingGrid, T_field_map: Matrix4) -> GridNodes:

@@ -16,7 +16,13 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from devices.geometry import Matrix4, make_transform, rotation_z, transform_points
+from devices.geometry import (
+    Matrix4,
+    fit_plan_motion,
+    make_transform,
+    rotation_z,
+    transform_points,
+)
 from fieldapp.io.session import Session, reported_base_poses
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.grid import GridNodes, plan_nodes
@@ -43,18 +49,9 @@ def fit_T_map_field(
     """The 2-D rigid ``T_map_field`` taking ``field_xy_m`` (S, 2) onto ``map_xy_m`` (S, 2); with
     one station the turn is ``map_yaw_deg - field_heading_deg`` (its view 0's heading)."""
     if len(field_xy_m) >= 2:
-        field_mean, map_mean = field_xy_m.mean(axis=0), map_xy_m.mean(axis=0)
-        covariance = (field_xy_m - field_mean).T @ (map_xy_m - map_mean)
-        u, _, vt = np.linalg.svd(covariance)
-        sign = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-        R2 = vt.T @ np.diag([1.0, sign]) @ u.T
-        yaw_deg = float(np.degrees(np.arctan2(R2[1, 0], R2[0, 0])))
-    else:
-        yaw_deg = map_yaw_deg - field_heading_deg
-        field_mean, map_mean = field_xy_m[0], map_xy_m[0]
-    R = rotation_z(yaw_deg)
-    shift = np.append(map_mean - R[:2, :2] @ field_mean, 0.0)
-    return make_transform(R, shift)
+        return fit_plan_motion(field_xy_m, map_xy_m)
+    R = rotation_z(map_yaw_deg - field_heading_deg)
+    return make_transform(R, np.append(map_xy_m[0] - R[:2, :2] @ field_xy_m[0], 0.0))
 
 
 def turntable_axis_direction(T_view_next: Matrix4) -> NDArray[np.float64]:

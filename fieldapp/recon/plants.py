@@ -29,8 +29,10 @@ from fieldapp.recon.geodesic import (
     voxel_neighbours,
 )
 from fieldapp.recon.grid import (
+    GridFit,
     GridNodes,
     apply_grid_prior_nodes,
+    fitted_to_stems,
     prior_nodes,
     stems_at_empty_nodes,
 )
@@ -143,7 +145,8 @@ class PlantSearch:
       of the plot): neither found nor missing;
     - ``extra_plants``: ids of plants standing at no grid cell;
     - ``meets``: plant id -> the plant its widest extent meets (:func:`widest_meets`): its width
-      may go on into that plant."""
+      may go on into that plant;
+    - ``grid_fit``: how the planting grid was moved onto the stems, when it was."""
 
     plants: list[Plant]
     splits: list[list[int]] = field(default_factory=list)
@@ -152,6 +155,7 @@ class PlantSearch:
     unseen_cells: list[tuple[int, int]] = field(default_factory=list)
     extra_plants: list[int] = field(default_factory=list)
     meets: dict[int, int] = field(default_factory=dict)
+    grid_fit: GridFit | None = None
 
     def warnings(self, flag_ambiguous_share: float) -> list[str]:
         """One line per plant that may hold another's points, per missing grid cell (as a
@@ -165,6 +169,14 @@ class PlantSearch:
         if self.meets:
             named = ", ".join(f"{p} (plant {o})" for p, o in sorted(self.meets.items()))
             lines.append(f"plants that {MEETS_WARNING}: {named}")
+        fit = self.grid_fit
+        if fit is not None and fit.applied:
+            lines.append(
+                f"planting grid fitted to {fit.stems} stems: it stood up to "
+                f"{100 * fit.moved_m:.0f} cm ({fit.turned_deg:.1f} deg) off them where the map "
+                "frame put it; the base's localisation, or the plan's grid, is off by that much "
+                "(plants keep the map positions the base's reports give)"
+            )
         if self.missing_cells:
             cells = ", ".join(f"row {r} column {c}" for r, c in self.missing_cells)
             lines.append(f"{len(self.missing_cells)} planting-grid cells without a plant: {cells}")
@@ -206,11 +218,13 @@ def search_plants(
     # the plan-view tree over the soil, built once (0.04 s for a 3 x 3 plot): the stems' local
     # ground, the plants' soil and the grid's seen nodes all ask it
     soil_tree = cKDTree(soil_m[:, :2]) if len(soil_m) else None
+    grid_fit: GridFit | None = None
     if settings.stems.enabled and len(cloud):
         stems, merged = find_stems(cloud.points, soil_m, settings.stems, soil_tree)
         if merged:
             merges.append(f"{merged} stem candidates merged into a stronger stem nearby")
         if grid is not None:
+            grid, grid_fit = fitted_to_stems(grid, np.array([stem.xy_m for stem in stems]))
             stems = stems + stems_at_empty_nodes(
                 cloud.points, soil_m, stems, grid, settings.stems, soil_tree
             )
@@ -226,7 +240,7 @@ def search_plants(
         plants, plant_labels = _measured(
             cloud, soil_m, soil_tree, labels, ambiguous, len(stems), settings, ground_radius_m
         )
-    search = PlantSearch(plants, merges=merges)
+    search = PlantSearch(plants, merges=merges, grid_fit=grid_fit)
     if grid is not None:
         _place_on_grid(search, grid, soil_m, soil_tree)
     search.splits = _splits(cloud.points, labels, plant_labels, settings.cluster_voxel_m)

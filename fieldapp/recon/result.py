@@ -136,7 +136,7 @@ class Reconstruction:
     def plant_report(self) -> dict[str, Any]:
         """How the plants were found: from stems or clusters, ambiguous shares (flagged above
         ``flag_ambiguous_share``), each plant's cautions, splits and merges, grid cells missing
-        and plants extra."""
+        and plants extra, how the grid was fitted to the stems."""
         search = self.search or PlantSearch(self.plants)
         return {
             "method": "stems, geodesic assignment; density clusters where no stem is seen",
@@ -157,6 +157,14 @@ class Reconstruction:
             "missing_cells": [list(cell) for cell in search.missing_cells],
             "unseen_cells": [list(cell) for cell in search.unseen_cells],
             "extra_plants": search.extra_plants,
+            "grid_fit": None
+            if search.grid_fit is None
+            else {
+                "stems": search.grid_fit.stems,
+                "moved_m": round(search.grid_fit.moved_m, 4),
+                "turned_deg": round(search.grid_fit.turned_deg, 3),
+                "applied": search.grid_fit.applied,
+            },
         }
 
     def T_reference_station(self, station: int) -> Matrix4:

@@ -73,17 +73,17 @@ class RegistrationSettings(_Section):
     from where it stood when calibrated (``fieldapp/recon/arrival.py``; a report beyond
     ``max_base_move_m``/``_deg`` is not used), then with the arrival uncertainty
     ``retry_arrival_factor`` times wider, and wider again by the same factor while stations
-    are left, up to ``max_arrival_sigma_m``/``_deg``; the run leaving the fewest stations
-    coarse is kept."""
+    are left, ``retry_widenings`` times at most; the run leaving the fewest stations coarse is
+    kept."""
 
     enabled: bool = True
     retry_arrival_factor: float = Field(default=2.0, ge=1.0)
     """How much wider the arrival uncertainty of each run after the first than the run before
     (1: no such run)."""
-    max_arrival_sigma_m: float = Field(default=0.24, gt=0.0)
-    max_arrival_sigma_deg: float = Field(default=12.0, gt=0.0)
-    """The widest arrival uncertainty a later run assumes: beyond it a station's overlaps are
-    too small a part of what it sees to be found again (stations 1.6 m apart)."""
+    retry_widenings: int = Field(default=3, ge=0)
+    """How many runs with a wider prior at most (3: up to 8 times the settings, 24 cm / 12
+    degrees with the defaults; beyond that a station's overlaps are too small a part of what
+    it sees to be found again, stations 1.6 m apart)."""
     use_base_poses: bool = True
     max_base_move_m: float = Field(default=0.5, gt=0.0)
     max_base_move_deg: float = Field(default=20.0, gt=0.0)

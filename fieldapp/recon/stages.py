@@ -283,8 +283,8 @@ def join_stations(
     place that nothing here would mend), the base probably erred more than the settings say,
     and registration runs again (:func:`_later_runs`): from the levelled poses moved by where
     the base reported it stopped (``moves``, :func:`starting_poses`), then, while stations are
-    still left, with the arrival uncertainty ``retry_arrival_factor`` times wider each run, up
-    to the widest of the settings. The run leaving the fewest stations coarse is kept (the
+    still left, with the arrival uncertainty ``retry_arrival_factor`` times wider each run
+    (``retry_widenings`` runs at most). The run leaving the fewest stations coarse is kept (the
     first on a tie), with a warning saying how it was placed. Every run keeps its guards. A
     plot registered the first time is registered exactly as before: on touching canopies a
     millimetre of registration decides some leaf tips (RECONSTRUCTION.md, "Touching
@@ -336,8 +336,8 @@ def _later_runs(
 ) -> list[tuple[dict[int, Matrix4], RegistrationSettings, str]]:
     """The registrations to try after the first, in order: (starting poses, settings, how
     they differ): from the moved poses when any station moved, then with the arrival
-    uncertainty ``retry_arrival_factor`` times wider, and wider again by the same factor, up
-    to ``max_arrival_sigma_m`` / ``_deg`` (the caller stops when no station is left)."""
+    uncertainty ``retry_arrival_factor`` times wider, and wider again by the same factor,
+    ``retry_widenings`` times (the caller stops when no station is left)."""
     runs: list[tuple[dict[int, Matrix4], RegistrationSettings, str]] = []
     moved, from_reports = T_field_levelled, ""
     if any(not np.array_equal(T_field_moved[s], T_field_levelled[s]) for s in T_field_levelled):
@@ -351,16 +351,19 @@ def _later_runs(
 
 def _wider_priors(settings: RegistrationSettings) -> list[RegistrationSettings]:
     """``settings`` with the arrival uncertainty widened by ``retry_arrival_factor`` again and
-    again, each clipped to the widest (``max_arrival_sigma_*``), until both are reached."""
-    factor, priors = settings.retry_arrival_factor, []
-    sigma_m, sigma_deg = settings.arrival_sigma_m, settings.arrival_sigma_deg
-    widest_m = max(settings.max_arrival_sigma_m, sigma_m)
-    widest_deg = max(settings.max_arrival_sigma_deg, sigma_deg)
-    while factor > 1.0 and (sigma_m < widest_m or sigma_deg < widest_deg):
-        sigma_m, sigma_deg = min(factor * sigma_m, widest_m), min(factor * sigma_deg, widest_deg)
-        update = {"arrival_sigma_m": sigma_m, "arrival_sigma_deg": sigma_deg}
-        priors.append(settings.model_copy(update=update))
-    return priors
+    again, ``retry_widenings`` times."""
+    factor = settings.retry_arrival_factor
+    if factor <= 1.0:
+        return []
+    return [
+        settings.model_copy(
+            update={
+                "arrival_sigma_m": factor**k * settings.arrival_sigma_m,
+                "arrival_sigma_deg": factor**k * settings.arrival_sigma_deg,
+            }
+        )
+        for k in range(1, settings.retry_widenings + 1)
+    ]
 
 
 def _done_already(steps: RegistrationSteps, prefix: str) -> RegistrationSteps:
