@@ -117,3 +117,48 @@ def misregistered(color: NDArray[np.uint8], dx_px: int, dy_px: int) -> NDArray[n
     padded = np.pad(color, ((top, max(-dy_px, 0)), (left, max(-dx_px, 0)), (0, 0)), mode="edge")
     y0, x0 = max(-dy_px, 0), max(-dx_px, 0)
     return padded[y0 : y0 + h, x0 : x0 + w]
+
+
+COLOR_CAMERA = (1081.37, 1081.37, 959.5, 539.5, 1920, 1080)
+"""A Kinect v2's colour camera as libfreenect2 describes it by default: fx, fy, cx, cy
+(pixels) and its width and height (about 84 x 53 degrees: less high than the depth camera's
+60 degrees)."""
+COLOR_BASELINE_M = 0.052
+"""How far the colour camera stands beside the depth camera (libfreenect2's ``shift_m``)."""
+OCCLUSION_WINDOW_PX = (2, 1)
+"""Half the width and height (colour pixels) over which a depth pixel shadows others, and..."""
+OCCLUSION_TOLERANCE = 0.01
+"""...how much farther (a share of its depth) a depth pixel may be than the nearest one
+mapped there and still be given its colour (libfreenect2's registration filter)."""
+
+
+def registered_as_libfreenect2(
+    color: NDArray[np.uint8],
+    depth_m: NDArray[np.floating],
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+) -> NDArray[np.uint8]:
+    """``color`` (H, W, 3, registered exactly to ``depth_m`` of a depth camera with those
+    intrinsics) with what libfreenect2's registration (its filter on, the default) leaves no
+    colour in black: depth pixels outside the colour camera's view (rows at the top and bottom:
+    its field is less high) and those the colour camera, :data:`COLOR_BASELINE_M` beside the
+    depth camera, sees behind a nearer surface (a band beside every near edge), and pixels
+    without depth."""
+    cfx, cfy, ccx, ccy, width, height = COLOR_CAMERA
+    v, u = np.nonzero(depth_m > 0)
+    z = depth_m[v, u].astype(np.float64)
+    uc = np.rint(cfx * ((u - cx) / fx + COLOR_BASELINE_M / z) + ccx).astype(np.intp)
+    vc = np.rint(cfy * (v - cy) / fy + ccy).astype(np.intp)
+    inside = (uc >= 0) & (uc < width) & (vc >= 0) & (vc < height)
+    v, u, z, uc, vc = v[inside], u[inside], z[inside], uc[inside], vc[inside]
+    half_w, half_h = OCCLUSION_WINDOW_PX
+    nearest = np.full((height + 2 * half_h, width + 2 * half_w), np.inf)
+    for dy in range(-half_h, half_h + 1):
+        for dx in range(-half_w, half_w + 1):
+            np.minimum.at(nearest, (vc + half_h + dy, uc + half_w + dx), z)
+    seen = (z - nearest[vc + half_h, uc + half_w]) / z <= OCCLUSION_TOLERANCE
+    out = np.zeros_like(color)
+    out[v[seen], u[seen]] = color[v[seen], u[seen]]
+    return out

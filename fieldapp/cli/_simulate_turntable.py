@@ -56,11 +56,18 @@ def write_turntable_session(
     views: list[int],
     depth_only: bool,
     rig: TurntableRig | None = None,
+    color_holes: bool = False,
 ) -> int:
-    """Simulate and write the session and its truth; returns the number of captures."""
+    """Simulate and write the session and its truth; returns the number of captures.
+    ``color_holes``: colour black where libfreenect2's registration gives none
+    (:func:`devices.sim.sensor.registered_as_libfreenect2`)."""
+    from devices.sim.sensor import registered_as_libfreenect2
+
     rig = rig or TurntableRig()
     plant = turntable_plant(seed, day)
-    about = {"scene": "turntable", "seed": seed, "day": day, "depth_only": depth_only}
+    about: dict[str, Any] = {"scene": "turntable", "seed": seed, "day": day}
+    about |= {"depth_only": depth_only} | ({"color_holes": True} if color_holes else {})
+    k = KINECT_V2_PAPER
     writer = SessionWriter.create(
         folder,
         f"sim-turntable-seed{seed}-day{day}",
@@ -73,11 +80,14 @@ def write_turntable_session(
     truths: list[dict[str, Any]] = []
     for capture in turntable_captures(plant, rig, views, seed):
         frame = capture.frame
+        color = None if depth_only else frame.color
+        if color is not None and color_holes:
+            color = registered_as_libfreenect2(color, frame.depth_m, k.fx, k.fy, k.cx, k.cy)
         writer.add_capture(
             STATION,
             capture.view,
             frame.depth_m,
-            None if depth_only else frame.color,
+            color,
             ir=frame.ir,
             angle_deg=capture.reported_angle_deg,
         )

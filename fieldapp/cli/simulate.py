@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 from fieldapp.errors import FieldappError
 
 if TYPE_CHECKING:
+    from devices.camera.frames import Intrinsics
     from devices.sim.rig import RigGeometry, StopErrors
     from devices.sim.survey import SimCapture
     from devices.sim.world import SimWorld
@@ -83,6 +84,14 @@ def register(subparsers: Any) -> None:
         metavar="DX,DY",
         help="colour images registered DX, DY pixels off the depth (integers, up to 3 a side), "
         "as a Kinect v2's registration can leave them (default: exact)",
+    )
+    parser.add_argument(
+        "--color-holes",
+        action="store_true",
+        help="colour as libfreenect2 registers a Kinect v2's: black (no colour) where the "
+        "colour camera, 5.2 cm beside the depth camera and with a less high field of view, "
+        "does not see the depth pixel (rows at the top and bottom, a band beside every near "
+        "edge)",
     )
     parser.add_argument(
         "--camera",
@@ -274,7 +283,7 @@ def run(args: argparse.Namespace) -> int:
         raise FieldappError(f"--out: {args.out} exists and is not a folder")
     try:
         if args.scene == "turntable":
-            count = _write_turntable(args.out, seed, day, views, args.depth_only)
+            count = _write_turntable(args.out, seed, day, views, args.depth_only, args.color_holes)
         else:
             world = build_world(
                 args.scene, seed, day, rig, args.plants, args.stage, args.plant_model, lean
@@ -295,6 +304,8 @@ def run(args: argparse.Namespace) -> int:
                 about["table_error_deg"] = table_error
             if color_shift is not None:  # absent: exact registration (sessions unchanged)
                 about["color_shift_px"] = list(color_shift)
+            if args.color_holes:
+                about["color_holes"] = True
             if args.depth_only:
                 about["depth_only"] = True
             if camera:  # absent: the paper's rig (sessions unchanged)
@@ -311,10 +322,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write_turntable(out: Path, seed: int, day: int, views: list[int], depth_only: bool) -> int:
+def _write_turntable(
+    out: Path, seed: int, day: int, views: list[int], depth_only: bool, color_holes: bool
+) -> int:
     from fieldapp.cli._simulate_turntable import write_turntable_session
 
-    return write_turntable_session(out, seed, day, views, depth_only)
+    return write_turntable_session(out, seed, day, views, depth_only, color_holes=color_holes)
 
 
 def build_world(
@@ -429,6 +442,7 @@ def write_session(
                     capture,
                     bool(about.get("depth_only")),
                     about.get("color_shift_px"),
+                    world.intrinsics if about.get("color_holes") else None,
                 )
             )
             truths.append(capture.truth())
@@ -446,17 +460,23 @@ def save_capture(
     capture: SimCapture,
     depth_only: bool = False,
     color_shift_px: Sequence[int] | None = None,
+    holes_of: Intrinsics | None = None,
 ) -> None:
     """Write one simulated capture as the devices would have reported it (without its colour
     image when ``depth_only``; with it registered ``color_shift_px`` (DX, DY) off the depth,
-    :func:`devices.sim.sensor.misregistered`)."""
-    from devices.sim.sensor import misregistered
+    :func:`devices.sim.sensor.misregistered`; with ``holes_of``, the depth camera's
+    intrinsics, black where libfreenect2's registration gives no colour,
+    :func:`devices.sim.sensor.registered_as_libfreenect2`)."""
+    from devices.sim.sensor import misregistered, registered_as_libfreenect2
     from fieldapp.io.session import BasePose
 
     pose = capture.reported_pose
     color = capture.frame.color
     if color_shift_px is not None and color is not None:
         color = misregistered(color, *color_shift_px)
+    if holes_of is not None and color is not None:
+        K = holes_of
+        color = registered_as_libfreenect2(color, capture.frame.depth_m, K.fx, K.fy, K.cx, K.cy)
     writer.add_capture(
         capture.station,
         capture.view,

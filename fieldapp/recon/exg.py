@@ -21,6 +21,10 @@ EXG_KEYS = 256 * SUM_LEVELS
 a function of the green level G and the sum S alone, so 196 608 keys hold every value."""
 NO_KEY = EXG_KEYS
 """The key of a pixel left out (no depth): one past the last, never tallied, never green."""
+NO_COLOUR_SUM = 6
+"""A pixel whose R + G + B is at most this has no colour: libfreenect2's registration writes
+black (0, 0, 0) where the colour camera does not see the depth pixel, and a JPEG of it leaves a
+level or two; no lit soil or leaf is that dark."""
 VALLEY_SMOOTHING_BINS = 5
 MIN_GREEN_CONTRAST = 0.1
 """Least difference of the mean ExG of Otsu's two classes for colour to separate plants: green
@@ -144,10 +148,27 @@ def exg_of_keys() -> NDArray[np.float64]:
     return table
 
 
+@cache
+def uncoloured_keys() -> NDArray[np.bool_]:
+    """(EXG_KEYS + 1,) bool: which keys of :func:`exg_keys` (and :data:`NO_KEY`, not) are of
+    pixels without colour (R + G + B at most :data:`NO_COLOUR_SUM`) (read-only)."""
+    table = np.append(np.arange(EXG_KEYS) % SUM_LEVELS <= NO_COLOUR_SUM, False)
+    table.flags.writeable = False
+    return table
+
+
 def exg_tally(keys: NDArray[np.int32]) -> NDArray[np.int64]:
     """(EXG_KEYS,) int64: how many of the pixels ``keys`` (N,) (see :func:`exg_keys`; those
-    of :data:`NO_KEY` left out) have each key."""
-    return np.bincount(keys, minlength=NO_KEY + 1)[:EXG_KEYS]
+    of :data:`NO_KEY` and those without colour, :func:`uncoloured_keys`, left out) have each
+    key: a pixel with no colour is neither soil nor plant to the threshold."""
+    tally = np.bincount(keys, minlength=NO_KEY + 1)[:EXG_KEYS]
+    tally[_uncoloured_key_indices()] = 0
+    return tally
+
+
+@cache
+def _uncoloured_key_indices() -> NDArray[np.intp]:
+    return np.flatnonzero(uncoloured_keys()[:EXG_KEYS])
 
 
 def exg_values(tally: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:

@@ -41,6 +41,7 @@ from fieldapp.recon.exg import (
     exg_values,
     keep_soil,
     otsu_threshold,
+    uncoloured_keys,
 )
 from fieldapp.recon.settings import CropSettings
 from fieldapp.recon.station import (
@@ -67,6 +68,11 @@ edge detector's two thresholds make."""
 WEAK_REACH_PX = 4
 """How far (pixels) green grows into weak green: a JPEG's chroma is at half resolution in 8 x
 8 blocks, so a leaf's colour bleeds over two to four pixels of its edge."""
+UNCOLOURED_REACH_PX = 12
+"""How far (pixels) green grows into measured pixels without colour
+(:func:`grown_into_uncoloured`): the colour camera, 5.2 cm beside the depth camera, loses a
+band 365 px x 0.052 m x (1 / near - 1 / far) wide beside a near edge: 8 px for a leaf 30 cm in
+front of another 1 m away, 12 px at 0.8 m."""
 NOT_MEASURED_M = 1e3
 """The distance given to unmeasured pixels in the image filters (far behind everything)."""
 
@@ -135,14 +141,16 @@ class ReadFrame:
     ``images``: as read; ``measured``: (H, W) bool; ``keys``: (H * W,) int32, the
     :func:`~fieldapp.recon.exg.exg_keys` of every pixel in row-major order,
     :data:`~fieldapp.recon.exg.NO_KEY` where none is measured, and ``tally``:
-    (EXG_KEYS,) int64, how many measured pixels have each key; both ``None`` for a
-    depth-only capture (no colour: its plants are told by geometry).
+    (EXG_KEYS,) int64, how many measured pixels with colour have each key; both ``None`` for
+    a depth-only capture (no colour: its plants are told by geometry). ``uncoloured``: how
+    many measured pixels have no colour (black, :data:`~fieldapp.recon.exg.NO_COLOUR_SUM`).
     """
 
     images: CaptureImages
     measured: NDArray[np.bool_]
     keys: NDArray[np.int32] | None
     tally: NDArray[np.int64] | None
+    uncoloured: int = 0
 
     @property
     def capture(self) -> Capture:
@@ -156,7 +164,8 @@ def frame_of(images: CaptureImages) -> ReadFrame:
         return ReadFrame(images, measured, None, None)
     keys = exg_keys(images.color.reshape(-1, 3))
     keys[~measured.reshape(-1)] = NO_KEY
-    return ReadFrame(images, measured, keys, exg_tally(keys))
+    tally = exg_tally(keys)
+    return ReadFrame(images, measured, keys, tally, int(measured.sum() - tally.sum()))
 
 
 class FrameWorkers:
@@ -341,6 +350,36 @@ def grown_into_weak_green(
     return grown.astype(bool)
 
 
+def grown_into_uncoloured(
+    green: NDArray[np.bool_], uncoloured: NDArray[np.bool_], edges: DepthEdges
+) -> NDArray[np.bool_]:
+    """(H, W) ``green`` grown, pixel by pixel up to :data:`UNCOLOURED_REACH_PX`, into the
+    measured pixels without colour (``uncoloured``) that continue the surface of a pixel
+    already grown beside them (within :data:`CONTINUOUS_SHARE` of its distance, ``edges``).
+
+    libfreenect2 registers a Kinect v2's colour to its depth and writes black where the colour
+    camera does not see the depth pixel: behind a nearer surface from where it stands, 5.2 cm
+    beside the depth camera, and outside its view. On a tall plant near the camera a stretch of
+    a lower leaf, seen by the depth camera, is hidden from the colour camera by the leaf above;
+    read as not green, it was lost (a touching plot's tallest plant 2.5 cm low). The leaf's
+    surface goes on from its green part into the black: grown along it. The black soil beside
+    a leaf lies far behind the leaf's edge and is not grown into; soil that continues a stem's
+    foot lies on the local ground, where the pass-through drops it."""
+    far = edges.far_m
+    step = np.ones((3, 3), np.uint8)
+    grown = green.copy()
+    for _ in range(UNCOLOURED_REACH_PX):
+        nearest = cv2.erode(np.where(grown, far, NOT_MEASURED_M).astype(np.float32), step)
+        farthest = cv2.dilate(np.where(grown, far, 0.0).astype(np.float32), step)
+        tolerance = CONTINUOUS_SHARE * far
+        continues = (np.abs(far - nearest) <= tolerance) | (np.abs(far - farthest) <= tolerance)
+        wider = grown | (uncoloured & continues)
+        if np.array_equal(wider, grown):
+            break
+        grown = wider
+    return grown
+
+
 def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame | str:
     """A capture's measured pixels, or the warning saying why it was skipped."""
     try:
@@ -398,7 +437,11 @@ def _green_and_soil(
         shape = frame.measured.shape
         strong, weak = (np.take(key, frame.keys).reshape(shape) for key in green_keys)  # 2 x
         edges = DepthEdges.of(frame.images.depth_m, frame.measured)
-        mask = grown_over_edges(grown_into_weak_green(strong, weak, edges), edges).reshape(-1)
+        grown = grown_into_weak_green(strong, weak, edges)
+        if frame.uncoloured:
+            uncoloured = np.take(uncoloured_keys(), frame.keys).reshape(shape)
+            grown = grown_into_uncoloured(grown, uncoloured, edges)
+        mask = grown_over_edges(grown, edges).reshape(-1)
         green = np.flatnonzero(mask)
         soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
 

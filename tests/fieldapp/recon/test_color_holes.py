@@ -1,0 +1,99 @@
+"""Colour with holes, as libfreenect2 registers a Kinect v2's: black where the colour camera,
+5.2 cm beside the depth camera and with a less high field of view, does not see the depth
+pixel. A pixel without colour is neither soil nor plant to the threshold, and green grows into
+it along the surface it continues (``scans.grown_into_uncoloured``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from devices.camera.frames import KINECT_V2_PAPER as K
+from devices.sim.sensor import COLOR_BASELINE_M, COLOR_CAMERA, registered_as_libfreenect2
+from fieldapp.cli import main
+from fieldapp.io.images import read_color
+from fieldapp.recon.exg import exg_keys, exg_tally, exg_values, otsu_threshold
+from fieldapp.recon.scans import DepthEdges, grown_into_uncoloured
+
+SOIL, LEAF = (120, 90, 60), (50, 140, 30)
+
+
+def _scene() -> tuple[NDArray[np.float32], NDArray[np.uint8], dict[str, NDArray[np.bool_]]]:
+    """Depth and exact colour of soil 1.6 m away, a lower leaf 1.0 m away across the middle
+    and an upper leaf 0.7 m away over the lower leaf's left half."""
+    depth = np.full((K.height, K.width), 1.6, np.float32)
+    parts = {name: np.zeros(depth.shape, bool) for name in ("lower", "upper")}
+    parts["lower"][150:260, 120:400] = True
+    parts["upper"][180:230, 120:250] = True
+    depth[parts["lower"]] = 1.0
+    depth[parts["upper"]] = 0.7
+    parts["lower"] &= ~parts["upper"]
+    color = np.empty((*depth.shape, 3), np.uint8)
+    color[:] = SOIL
+    color[parts["lower"] | parts["upper"]] = LEAF
+    return depth, color, parts
+
+
+def _black(color: NDArray[np.uint8]) -> NDArray[np.bool_]:
+    black: NDArray[np.bool_] = color.sum(axis=2) == 0
+    return black
+
+
+def test_the_colour_camera_misses_rows_at_the_top_and_bottom_and_bands_beside_near_edges() -> None:
+    depth, color, parts = _scene()
+    holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
+    black = _black(holed)
+    fy_colour, height = COLOR_CAMERA[1], COLOR_CAMERA[5]
+    rows = np.arange(K.height)
+    outside = np.abs((rows - K.cy) / K.fy) > (height / 2) / fy_colour  # its field is less high
+    assert black[outside].all() and 20 < outside[: K.height // 2].sum() < 35
+    inside = ~outside
+    # beside the upper leaf's right edge the lower leaf is hidden from the colour camera over
+    # fx * b * (1 / 0.7 - 1 / 1.0) pixels (the colour camera looks from the left)
+    band = K.fx * COLOR_BASELINE_M * (1 / 0.7 - 1 / 1.0)
+    shadow = black & parts["lower"] & inside[:, None]
+    columns = np.flatnonzero(shadow[200])
+    assert columns.min() >= 250 and columns.max() - 249 == pytest.approx(band, abs=2)
+    assert not black[parts["upper"]].any()  # the nearest surface keeps its colour
+    assert black[inside].mean() < 0.1
+
+
+def test_green_grows_into_the_hidden_part_of_a_leaf_and_not_into_the_soil() -> None:
+    depth, color, parts = _scene()
+    holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
+    black = _black(holed) & np.isfinite(depth)
+    green = (holed[..., 1].astype(int) - holed[..., 0] > 40) & ~black
+    hidden = black & parts["lower"]
+    hidden[:30] = hidden[390:] = False  # the shadow beside the upper leaf, not the rows
+    assert hidden.sum() > 300 and not green[hidden].any()  # without colour: not green
+    edges = DepthEdges.of(depth, np.isfinite(depth))
+    grown = grown_into_uncoloured(green, black, edges)
+    assert grown[hidden].mean() > 0.99
+    soil = ~(parts["lower"] | parts["upper"])
+    assert not grown[soil].any()  # the black soil beside the leaves is behind their edges
+
+
+def test_pixels_without_colour_are_left_out_of_the_threshold() -> None:
+    depth, color, _ = _scene()
+    holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
+    exact = exg_tally(exg_keys(color.reshape(-1, 3)))
+    tally = exg_tally(exg_keys(holed.reshape(-1, 3)))
+    assert tally.sum() == (~_black(holed)).sum()  # black tallied nowhere
+    values, weights = exg_values(tally)
+    assert otsu_threshold(values, weights) == pytest.approx(otsu_threshold(*exg_values(exact)))
+
+
+def test_the_simulator_writes_colour_with_holes_when_asked(tmp_path: Path) -> None:
+    out = tmp_path / "holes"
+    options = ["--stations", "5", "--views", "0", "--color-holes"]
+    assert main(["simulate", "--out", str(out), *options]) == 0
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["color_holes"] is True
+    session = json.loads((out / "session.json").read_text())
+    color = read_color(out / session["captures"][0]["color"])
+    assert _black(color)[:10].all() and _black(color)[-10:].all()  # the rows it cannot see
+    assert not _black(color)[200].all()
