@@ -167,6 +167,7 @@ class Renderer:
             depth = sensor_depth(self.sensor, depth, cos_incidence, ir, rng)
         else:
             depth[~np.isfinite(depth)] = np.nan
+        depth += np.float32(self.sensor.depth_offset_m)
         depth[(depth < MIN_RANGE_M) | (depth > MAX_RANGE_M)] = np.nan
         return Frame(
             depth_m=depth,

@@ -39,6 +39,9 @@ class SensorModel:
     """Cast shadow rays towards the sun for the colour image."""
     supersample: int = 1
     """Rays per pixel side (IR and colour are averaged; 3 for calibration images)."""
+    depth_offset_m: float = 0.0
+    """Added to every depth measured: a unit's static offset (``shared/KINECT-V2.md``: 1-4 cm
+    is common after calibration)."""
 
 
 def axial_noise_m(

@@ -10,6 +10,7 @@ previous file kept beside it (:func:`save`). The callers only present the figure
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 
@@ -77,7 +78,9 @@ def merge_intrinsics(
     options: SolveOptions | None = None,
 ) -> Calibration:
     """``current`` (a new calibration when None) with the solved ``depth_camera``; the depth
-    scale in force is kept."""
+    scale and depth offset in force are kept (the offset comes from the view step's boards:
+    solve the view step again after new intrinsics, as the focal length sets the boards'
+    size)."""
     camera = DepthCamera.from_intrinsics(result.intrinsics)
     camera.calibrated = provenance(
         serial,
@@ -92,6 +95,7 @@ def merge_intrinsics(
     if current is None:
         return Calibration(format=CALIBRATION_FORMAT, depth_camera=camera)
     camera.depth_scale = current.depth_camera.depth_scale
+    camera.depth_offset_m = current.depth_camera.depth_offset_m
     return current.model_copy(update={"depth_camera": camera})
 
 
@@ -113,8 +117,25 @@ def merge_view_step(
         solved_angle_deg=round(result.angle_deg, 4),
         points=result.points,
         pairs=result.pairs,
+        **_offset_figures(result),
     )
-    return base.model_copy(update={"view_step": view_step})
+    update: dict[str, object] = {"view_step": view_step}
+    if result.depth_offset is not None:  # taken off every depth read from now on
+        offset_m = round(result.depth_offset.offset_m, 4)
+        update["depth_camera"] = base.depth_camera.model_copy(update={"depth_offset_m": offset_m})
+    return base.model_copy(update=update)
+
+
+def _offset_figures(result: ViewStepResult) -> dict[str, object]:
+    """The depth offset the view step's boards showed, for its provenance."""
+    found = result.depth_offset
+    if found is None:
+        return {}
+    return {
+        "depth_offset_mm": round(1000 * found.offset_m, 2),
+        "depth_offset_spread_mm": round(1000 * found.spread_m, 2),
+        "depth_offset_boards": found.boards,
+    }
 
 
 def stations_job(
@@ -131,7 +152,26 @@ def stations_job(
         raise FieldappError(f"{source} has no view_step: calibrate the view step first")
     in_force_stations = calibration.stations or session.calibration.stations
     prior = in_force_stations.to_reference if in_force_stations else None
-    return partial(calibrate_stations, session, board, calibration.view_step, reference, prior)
+    return partial(
+        calibrate_stations,
+        _with_offset_of(calibration, session),
+        board,
+        calibration.view_step,
+        reference,
+        prior,
+    )
+
+
+def _with_offset_of(calibration: Calibration, session: Session) -> Session:
+    """``session`` reading its depth with ``calibration``'s depth offset (the one its view step
+    was solved with), whatever the session's own calibration says."""
+    offset_m = calibration.depth_camera.depth_offset_m
+    if offset_m == session.calibration.depth_camera.depth_offset_m:
+        return session
+    camera = session.calibration.depth_camera.model_copy(update={"depth_offset_m": offset_m})
+    return replace(
+        session, calibration=session.calibration.model_copy(update={"depth_camera": camera})
+    )
 
 
 def merge_stations(base: Calibration, result: StationsResult, serial: str | None) -> Calibration:
@@ -170,8 +210,9 @@ def _turn_deg(T_view_k_view_k1: NDArray[np.float64]) -> float:
 def ground_job(
     session: Session, calibration: Calibration, settings: ReconstructionSettings | None = None
 ) -> Callable[[], GroundResult]:
-    """The ground solve, ready to run, at the reference station of ``calibration``."""
-    return partial(calibrate_ground, session, calibration, settings)
+    """The ground solve, ready to run, at the reference station of ``calibration`` (the
+    session's depth read with its depth offset)."""
+    return partial(calibrate_ground, _with_offset_of(calibration, session), calibration, settings)
 
 
 def merge_ground(base: Calibration, result: GroundResult, serial: str | None) -> Calibration:

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from devices.geometry import Matrix4, pose_error, rotation_angle_deg
 from fieldapp.calib.board import Board
+from fieldapp.calib.depth_offset import DepthOffset, depth_offset, without_offset
 from fieldapp.calib.observe import (
     Observation,
     align_order,
@@ -40,6 +41,9 @@ class ViewStepResult:
     pairs: list[str]
     points: int
     warnings: list[str] = field(default_factory=list)
+    depth_offset: DepthOffset | None = None
+    """The unit's depth offset the boards show (``calib/depth_offset.py``; the one the
+    session's calibration already took off included); the view step is solved without it."""
 
 
 @dataclass
@@ -50,6 +54,7 @@ class _Pairs:
     names: list[str] = field(default_factory=list)
     seen_once: list[str] = field(default_factory=list)
     refused: list[str] = field(default_factory=list)
+    depth_offset: DepthOffset | None = None
 
 
 def view_pairs(session: Session, station: int | None) -> list[tuple[Capture, Capture]]:
@@ -65,10 +70,19 @@ def view_pairs(session: Session, station: int | None) -> list[tuple[Capture, Cap
 
 
 def _collect(session: Session, board: Board, station: int | None, prior: Matrix4) -> _Pairs:
+    """The boards seen at consecutive views, their corners lifted without the depth offset
+    they show (:func:`~fieldapp.calib.depth_offset.depth_offset` over every board seen)."""
     pairs = _Pairs()
+    seen: list[tuple[list[Observation], list[Observation]]] = []
     for first, second in view_pairs(session, station):
         seen_a = _with_depth(observe_all(session, first, board), pairs)
         seen_b = _with_depth(observe_all(session, second, board), pairs)
+        seen.append((seen_a, seen_b))
+    pairs.depth_offset = depth_offset([o for a, b in seen for o in a + b], board)
+    offset_m = pairs.depth_offset.offset_m if pairs.depth_offset else 0.0
+    for seen_a, seen_b in seen:
+        seen_a = [without_offset(o, offset_m) for o in seen_a]
+        seen_b = [without_offset(o, offset_m) for o in seen_b]
         matched = match_by_prior(seen_a, seen_b, prior, SAME_BOARD_M, _centroid)
         if not matched:
             pairs.seen_once += [o.name for o in seen_a[:1] + seen_b[:1]]
@@ -135,6 +149,7 @@ def calibrate_view_step(
         fit.rmse_m,
         pairs.names,
         sum(len(s) for s in pairs.sources),
+        depth_offset=_in_all(pairs.depth_offset, session),
     )
     result.warnings = [f"pair not used: {reason}" for reason in pairs.refused]
     if len(pairs.names) == 1:
@@ -143,6 +158,12 @@ def calibrate_view_step(
             "station or height too, to check the result"
         )
     return result
+
+
+def _in_all(found: DepthOffset | None, session: Session) -> DepthOffset | None:
+    """``found`` (beyond what the session's calibration took off) as the unit's whole offset."""
+    taken_off = session.calibration.depth_camera.depth_offset_m or 0.0
+    return None if found is None else replace(found, offset_m=found.offset_m + taken_off)
 
 
 def _nothing_usable(pairs: _Pairs, board: Board, station: int | None) -> str:

@@ -182,6 +182,8 @@ def run_views(args: argparse.Namespace) -> int:
         + " m"
     )
     print(f"feature point RMSE {1000 * result.rmse_m:.2f} mm over {result.points} corners")
+    if result.depth_offset is not None:
+        print(result.depth_offset.text())
     for pair in result.pairs:
         print(f"  {pair}")
     return _finish(result.warnings, views_verdict(result, nominal_deg), args.out, previous)

@@ -34,6 +34,7 @@ SCENES = ("plot", "spheres", "soil", "checkerboard", "turntable")
 MAX_ARRIVAL_M = 0.10
 MAX_ARRIVAL_DEG = 5.0
 MAX_LOCALISATION_M = 0.25
+MAX_DEPTH_OFFSET_M = 0.05
 MAX_LOCALISATION_DEG = 10.0
 
 
@@ -92,6 +93,13 @@ def register(subparsers: Any) -> None:
         "colour camera, 5.2 cm beside the depth camera and with a less high field of view, "
         "does not see the depth pixel (rows at the top and bottom, a band beside every near "
         "edge)",
+    )
+    parser.add_argument(
+        "--depth-offset",
+        default=None,
+        metavar="M",
+        help="a static offset added to every depth the sensor measures, metres (-0.05..0.05), "
+        "as a Kinect v2 unit can have after calibration (default: none)",
     )
     parser.add_argument(
         "--camera",
@@ -205,6 +213,21 @@ def parse_arrival(
     return sigma_m, sigma_deg
 
 
+def parse_depth_offset(text: str | None) -> float | None:
+    """``"0.02"`` -> 0.02 m, within :data:`MAX_DEPTH_OFFSET_M` either way; ``None`` stays."""
+    if text is None:
+        return None
+    try:
+        offset = float(text)
+    except ValueError:
+        raise FieldappError(f"--depth-offset: {text!r} is not a number of metres") from None
+    if not abs(offset) <= MAX_DEPTH_OFFSET_M:
+        raise FieldappError(
+            f"--depth-offset: {text!r} is outside -{MAX_DEPTH_OFFSET_M:g}..{MAX_DEPTH_OFFSET_M:g} m"
+        )
+    return offset
+
+
 def parse_color_shift(text: str | None) -> tuple[int, int] | None:
     """``"1,-2"`` -> (1, -2) pixels, each within
     :data:`~devices.sim.sensor.MAX_COLOR_SHIFT_PX`; ``None`` stays (exact registration)."""
@@ -272,6 +295,7 @@ def run(args: argparse.Namespace) -> int:
     lean = parse_degrees("--lean", args.lean, MAX_LEAN_DEG)
     table_error = parse_degrees("--table-error", args.table_error, MAX_TABLE_ERROR_DEG)
     color_shift = parse_color_shift(args.color_shift)
+    depth_offset = parse_depth_offset(args.depth_offset)
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
     if localisation is not None:
         errors = replace(errors, locate_m=localisation[0], locate_deg=localisation[1])
@@ -286,7 +310,15 @@ def run(args: argparse.Namespace) -> int:
             count = _write_turntable(args.out, seed, day, views, args.depth_only, args.color_holes)
         else:
             world = build_world(
-                args.scene, seed, day, rig, args.plants, args.stage, args.plant_model, lean
+                args.scene,
+                seed,
+                day,
+                rig,
+                args.plants,
+                args.stage,
+                args.plant_model,
+                lean,
+                depth_offset,
             )
             about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
             about |= {"stage": args.stage, "grid": rig.grid}
@@ -306,6 +338,8 @@ def run(args: argparse.Namespace) -> int:
                 about["color_shift_px"] = list(color_shift)
             if args.color_holes:
                 about["color_holes"] = True
+            if depth_offset is not None:  # absent: no offset (sessions unchanged)
+                about["depth_offset_m"] = depth_offset
             if args.depth_only:
                 about["depth_only"] = True
             if camera:  # absent: the paper's rig (sessions unchanged)
@@ -339,8 +373,10 @@ def build_world(
     stage: str = "seedling",
     plant_model: str = "distichous",
     max_lean_deg: float | None = None,
+    depth_offset_m: float | None = None,
 ) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
+    from devices.sim.render import SensorModel
     from devices.sim.scene import (
         PlotLayout,
         bare_soil_scene,
@@ -360,7 +396,8 @@ def build_world(
         scene = bare_soil_scene(seed, soil)
     else:
         scene = checkerboard_scene(seed, rig)
-    return SimWorld(scene, rig, seed=seed)
+    sensor = None if depth_offset_m is None else SensorModel(depth_offset_m=depth_offset_m)
+    return SimWorld(scene, rig, seed=seed, sensor=sensor)
 
 
 def simulated_plan(rig: RigGeometry, sown: bool = True) -> dict[str, Any]:
@@ -400,12 +437,17 @@ def simulated_plan(rig: RigGeometry, sown: bool = True) -> dict[str, Any]:
 
 def nominal_calibration(world: SimWorld) -> Calibration:
     """The rig's pre-calibration over all the plan's stations (reference: the centre one, 5 on
-    the 3 x 3 plan)."""
+    the 3 x 3 plan), with the sensor's depth offset when it has one."""
     from fieldapp.mission.calibration import rig_calibration
 
     rig = world.rig
     poses = {s: rig.station_pose(s) for s in rig.stations}
-    return rig_calibration(world, poses, rig.reference_station, rig.view_step_deg)
+    calibration = rig_calibration(world, poses, rig.reference_station, rig.view_step_deg)
+    offset_m = world.renderer.sensor.depth_offset_m
+    if offset_m:  # the unit's depth offset, as a calibration that measured it holds it
+        camera = calibration.depth_camera.model_copy(update={"depth_offset_m": offset_m})
+        calibration = calibration.model_copy(update={"depth_camera": camera})
+    return calibration
 
 
 def write_session(

@@ -23,6 +23,7 @@ from typing_extensions import TypedDict
 from devices.camera.frames import Intrinsics
 from devices.geometry import make_transform
 from fieldapp.io.durable import write_json_durably
+from fieldapp.io.images import depth_units_to_m
 from fieldapp.io.jsonfile import load_model, to_rigid_matrix
 
 CALIBRATION_FORMAT = "fieldapp-calibration/1"
@@ -64,6 +65,10 @@ class DepthCamera(SpecModel):
     cy: FiniteFloat
     distortion: list[FiniteFloat] = Field(default_factory=lambda: [0.0] * 5)
     depth_scale: FiniteFloat = Field(default=1000.0, gt=0)
+    depth_offset_m: FiniteFloat | None = Field(default=None, ge=-0.2, le=0.2)
+    """The unit's static depth offset (a field this project adds; readers ignore it): what
+    it adds to every depth it measures, estimated from the boards by ``fieldapp calibrate
+    views`` (``calib/depth_offset.py``) and taken off every depth read (:meth:`metres`)."""
     calibrated: Provenance | None = None
 
     @field_validator("distortion")
@@ -83,6 +88,14 @@ class DepthCamera(SpecModel):
             cy=self.cy,
             distortion=tuple(self.distortion),
         )
+
+    def metres(self, units: NDArray[np.uint16]) -> NDArray[np.float32]:
+        """Stored depth units to metres (float32, NaN where none is measured), the unit's
+        depth offset taken off."""
+        depth_m = depth_units_to_m(units, self.depth_scale)
+        if self.depth_offset_m:
+            depth_m -= np.float32(self.depth_offset_m)
+        return depth_m
 
     @classmethod
     def from_intrinsics(cls, intrinsics: Intrinsics, depth_scale: float = 1000.0) -> DepthCamera:

@@ -18,7 +18,6 @@ from fieldapp.io.files import resolves_inside
 from fieldapp.io.images import (
     Expected,
     ImageError,
-    depth_units_to_m,
     read_color,
     read_depth_units,
     read_ir,
@@ -176,7 +175,7 @@ class Session:
                 ir = read_ir(self.path_of(capture.ir), expected=self.expected(capture, "ir"))
         except ImageError as error:
             raise FormatError([error.problem]) from None
-        return CaptureImages(capture, depth_units_to_m(units, camera.depth_scale), color, ir)
+        return CaptureImages(capture, camera.metres(units), color, ir)
 
     def iter_captures(self, with_ir: bool = False) -> Iterator[CaptureImages]:
         """Yield every capture's images in session order."""

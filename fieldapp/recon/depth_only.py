@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from fieldapp.errors import FormatError
-from fieldapp.io.images import ImageError, depth_units_to_m, read_depth_units
+from fieldapp.io.images import ImageError, read_depth_units
 from fieldapp.io.session import Capture, CaptureImages, Session
 
 NEUTRAL_GREY = 128
@@ -29,4 +29,4 @@ def read_scan_capture(session: Session, capture: Capture) -> CaptureImages:
     except ImageError as error:
         raise FormatError([error.problem]) from None
     grey = np.full((*units.shape, 3), NEUTRAL_GREY, dtype=np.uint8)
-    return CaptureImages(capture, depth_units_to_m(units, camera.depth_scale), grey)
+    return CaptureImages(capture, camera.metres(units), grey)

@@ -151,6 +151,7 @@ class ViewsWizard(_SessionWizard):
             + " ".join(f"{x:+.4f}" for x in t)
             + " m",
             f"feature point RMSE {1000 * result.rmse_m:.2f} mm over {result.points} corners",
+            *([result.depth_offset.text()] if result.depth_offset else []),
             *[f"  {pair}" for pair in result.pairs],
             *[f"warning: {w}" for w in result.warnings],
         ]
