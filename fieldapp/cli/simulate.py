@@ -215,17 +215,7 @@ def parse_arrival(
 
 def parse_depth_offset(text: str | None) -> float | None:
     """``"0.02"`` -> 0.02 m, within :data:`MAX_DEPTH_OFFSET_M` either way; ``None`` stays."""
-    if text is None:
-        return None
-    try:
-        offset = float(text)
-    except ValueError:
-        raise FieldappError(f"--depth-offset: {text!r} is not a number of metres") from None
-    if not abs(offset) <= MAX_DEPTH_OFFSET_M:
-        raise FieldappError(
-            f"--depth-offset: {text!r} is outside -{MAX_DEPTH_OFFSET_M:g}..{MAX_DEPTH_OFFSET_M:g} m"
-        )
-    return offset
+    return parse_number("--depth-offset", text, -MAX_DEPTH_OFFSET_M, MAX_DEPTH_OFFSET_M, "metres")
 
 
 def parse_color_shift(text: str | None) -> tuple[int, int] | None:
@@ -252,14 +242,19 @@ def parse_color_shift(text: str | None) -> tuple[int, int] | None:
 def parse_degrees(option: str, text: str | None, limit: float) -> float | None:
     """``"15"`` -> 15.0 degrees for ``option`` (``--lean``, ``--table-error``), within
     0..``limit``; ``None`` stays (the simulator's own)."""
+    return parse_number(option, text, 0.0, limit, "degrees")
+
+
+def parse_number(option: str, text: str | None, low: float, high: float, unit: str) -> float | None:
+    """``option``'s value as a number of ``unit`` within ``low``..``high``; ``None`` stays."""
     if text is None:
         return None
     try:
         value = float(text)
     except ValueError:
-        raise FieldappError(f"{option}: {text!r} is not a number of degrees") from None
-    if not 0.0 <= value <= limit:
-        raise FieldappError(f"{option}: {value:g} is outside 0..{limit:g} degrees")
+        raise FieldappError(f"{option}: {text!r} is not a number of {unit}") from None
+    if not low <= value <= high:
+        raise FieldappError(f"{option}: {value:g} is outside {low:g}..{high:g} {unit}")
     return value
 
 
