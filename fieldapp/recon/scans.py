@@ -403,7 +403,9 @@ def _separation(
     for tally in tallies[1:]:
         station_tally += tally  # in place: np.sum over the list is 200 times slower
     values, weights = exg_values(station_tally)
-    otsu = otsu_threshold(values, weights) if len(values) else 0.0
+    if len(values) == 0:  # every pixel black: a colour stream that gave nothing
+        return choose_separation(None), np.inf, np.inf
+    otsu = otsu_threshold(values, weights)
     separation = choose_separation(values, weights, otsu)
     threshold = otsu if exg_threshold == "otsu" else float(exg_threshold)
     separation = keep_soil(separation, values, threshold, weights)

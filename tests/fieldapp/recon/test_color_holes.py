@@ -16,8 +16,9 @@ from devices.camera.frames import KINECT_V2_PAPER as K
 from devices.sim.sensor import COLOR_BASELINE_M, COLOR_CAMERA, registered_as_libfreenect2
 from fieldapp.cli import main
 from fieldapp.io.images import read_color
-from fieldapp.recon.exg import exg_keys, exg_tally, exg_values, otsu_threshold
-from fieldapp.recon.scans import DepthEdges, grown_into_uncoloured
+from fieldapp.io.session import Capture, CaptureImages
+from fieldapp.recon.exg import NO_COLOUR, exg_keys, exg_tally, exg_values, otsu_threshold
+from fieldapp.recon.scans import DepthEdges, _separation, frame_of, grown_into_uncoloured
 
 SOIL, LEAF = (120, 90, 60), (50, 140, 30)
 
@@ -97,3 +98,15 @@ def test_the_simulator_writes_colour_with_holes_when_asked(tmp_path: Path) -> No
     color = read_color(out / session["captures"][0]["color"])
     assert _black(color)[:10].all() and _black(color)[-10:].all()  # the rows it cannot see
     assert not _black(color)[200].all()
+
+
+def test_a_station_whose_colour_is_all_black_is_told_by_geometry_for_want_of_colour() -> None:
+    depth, color, _ = _scene()
+    capture = Capture(station=1, view=0, depth="d.png", color="c.png")
+    frames = [frame_of(CaptureImages(capture, depth, np.zeros_like(color)))]
+    separation, threshold, weak = _separation(frames, "otsu")
+    assert separation.by_geometry and separation.reason == NO_COLOUR
+    assert threshold == weak == np.inf
+    holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
+    frames = [frame_of(CaptureImages(capture, depth, holed))]
+    assert not _separation(frames, "otsu")[0].by_geometry  # holes alone leave colour to judge
