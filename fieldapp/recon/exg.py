@@ -21,10 +21,13 @@ EXG_KEYS = 256 * SUM_LEVELS
 a function of the green level G and the sum S alone, so 196 608 keys hold every value."""
 NO_KEY = EXG_KEYS
 """The key of a pixel left out (no depth): one past the last, never tallied, never green."""
-NO_COLOUR_SUM = 6
-"""A pixel whose R + G + B is at most this has no colour: libfreenect2's registration writes
-black (0, 0, 0) where the colour camera does not see the depth pixel, and a JPEG of it leaves a
-level or two; no lit soil or leaf is that dark."""
+NO_COLOUR_SUM = 48
+"""A pixel whose R + G + B is at most this (16 levels a channel) has no colour: libfreenect2's
+registration writes black (0, 0, 0) where the colour camera does not see the depth pixel, and a
+JPEG of it (quality 90) leaves sums up to 32 with random hues; a level of noise moves a dark
+pixel's chromaticity by 1 / (R + G + B), so ExG means nothing there (read as colour, the JPEG'd
+black of a touching plot made Otsu's threshold leave no soil: 20 "plants", width RMSE 20 cm).
+No lit soil or leaf of the simulator's plots is darker than 134."""
 VALLEY_SMOOTHING_BINS = 5
 MIN_GREEN_CONTRAST = 0.1
 """Least difference of the mean ExG of Otsu's two classes for colour to separate plants: green

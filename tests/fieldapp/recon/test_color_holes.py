@@ -110,3 +110,27 @@ def test_a_station_whose_colour_is_all_black_is_told_by_geometry_for_want_of_col
     holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
     frames = [frame_of(CaptureImages(capture, depth, holed))]
     assert not _separation(frames, "otsu")[0].by_geometry  # holes alone leave colour to judge
+
+
+def test_black_through_a_jpeg_is_still_no_colour() -> None:
+    """A JPEG of libfreenect2's black leaves it dark with random hues (sums up to about 30):
+    still no colour, so the threshold is the one the same colour without holes gets."""
+    import cv2
+
+    def through_jpeg(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        ok, encoded = cv2.imencode(".jpg", image[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 90])
+        assert ok
+        decoded: NDArray[np.uint8] = cv2.imdecode(encoded, cv2.IMREAD_COLOR)[..., ::-1]
+        return decoded
+
+    depth, color, _ = _scene()
+    holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
+    jpeg = through_jpeg(holed)
+    black = _black(holed)
+    assert (jpeg[black].astype(int).sum(axis=1) > 6).mean() > 0.01  # not black any more
+    tally = exg_tally(exg_keys(jpeg.reshape(-1, 3)))
+    assert tally.sum() == pytest.approx((~black).sum(), rel=0.02)
+    whole = exg_tally(exg_keys(through_jpeg(color).reshape(-1, 3)))
+    assert otsu_threshold(*exg_values(tally)) == pytest.approx(
+        otsu_threshold(*exg_values(whole)), abs=0.05
+    )
