@@ -9,6 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from devices.camera.frames import Intrinsics
+
 MIN_RANGE_M = 0.5
 MAX_RANGE_M = 4.5
 
@@ -136,15 +138,10 @@ mapped there and still be given its colour (libfreenect2's registration filter).
 
 
 def registered_as_libfreenect2(
-    color: NDArray[np.uint8],
-    depth_m: NDArray[np.floating],
-    fx: float,
-    fy: float,
-    cx: float,
-    cy: float,
+    color: NDArray[np.uint8], depth_m: NDArray[np.floating], camera: Intrinsics
 ) -> NDArray[np.uint8]:
-    """``color`` (H, W, 3, registered exactly to ``depth_m`` of a depth camera with those
-    intrinsics) with what libfreenect2's registration (its filter on, the default) leaves no
+    """``color`` (H, W, 3, registered exactly to ``depth_m`` of the depth ``camera``, pinhole)
+    with what libfreenect2's registration (its filter on, the default) leaves no
     colour in black: depth pixels outside the colour camera's view (rows at the top and bottom:
     its field is less high) and those the colour camera, :data:`COLOR_BASELINE_M` beside the
     depth camera, sees behind a nearer surface (a band beside every near edge), and pixels
@@ -152,8 +149,9 @@ def registered_as_libfreenect2(
     cfx, cfy, ccx, ccy, width, height = COLOR_CAMERA
     v, u = np.nonzero(depth_m > 0)
     z = depth_m[v, u].astype(np.float64)
-    uc = np.rint(cfx * ((u - cx) / fx + COLOR_BASELINE_M / z) + ccx).astype(np.intp)
-    vc = np.rint(cfy * (v - cy) / fy + ccy).astype(np.intp)
+    x_n, y_n = (u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy
+    uc = np.rint(cfx * (x_n + COLOR_BASELINE_M / z) + ccx).astype(np.intp)
+    vc = np.rint(cfy * y_n + ccy).astype(np.intp)
     inside = (uc >= 0) & (uc < width) & (vc >= 0) & (vc < height)
     v, u, z, uc, vc = v[inside], u[inside], z[inside], uc[inside], vc[inside]
     half_w, half_h = OCCLUSION_WINDOW_PX

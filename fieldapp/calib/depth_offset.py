@@ -7,8 +7,8 @@ looks larger by the offset over its distance: a 3 cm offset made a plot's plants
 its view step's features fit 1.5 times worse. The board's squares are known, so the offset is
 what makes the lifted corners the board's own shape again: for each board, the offset and the
 board's pose that bring its corners (each moved along its viewing ray by the offset) nearest
-their lifted places, least squares, solved by turns (pose, then offset) until they hold; the
-median over boards is the unit's.
+their lifted places, least squares (a bounded search over the offset, each offset's best pose
+by Kabsch); the median over boards is the unit's.
 
 Its precision is the intrinsics': the board's lateral size comes through the focal length, so
 a focal length 0.5 % off reads as an offset of 0.5 % of the boards' distance (7 mm at 1.5 m).
@@ -54,9 +54,10 @@ class DepthOffset:
 def board_offset_m(corners: Corners3D, board: Board) -> float | None:
     """The depth offset that makes one board's lifted corners (``corners``, in its camera
     frame, corner i of ``board.object_points_m()`` at row i) the board's shape: the offset
-    whose corrected corners the board fits best (bounded scalar search over
-    :data:`MAX_OFFSET_M` either way, each offset's best pose by Kabsch); ``None`` with fewer
-    than :data:`MIN_CORNERS` lifted corners."""
+    whose corrected corners the board fits best (bounded scalar search up to
+    :data:`MAX_OFFSET_SHARE` of its distance either way, each offset's best pose by Kabsch);
+    ``None`` with fewer than :data:`MIN_CORNERS` lifted corners, or when the best offset is at
+    the bound (not a board of the size told)."""
     from scipy.optimize import minimize_scalar
 
     valid = corners.valid

@@ -67,7 +67,6 @@ def write_turntable_session(
     plant = turntable_plant(seed, day)
     about: dict[str, Any] = {"scene": "turntable", "seed": seed, "day": day}
     about |= {"depth_only": depth_only} | ({"color_holes": True} if color_holes else {})
-    k = KINECT_V2_PAPER
     writer = SessionWriter.create(
         folder,
         f"sim-turntable-seed{seed}-day{day}",
@@ -82,7 +81,7 @@ def write_turntable_session(
         frame = capture.frame
         color = None if depth_only else frame.color
         if color is not None and color_holes:
-            color = registered_as_libfreenect2(color, frame.depth_m, k.fx, k.fy, k.cx, k.cy)
+            color = registered_as_libfreenect2(color, frame.depth_m, KINECT_V2_PAPER)
         writer.add_capture(
             STATION,
             capture.view,

@@ -34,8 +34,8 @@ SCENES = ("plot", "spheres", "soil", "checkerboard", "turntable")
 MAX_ARRIVAL_M = 0.10
 MAX_ARRIVAL_DEG = 5.0
 MAX_LOCALISATION_M = 0.25
-MAX_DEPTH_OFFSET_M = 0.05
 MAX_LOCALISATION_DEG = 10.0
+MAX_DEPTH_OFFSET_M = 0.05
 
 
 def register(subparsers: Any) -> None:
@@ -512,8 +512,7 @@ def save_capture(
     if color_shift_px is not None and color is not None:
         color = misregistered(color, *color_shift_px)
     if holes_of is not None and color is not None:
-        K = holes_of
-        color = registered_as_libfreenect2(color, capture.frame.depth_m, K.fx, K.fy, K.cx, K.cy)
+        color = registered_as_libfreenect2(color, capture.frame.depth_m, holes_of)
     writer.add_capture(
         capture.station,
         capture.view,

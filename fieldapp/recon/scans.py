@@ -288,6 +288,8 @@ def _placed_at_reached_angles(
 
 _REACH = np.ones((2 * REGISTRATION_PX + 1,) * 2, np.uint8)
 """The square of pixels within :data:`REGISTRATION_PX` of one (OpenCV's structuring element)."""
+_NEIGHBOURS = np.ones((3, 3), np.uint8)
+"""A pixel and its eight neighbours: one step of the pixel-by-pixel growths."""
 
 
 @dataclass(frozen=True)
@@ -344,9 +346,8 @@ def grown_into_weak_green(
     on the local ground, where the pass-through drops it."""
     allowed = (green | (weak & ~edges.behind)).astype(np.uint8)
     grown = green.astype(np.uint8)
-    step = np.ones((3, 3), np.uint8)
     for _ in range(WEAK_REACH_PX):
-        grown = cv2.dilate(grown, step) & allowed
+        grown = cv2.dilate(grown, _NEIGHBOURS) & allowed
     return grown.astype(bool)
 
 
@@ -366,12 +367,11 @@ def grown_into_uncoloured(
     a leaf lies far behind the leaf's edge and is not grown into; soil that continues a stem's
     foot lies on the local ground, where the pass-through drops it."""
     far = edges.far_m
-    step = np.ones((3, 3), np.uint8)
+    tolerance = CONTINUOUS_SHARE * far
     grown = green.copy()
     for _ in range(UNCOLOURED_REACH_PX):
-        nearest = cv2.erode(np.where(grown, far, NOT_MEASURED_M).astype(np.float32), step)
-        farthest = cv2.dilate(np.where(grown, far, 0.0).astype(np.float32), step)
-        tolerance = CONTINUOUS_SHARE * far
+        nearest = cv2.erode(np.where(grown, far, NOT_MEASURED_M).astype(np.float32), _NEIGHBOURS)
+        farthest = cv2.dilate(np.where(grown, far, 0.0).astype(np.float32), _NEIGHBOURS)
         continues = (np.abs(far - nearest) <= tolerance) | (np.abs(far - farthest) <= tolerance)
         wider = grown | (uncoloured & continues)
         if np.array_equal(wider, grown):

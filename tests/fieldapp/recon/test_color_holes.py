@@ -46,7 +46,7 @@ def _black(color: NDArray[np.uint8]) -> NDArray[np.bool_]:
 
 def test_the_colour_camera_misses_rows_at_the_top_and_bottom_and_bands_beside_near_edges() -> None:
     depth, color, parts = _scene()
-    holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
+    holed = registered_as_libfreenect2(color, depth, K)
     black = _black(holed)
     fy_colour, height = COLOR_CAMERA[1], COLOR_CAMERA[5]
     rows = np.arange(K.height)
@@ -65,7 +65,7 @@ def test_the_colour_camera_misses_rows_at_the_top_and_bottom_and_bands_beside_ne
 
 def test_green_grows_into_the_hidden_part_of_a_leaf_and_not_into_the_soil() -> None:
     depth, color, parts = _scene()
-    holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
+    holed = registered_as_libfreenect2(color, depth, K)
     black = _black(holed) & np.isfinite(depth)
     green = (holed[..., 1].astype(int) - holed[..., 0] > 40) & ~black
     hidden = black & parts["lower"]
@@ -80,7 +80,7 @@ def test_green_grows_into_the_hidden_part_of_a_leaf_and_not_into_the_soil() -> N
 
 def test_pixels_without_colour_are_left_out_of_the_threshold() -> None:
     depth, color, _ = _scene()
-    holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
+    holed = registered_as_libfreenect2(color, depth, K)
     exact = exg_tally(exg_keys(color.reshape(-1, 3)))
     tally = exg_tally(exg_keys(holed.reshape(-1, 3)))
     assert tally.sum() == (~_black(holed)).sum()  # black tallied nowhere
@@ -107,7 +107,7 @@ def test_a_station_whose_colour_is_all_black_is_told_by_geometry_for_want_of_col
     separation, threshold, weak = _separation(frames, "otsu")
     assert separation.by_geometry and separation.reason == NO_COLOUR
     assert threshold == weak == np.inf
-    holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
+    holed = registered_as_libfreenect2(color, depth, K)
     frames = [frame_of(CaptureImages(capture, depth, holed))]
     assert not _separation(frames, "otsu")[0].by_geometry  # holes alone leave colour to judge
 
@@ -124,7 +124,7 @@ def test_black_through_a_jpeg_is_still_no_colour() -> None:
         return decoded
 
     depth, color, _ = _scene()
-    holed = registered_as_libfreenect2(color, depth, K.fx, K.fy, K.cx, K.cy)
+    holed = registered_as_libfreenect2(color, depth, K)
     jpeg = through_jpeg(holed)
     black = _black(holed)
     assert (jpeg[black].astype(int).sum(axis=1) > 6).mean() > 0.01  # not black any more
