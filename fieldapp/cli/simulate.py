@@ -36,6 +36,23 @@ MAX_ARRIVAL_DEG = 5.0
 MAX_LOCALISATION_M = 0.25
 MAX_LOCALISATION_DEG = 10.0
 MAX_DEPTH_OFFSET_M = 0.05
+_ON_THE_RIG = ("plot", "spheres", "soil", "checkerboard")
+SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
+    "grid": _ON_THE_RIG,
+    "arrival_error": _ON_THE_RIG,
+    "localisation_error": _ON_THE_RIG,
+    "table_error": _ON_THE_RIG,
+    "color_shift": _ON_THE_RIG,
+    "depth_offset": _ON_THE_RIG,
+    "camera": _ON_THE_RIG,
+    "stations": _ON_THE_RIG,
+    "stage": ("plot",),
+    "plant_model": ("plot",),
+    "lean": ("plot",),
+    "plants": ("spheres",),
+    "intrinsics_images": ("checkerboard",),
+}
+"""The scenes each option acts on (argparse ``dest``); given to another scene, it is refused."""
 
 
 def register(subparsers: Any) -> None:
@@ -53,7 +70,9 @@ def register(subparsers: Any) -> None:
         "on a table before a fixed camera, in a room; one station)",
     )
     parser.add_argument(
-        "--grid", default="3", help="stations per side of the plot, 2..9 (plants spread over it)"
+        "--grid",
+        default=None,
+        help="stations per side of the plot, 2..9 (default 3; plants spread over it)",
     )
     parser.add_argument(
         "--arrival-error",
@@ -112,13 +131,13 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--day", default="0", help="days since the first scan (plants grow)")
     parser.add_argument(
         "--stage",
-        default="seedling",
+        default=None,
         help="plot growth stage: seedling (default) or touching (55-90 cm, 5-8 leaves, "
         "canopies reaching across the 80 cm spacing)",
     )
     parser.add_argument(
         "--plant-model",
-        default="distichous",
+        default=None,
         help="plot scene's plants: distichous (default: leaves at 180 degrees, set along the "
         "rows when touching) or irregular (a second model: phyllotaxy off 180 degrees, plants "
         "turned at random, twisted wavy leaves, erect to drooping)",
@@ -141,7 +160,9 @@ def register(subparsers: Any) -> None:
         help="write depth-only captures (no colour image), as a sensor without colour records",
     )
     parser.add_argument(
-        "--intrinsics-images", default="20", help="checkerboard scene: IR board images (0-100)"
+        "--intrinsics-images",
+        default=None,
+        help="checkerboard scene: IR board images (0-100, default 20)",
     )
     parser.set_defaults(handler=run)
 
@@ -258,11 +279,28 @@ def parse_number(option: str, text: str | None, low: float, high: float, unit: s
     return value
 
 
+def check_scene_options(args: argparse.Namespace) -> None:
+    """Refuse an option the chosen scene would ignore: a session made without what was asked
+    for is worse than an error naming the option."""
+    if args.scene not in SCENES:
+        raise FieldappError(f"--scene: {args.scene!r} is not one of {', '.join(SCENES)}")
+    for dest, scenes in SCENE_OPTIONS.items():
+        if getattr(args, dest) not in (None, False) and args.scene not in scenes:
+            option = "--" + dest.replace("_", "-")
+            takers = " and ".join(scenes) if len(scenes) < 3 else "all but the turntable"
+            raise FieldappError(
+                f"{option}: the {args.scene} scene does not take it (only {takers})"
+            )
+
+
 def run(args: argparse.Namespace) -> int:
     from devices.sim.rig import MAX_GRID, MAX_TABLE_ERROR_DEG, RigGeometry, StopErrors
 
-    if args.scene not in SCENES:
-        raise FieldappError(f"--scene: {args.scene!r} is not one of {', '.join(SCENES)}")
+    check_scene_options(args)
+    args.grid = args.grid or "3"
+    args.stage = args.stage or "seedling"
+    args.plant_model = args.plant_model or "distichous"
+    args.intrinsics_images = args.intrinsics_images or "20"
     from devices.sim.plants import MAX_LEAN_DEG, PLANT_MODELS, STAGES
 
     seed = parse_int("seed", args.seed, 0, 2**31 - 1)

@@ -77,3 +77,25 @@ def test_cli_writes_a_depth_only_plot_session(
     assert capture.color is None and (out / capture.depth).is_file()
     assert not list(out.rglob("color*"))
     assert json.loads((out / "session.json").read_text())["simulated"]["depth_only"] is True
+
+
+@pytest.mark.parametrize(
+    ("scene", "option", "takers"),
+    [
+        ("turntable", ["--depth-offset", "0.02"], "all but the turntable"),
+        ("turntable", ["--color-shift", "1,0"], "all but the turntable"),
+        ("turntable", ["--grid", "4"], "all but the turntable"),
+        ("turntable", ["--stage", "touching"], "plot"),
+        ("soil", ["--lean", "10"], "plot"),
+        ("plot", ["--plants"], "spheres"),
+        ("plot", ["--intrinsics-images", "5"], "checkerboard"),
+    ],
+)
+def test_an_option_the_scene_would_ignore_is_refused_by_name(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], scene: str, option: list[str], takers: str
+) -> None:
+    out = tmp_path / "s"
+    assert main(["simulate", "--out", str(out), "--scene", scene, *option]) == 1
+    error = capsys.readouterr().err
+    assert f"{option[0]}: the {scene} scene does not take it (only {takers})" in error
+    assert not out.exists()  # nothing written that lacks what was asked for
