@@ -154,17 +154,27 @@ class Renderer:
     def render(self, T_field_camera: Matrix4, rng: np.random.Generator | None = None) -> Frame:
         """One frame (depth_m float32 NaN = missing, color uint8 RGB, ir uint16)."""
         rng = rng or np.random.default_rng()
+        sunny = self.sensor.noise and self.sensor.sun_ir > 0
         with self._lock:
             hits = self._cast(T_field_camera)
-            rgb = self._shade(hits) if self.sensor.color else None
+            light = self._light(hits) if self.sensor.color or sunny else None
         s, h, w = self.sensor.supersample, self.intrinsics.height, self.intrinsics.width
         depth = _pixels(hits.t, h, w, s)
         ir = _pixels(self._ir_amplitude(hits), h, w, s)
-        color = _pixels(rgb, h, w, s) if rgb is not None else np.zeros((h, w, 3), np.float32)
+        if self.sensor.color and light is not None:
+            color = _pixels(self._shade(hits, light), h, w, s)
+        else:
+            color = np.zeros((h, w, 3), np.float32)
         cos_incidence = _pixels(hits.cos_incidence, h, w, s)
         if self.sensor.noise:
             ir *= 1.0 + self.sensor.ir_noise * rng.standard_normal(ir.shape, np.float32)
-            depth = sensor_depth(self.sensor, depth, cos_incidence, ir, rng)
+            ambient = None
+            if sunny and light is not None:
+                sun_ir = np.float32(self.sensor.sun_ir)
+                ambient = _pixels(
+                    np.where(np.isfinite(hits.t), hits.ir * light * sun_ir, 0), h, w, s
+                )
+            depth = sensor_depth(self.sensor, depth, cos_incidence, ir, rng, ambient)
         else:
             depth[~np.isfinite(depth)] = np.nan
         depth += np.float32(self.sensor.depth_offset_m)
@@ -223,8 +233,14 @@ class Renderer:
                 rgb[on_body], ir[on_body] = texture(points[on_body])
         return rgb, ir
 
-    def _shade(self, hits: Hits) -> NDArray[np.float32]:
-        """Linear RGB (N, 3): albedo x (sky + sun x cos x unshadowed)."""
+    def _shade(self, hits: Hits, light: NDArray[np.float32]) -> NDArray[np.float32]:
+        """Linear RGB (N, 3): albedo x ``light``; haze where nothing is hit."""
+        rgb = hits.rgb * light[:, None]
+        rgb[~np.isfinite(hits.t)] = (0.55, 0.62, 0.70)  # haze beyond the modelled ground
+        return rgb
+
+    def _light(self, hits: Hits) -> NDArray[np.float32]:
+        """Light falling on each hit (N,), white albedo: sky + sun x cos x unshadowed."""
         hit = np.isfinite(hits.t)
         n, sun = hits.normals, self._sun
         cos_sun = np.clip(n[:, 0] * sun[0] + n[:, 1] * sun[1] + n[:, 2] * sun[2], 0.0, 1.0)
@@ -242,10 +258,10 @@ class Renderer:
             lit[facing] = np.where(occluded, 0.0, cos_sun[facing])
         elif len(facing):
             lit[facing] = cos_sun[facing]
-        light = np.float32(self.sensor.sky) * (0.6 + 0.4 * hits.normals[:, 2]) + lit
-        rgb = hits.rgb * light[:, None]
-        rgb[~hit] = (0.55, 0.62, 0.70)  # haze beyond the modelled ground
-        return rgb
+        light: NDArray[np.float32] = (
+            np.float32(self.sensor.sky) * (0.6 + 0.4 * hits.normals[:, 2]) + lit
+        )
+        return light
 
     def _ir_amplitude(self, hits: Hits) -> NDArray[np.float32]:
         """Returned IR (N,): albedo x cos(incidence) / range^2, 0 where nothing is hit."""

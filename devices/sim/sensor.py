@@ -1,6 +1,8 @@
 """The Kinect v2 sensor model (``shared/KINECT-V2.md``): range, axial noise by distance and
 incidence angle (Fankhauser et al. 2015), flying pixels on depth edges, dropouts at grazing
-angles and on surfaces too dark in IR."""
+angles and on surfaces too dark in IR, and the sun's own infrared (``sun_ir``): shot noise
+that grows with the ambient light over the camera's returned light, and no depth where the
+return drowns in it."""
 
 from __future__ import annotations
 
@@ -44,6 +46,20 @@ class SensorModel:
     depth_offset_m: float = 0.0
     """Added to every depth measured: a unit's static offset (``shared/KINECT-V2.md``: 1-4 cm
     is common after calibration)."""
+    sun_ir: float = 0.0
+    """Ambient infrared in the camera's band from a white surface facing the sun, in the units
+    of ``ir`` amplitude (0: indoors or overcast dusk; ``FULL_SUN_IR``: clear midday sun)."""
+    drowned_start: float = 40.0
+    drowned_end: float = 120.0
+    """No depth: probability rising from 0 to 1 as ambient over returned light goes between
+    these (the sensor's own confidence test rejects a phase lost in shot noise)."""
+
+
+FULL_SUN_IR = 80_000.0
+"""``SensorModel.sun_ir`` of a clear midday sun: on sunlit soil 2 m away, ambient about 15 times
+the returned light, depth noise about 4 times the shade's (``shared/KINECT-V2.md``: "noise that
+rises in sunlight"); sunlit soil seen at grazing angles near the crop radius starts to drop out,
+sunlit leaves stay measured but noisy."""
 
 
 def axial_noise_m(
@@ -65,20 +81,30 @@ def sensor_depth(
     cos_incidence: NDArray[np.float32],
     ir: NDArray[np.float32],
     rng: np.random.Generator,
+    ambient: NDArray[np.float32] | None = None,
 ) -> NDArray[np.float32]:
     """Noisy depth (H, W) float32 from exact ``depth`` (H, W, inf = nothing hit),
-    ``cos_incidence`` and ``ir`` amplitude (H, W): axial noise, flying pixels, dropouts;
-    NaN where missing."""
+    ``cos_incidence``, ``ir`` amplitude and the ``ambient`` infrared on each pixel (H, W, the
+    same units; none: the shade): axial noise, flying pixels, dropouts; NaN where missing.
+
+    A time-of-flight pixel's phase noise goes as sqrt(returned + ambient) / returned, so the
+    ambient multiplies the shade's noise by sqrt(1 + ambient / returned)."""
     valid = np.isfinite(depth)
     safe = np.where(valid, depth, np.float32(1.0))
     theta = np.arccos(np.clip(cos_incidence, 0.0, 1.0))
     sigma = axial_noise_m(safe, theta).astype(np.float32)
     weak = np.sqrt(np.clip(400.0 / np.maximum(ir, 1.0), 1.0, 9.0))  # dim returns are noisier
+    drowned = np.zeros(depth.shape, bool)
+    if ambient is not None:
+        share = ambient / np.maximum(ir, np.float32(1.0))
+        weak = weak * np.sqrt(1.0 + share)
+        p_drowned = (share - sensor.drowned_start) / (sensor.drowned_end - sensor.drowned_start)
+        drowned = rng.random(depth.shape, np.float32) < p_drowned
     noisy = safe + sigma * weak * rng.standard_normal(depth.shape, np.float32)
     noisy = flying_pixels(noisy, valid, sensor, rng)
     span = np.radians(sensor.grazing_end_deg - sensor.grazing_start_deg)
     p_drop = (theta - np.radians(sensor.grazing_start_deg)) / span
-    dropped = (rng.random(depth.shape, np.float32) < p_drop) | (ir < sensor.min_ir)
+    dropped = (rng.random(depth.shape, np.float32) < p_drop) | (ir < sensor.min_ir) | drowned
     noisy[~valid | dropped] = np.nan
     return noisy
 

@@ -44,6 +44,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "table_error": _ON_THE_RIG,
     "color_shift": _ON_THE_RIG,
     "depth_offset": _ON_THE_RIG,
+    "sunlight": _ON_THE_RIG,
     "camera": _ON_THE_RIG,
     "stations": _ON_THE_RIG,
     "stage": ("plot",),
@@ -119,6 +120,14 @@ def register(subparsers: Any) -> None:
         metavar="M",
         help="a static offset added to every depth the sensor measures, metres (-0.05..0.05), "
         "as a Kinect v2 unit can have after calibration (default: none)",
+    )
+    parser.add_argument(
+        "--sunlight",
+        default=None,
+        metavar="S",
+        help="the sun's infrared on the depth camera, a share of a clear midday sun (0..1): "
+        "depth noise rising with the ambient light over the returned light, and no depth where "
+        "the return drowns in it (default: none, as under cloud)",
     )
     parser.add_argument(
         "--camera",
@@ -329,6 +338,7 @@ def run(args: argparse.Namespace) -> int:
     table_error = parse_degrees("--table-error", args.table_error, MAX_TABLE_ERROR_DEG)
     color_shift = parse_color_shift(args.color_shift)
     depth_offset = parse_depth_offset(args.depth_offset)
+    sunlight = parse_number("--sunlight", args.sunlight, 0.0, 1.0, "of a clear midday sun")
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
     if localisation is not None:
         errors = replace(errors, locate_m=localisation[0], locate_deg=localisation[1])
@@ -352,6 +362,7 @@ def run(args: argparse.Namespace) -> int:
                 args.plant_model,
                 lean,
                 depth_offset,
+                sunlight,
             )
             about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
             about |= {"stage": args.stage, "grid": rig.grid}
@@ -373,6 +384,8 @@ def run(args: argparse.Namespace) -> int:
                 about["color_holes"] = True
             if depth_offset is not None:  # absent: no offset (sessions unchanged)
                 about["depth_offset_m"] = depth_offset
+            if sunlight is not None:  # absent: no sun in the depth (sessions unchanged)
+                about["sunlight"] = sunlight
             if args.depth_only:
                 about["depth_only"] = True
             if camera:  # absent: the paper's rig (sessions unchanged)
@@ -407,6 +420,7 @@ def build_world(
     plant_model: str = "distichous",
     max_lean_deg: float | None = None,
     depth_offset_m: float | None = None,
+    sunlight: float | None = None,
 ) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.render import SensorModel
@@ -417,6 +431,7 @@ def build_world(
         soil_for_plot,
         spheres_scene,
     )
+    from devices.sim.sensor import FULL_SUN_IR
     from devices.sim.world import SimWorld
 
     layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
@@ -429,7 +444,9 @@ def build_world(
         scene = bare_soil_scene(seed, soil)
     else:
         scene = checkerboard_scene(seed, rig)
-    sensor = None if depth_offset_m is None else SensorModel(depth_offset_m=depth_offset_m)
+    sensor = SensorModel(
+        depth_offset_m=depth_offset_m or 0.0, sun_ir=(sunlight or 0.0) * FULL_SUN_IR
+    )
     return SimWorld(scene, rig, seed=seed, sensor=sensor)
 
 
