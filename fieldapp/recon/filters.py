@@ -104,11 +104,18 @@ def _group_means(
 @dataclass(frozen=True)
 class FilteredStation:
     """A station's plant points (green, above the ground, voxel means) and a sparse sample of
-    its soil, both in the field frame, with the points each filter kept."""
+    its soil, both in the field frame, with the points each filter kept; ``steady_soil_m``:
+    the soil sample at its blocks' median depths, as the registration takes it
+    (``scans.soil_depths``; ``soil_m`` itself by geometry)."""
 
     plants: Cloud
     soil_m: NDArray[np.float64]
     kept: dict[str, int]
+    steady_soil_m: NDArray[np.float64] | None = None
+
+    @property
+    def registration_soil_m(self) -> NDArray[np.float64]:
+        return self.soil_m if self.steady_soil_m is None else self.steady_soil_m
 
 
 def filter_station(
@@ -118,6 +125,7 @@ def filter_station(
     soil_band_m: float,
     soil_voxel_m: float,
     by_geometry: bool = False,
+    steady_soil: Cloud | None = None,
 ) -> FilteredStation:
     """Pass-through on a levelled station's green points (z is the height above the ground),
     then voxel means; the soil points near the ground are kept as a sparse sample.
@@ -150,7 +158,11 @@ def filter_station(
     plants = voxel_mean(plants, settings.voxel_size_m)
     kept["voxel_mean"] = len(plants)
     soil = soil_field.select(np.abs(soil_field.points[:, 2]) <= soil_band_m)
-    return FilteredStation(plants, voxel_mean(soil, soil_voxel_m).points, kept)
+    steady = None
+    if steady_soil is not None:
+        steady_near = steady_soil.select(np.abs(steady_soil.points[:, 2]) <= soil_band_m)
+        steady = voxel_mean(steady_near, soil_voxel_m).points
+    return FilteredStation(plants, voxel_mean(soil, soil_voxel_m).points, kept, steady)
 
 
 def remove_outliers(

@@ -73,6 +73,9 @@ UNCOLOURED_REACH_PX = 12
 (:func:`grown_into_uncoloured`): the colour camera, 5.2 cm beside the depth camera, loses a
 band 365 px x 0.052 m x (1 / near - 1 / far) wide beside a near edge: 8 px for a leaf 30 cm in
 front of another 1 m away, 12 px at 0.8 m."""
+SOIL_WINDOW_PX = 5
+"""Side of the window whose median depth a soil sample pixel takes (:func:`soil_depths`): the
+block of 4 x 4 pixels it stands for on the default grid, centred."""
 NOT_MEASURED_M = 1e3
 """The distance given to unmeasured pixels in the image filters (far behind everything)."""
 
@@ -94,6 +97,9 @@ class StationScan:
     exg_threshold: float
     measured_pixels: int
     separation: Separation = BY_COLOUR
+    steady_soil: Cloud | None = None
+    """The soil sample again, each point at its block's median depth (:func:`soil_depths`),
+    for the registration; ``None``: ``soil`` itself (by geometry, a turntable's scan)."""
 
 
 def captures_by_station(session: Session) -> dict[int, list[Capture]]:
@@ -253,15 +259,24 @@ def read_station(
     scan = StationScan(
         station,
         station_cloud(
-            dict(zip(views, (green for green, _ in clouds), strict=True)), view_step.matrix, placed
+            dict(zip(views, (green for green, _, _ in clouds), strict=True)),
+            view_step.matrix,
+            placed,
         ),
         station_cloud(
-            dict(zip(views, (soil for _, soil in clouds), strict=True)), view_step.matrix, placed
+            dict(zip(views, (soil for _, soil, _ in clouds), strict=True)), view_step.matrix, placed
         ),
         sorted(views),
         threshold,
         sum(int(np.count_nonzero(frame.measured)) for frame in frames),
         separation,
+        None
+        if separation.by_geometry
+        else station_cloud(
+            dict(zip(views, (steady for _, _, steady in clouds), strict=True)),
+            view_step.matrix,
+            placed,
+        ),
     )
     return scan, warnings
 
@@ -423,13 +438,14 @@ def _green_and_soil(
     grid: NDArray[np.intp],
     rays: NDArray[np.float64],
     crop: CropSettings,
-) -> tuple[Cloud, Cloud]:
+) -> tuple[Cloud, Cloud, Cloud]:
     """One frame's green points (``green_keys``: (EXG_KEYS + 1,) which colour keys are green,
     and which weakly green, ``NO_KEY`` neither; grown into the weak green next to the green,
     :func:`grown_into_weak_green`, and over the leaves' rims, :func:`grown_over_edges`) and
     its soil sample
-    (the measured ``grid`` pixels (M,) not green), in its camera frame; by geometry every
-    measured point is "green" and the soil the whole grid."""
+    (the measured ``grid`` pixels (M,) not green), in its camera frame, and the soil sample
+    again at its blocks' median depths (:func:`soil_depths`, for the registration); by
+    geometry every measured point is "green" and the soil the whole grid (twice, the same)."""
     if frame.measured.shape != rays.shape[:2]:
         raise ValueError(f"depth {frame.measured.shape} does not match the camera {rays.shape[:2]}")
     if separation.by_geometry or frame.keys is None:
@@ -447,9 +463,51 @@ def _green_and_soil(
         green = np.flatnonzero(mask)
         soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
 
-    def cloud(pixels: NDArray[np.intp]) -> Cloud:
-        depth_m = frame.images.depth_m.reshape(-1)[pixels]
+    def cloud(pixels: NDArray[np.intp], depth_m: NDArray[np.float32]) -> Cloud:
         colors = np.take(frame.images.color.reshape(-1, 3), pixels, axis=0)
         return backproject_pixels(pixels, depth_m, colors, rays, crop.radius_m, crop.min_depth_m)
 
-    return cloud(green), cloud(soil)
+    depth = frame.images.depth_m
+    soil_cloud = cloud(soil, depth.reshape(-1)[soil])
+    steady = soil_cloud if separation.by_geometry else cloud(soil, soil_depths(depth, soil))
+    return cloud(green, depth.reshape(-1)[green]), soil_cloud, steady
+
+
+def soil_depths(
+    depth_m: NDArray[np.float32], pixels: NDArray[np.intp], window_px: int = SOIL_WINDOW_PX
+) -> NDArray[np.float32]:
+    """(M,) the depth each soil sample pixel (``pixels``, (M,) flat indices of measured
+    pixels of ``depth_m`` (H, W), NaN unmeasured) is given: the median of the measured depths
+    in the ``window_px`` square around it where that median continues the pixel's own surface
+    (within :data:`CONTINUOUS_SHARE` of its depth), its own depth elsewhere (beside an edge,
+    where most of the window is another surface, and at the image's border, where the window
+    is not centred).
+
+    Each soil sample point stands for the block of pixels around it, and the registration
+    fits the overlaps' surfaces through these points: its own depth carries the whole of a
+    pixel's noise, the block's median a quarter of it (the median of
+    25 values spreads 1.25 / 5 as much as one). In the shade it hardly matters (1.5-2 mm at
+    1-2 m); in sunlight, where a time-of-flight pixel's noise grows with the ambient light (3
+    to 4 times the shade's, more at the far end of the views, where the stations overlap),
+    the noise of the overlaps' soil biased the registration: a plot came out up to a
+    centimetre shrunk and raised (RECONSTRUCTION.md, "Sunlight"). On a plane the median of a
+    centred window is the centre pixel's depth exactly (1 / depth is affine in the pixel, so
+    the window's depths pair off about the centre's), so the median moves nothing but the
+    noise."""
+    half = window_px // 2
+    width = depth_m.shape[1]
+    padded = np.pad(depth_m, half, constant_values=np.nan)
+    rows, columns = np.divmod(pixels, width)
+    steps = np.arange(window_px)
+    window = padded[
+        rows[:, None, None] + steps[None, :, None], columns[:, None, None] + steps[None, None, :]
+    ].reshape(len(pixels), -1)
+    window.sort(axis=1)  # NaN last
+    count = np.count_nonzero(np.isfinite(window), axis=1)
+    index = np.arange(len(pixels))
+    median = (window[index, (count - 1) // 2] + window[index, count // 2]) / np.float32(2)
+    own = depth_m.reshape(-1)[pixels]
+    height = depth_m.shape[0]
+    inside = (rows >= half) & (rows < height - half) & (columns >= half) & (columns < width - half)
+    continuous = inside & (np.abs(median - own) <= np.float32(CONTINUOUS_SHARE) * own)
+    return np.where(continuous, median, own).astype(np.float32)

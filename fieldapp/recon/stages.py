@@ -243,6 +243,7 @@ def filter_plants(
         ground.soil_band_m,
         ground.soil_voxel_m,
         scan.separation.by_geometry,
+        None if scan.steady_soil is None else scan.steady_soil.transformed(T_field_station),
     )
 
 
@@ -399,7 +400,7 @@ def _registration_points(
     in its view-0 frame."""
     points = {}
     for station, result in filtered.items():
-        chosen = [result.plants.points] + ([result.soil_m] if include_soil else [])
+        chosen = [result.plants.points] + ([result.registration_soil_m] if include_soil else [])
         points[station] = transform_points(
             invert(T_field_levelled[station]), np.concatenate(chosen)
         )
