@@ -501,7 +501,7 @@ def soil_depths(
     steps = np.arange(window_px)
     window = padded[
         rows[:, None, None] + steps[None, :, None], columns[:, None, None] + steps[None, None, :]
-    ].reshape(len(pixels), -1)
+    ].reshape(len(pixels), window_px * window_px)
     window.sort(axis=1)  # NaN last
     count = np.count_nonzero(np.isfinite(window), axis=1)
     index = np.arange(len(pixels))

@@ -63,6 +63,12 @@ def test_soil_beside_an_edge_keeps_its_own_depth() -> None:
     assert soil_depths(depth, soil)[0] == pytest.approx(2.0)
 
 
+def test_a_frame_without_soil_gives_none() -> None:
+    """A frame all plant or all unmeasured has no soil sample pixels."""
+    depth = _plane_depth((20, 20))
+    assert soil_depths(depth, np.zeros(0, np.intp)).shape == (0,)
+
+
 @pytest.fixture(scope="module")
 def sunlit_block(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("sunlit") / "session"
