@@ -104,18 +104,20 @@ def _group_means(
 @dataclass(frozen=True)
 class FilteredStation:
     """A station's plant points (green, above the ground, voxel means) and a sparse sample of
-    its soil, both in the field frame, with the points each filter kept; ``steady_soil_m``:
-    the soil sample at its blocks' median depths, as the registration takes it
-    (``scans.soil_depths``; ``soil_m`` itself by geometry)."""
+    its soil, both in the field frame, with the points each filter kept; ``steady``: the same
+    two at their blocks' median depths (``scans.block_median_depths``), as the registration
+    takes them (``None``: ``plants`` and ``soil_m`` themselves, by geometry)."""
 
     plants: Cloud
     soil_m: NDArray[np.float64]
     kept: dict[str, int]
-    steady_soil_m: NDArray[np.float64] | None = None
+    steady: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
 
-    @property
-    def registration_soil_m(self) -> NDArray[np.float64]:
-        return self.soil_m if self.steady_soil_m is None else self.steady_soil_m
+    def registration_points(self, include_soil: bool) -> NDArray[np.float64]:
+        """(N, 3) the points the registration aligns: the plants, and the soil when
+        ``include_soil``, steady where known."""
+        plants, soil = self.steady or (self.plants.points, self.soil_m)
+        return np.concatenate([plants, soil]) if include_soil else plants
 
 
 def filter_station(
@@ -125,7 +127,7 @@ def filter_station(
     soil_band_m: float,
     soil_voxel_m: float,
     by_geometry: bool = False,
-    steady_soil: Cloud | None = None,
+    steady: tuple[Cloud, Cloud] | None = None,
 ) -> FilteredStation:
     """Pass-through on a levelled station's green points (z is the height above the ground),
     then voxel means; the soil points near the ground are kept as a sparse sample.
@@ -134,6 +136,9 @@ def filter_station(
     plants are the points standing clear of the local ground (see
     :func:`~fieldapp.recon.geometry_split.plants_above_local_ground`) and the soil sample the
     points that do not.
+
+    ``steady``: the green points and the soil sample again at their blocks' median depths
+    (colour only), filtered the same way for the registration.
     """
     if by_geometry:
         is_plant, height_m, soil_height_m = plants_above_local_ground(
@@ -149,20 +154,37 @@ def filter_station(
         # it: weeds, moss, and the soil beside a leaf that took its colour where the colour
         # image is registered a pixel or two off (RECONSTRUCTION.md, "Colour a pixel or two
         # off the depth")
-        clear = height_above_local_ground(green_field.points, soil_field.points, soil_band_m)
-        plants = green_field.select(
-            (clear >= settings.pass_through_min_m)  # off the soil where it lies
-            & (green_field.points[:, 2] <= settings.pass_through_max_m)  # above the plane
-        )
+        plants = _passed_through(green_field, soil_field, settings, soil_band_m)
     kept["pass_through"] = len(plants)
     plants = voxel_mean(plants, settings.voxel_size_m)
     kept["voxel_mean"] = len(plants)
-    soil = soil_field.select(np.abs(soil_field.points[:, 2]) <= soil_band_m)
-    steady = None
-    if steady_soil is not None:
-        steady_near = steady_soil.select(np.abs(steady_soil.points[:, 2]) <= soil_band_m)
-        steady = voxel_mean(steady_near, soil_voxel_m).points
-    return FilteredStation(plants, voxel_mean(soil, soil_voxel_m).points, kept, steady)
+    steady_points = None
+    if steady is not None and not by_geometry:
+        steady_plants = _passed_through(steady[0], soil_field, settings, soil_band_m)
+        steady_points = (
+            voxel_mean(steady_plants, settings.voxel_size_m).points,
+            _soil_sample(steady[1], soil_band_m, soil_voxel_m),
+        )
+    soil = _soil_sample(soil_field, soil_band_m, soil_voxel_m)
+    return FilteredStation(plants, soil, kept, steady_points)
+
+
+def _passed_through(
+    green_field: Cloud, soil_field: Cloud, settings: FilterSettings, soil_band_m: float
+) -> Cloud:
+    """The green points standing ``pass_through_min_m`` clear of the local ground and at most
+    ``pass_through_max_m`` above the plane."""
+    clear = height_above_local_ground(green_field.points, soil_field.points, soil_band_m)
+    return green_field.select(
+        (clear >= settings.pass_through_min_m)  # off the soil where it lies
+        & (green_field.points[:, 2] <= settings.pass_through_max_m)  # above the plane
+    )
+
+
+def _soil_sample(soil_field: Cloud, soil_band_m: float, soil_voxel_m: float) -> NDArray[np.float64]:
+    """The soil points within ``soil_band_m`` of the plane, voxel means."""
+    near = soil_field.select(np.abs(soil_field.points[:, 2]) <= soil_band_m)
+    return voxel_mean(near, soil_voxel_m).points
 
 
 def remove_outliers(

@@ -73,9 +73,15 @@ UNCOLOURED_REACH_PX = 12
 (:func:`grown_into_uncoloured`): the colour camera, 5.2 cm beside the depth camera, loses a
 band 365 px x 0.052 m x (1 / near - 1 / far) wide beside a near edge: 8 px for a leaf 30 cm in
 front of another 1 m away, 12 px at 0.8 m."""
-SOIL_WINDOW_PX = 5
-"""Side of the window whose median depth a soil sample pixel takes (:func:`soil_depths`): the
-block of 4 x 4 pixels it stands for on the default grid, centred."""
+BLOCK_PX = 5
+"""Side of the window whose median depth a point takes for the registration
+(:func:`block_median_depths`): a soil sample pixel's the block of 4 x 4 pixels it stands for on
+the default grid, centred."""
+SAME_SURFACE_SIGMAS = 3.0
+"""A plant pixel's window takes the depths within this many times the frame's noise of its own
+(:func:`block_median_depths`, :func:`noise_per_m2`)."""
+MIN_NOISE_PER_M2 = 1e-4
+"""The least noise :func:`noise_per_m2` gives: 0.4 mm at 2 m, below any Kinect v2's."""
 NOT_MEASURED_M = 1e3
 """The distance given to unmeasured pixels in the image filters (far behind everything)."""
 
@@ -97,9 +103,10 @@ class StationScan:
     exg_threshold: float
     measured_pixels: int
     separation: Separation = BY_COLOUR
-    steady_soil: Cloud | None = None
-    """The soil sample again, each point at its block's median depth (:func:`soil_depths`),
-    for the registration; ``None``: ``soil`` itself (by geometry, a turntable's scan)."""
+    steady: tuple[Cloud, Cloud] | None = None
+    """``green`` and ``soil`` again, each point at its block's median depth
+    (:func:`block_median_depths`), for the registration; ``None``: the two themselves (by
+    geometry, a turntable's scan)."""
 
 
 def captures_by_station(session: Session) -> dict[int, list[Capture]]:
@@ -256,27 +263,21 @@ def read_station(
         )
     views = [frame.capture.view for frame in frames]
     placed = _placed_at_reached_angles(station, frames, view_step, warnings)
+
+    def joined(part: int) -> Cloud:
+        """Part ``part`` of every frame's clouds, joined in view 0."""
+        by_view = dict(zip(views, (cloud[part] for cloud in clouds), strict=True))
+        return station_cloud(by_view, view_step.matrix, placed)
+
     scan = StationScan(
         station,
-        station_cloud(
-            dict(zip(views, (green for green, _, _ in clouds), strict=True)),
-            view_step.matrix,
-            placed,
-        ),
-        station_cloud(
-            dict(zip(views, (soil for _, soil, _ in clouds), strict=True)), view_step.matrix, placed
-        ),
+        joined(0),
+        joined(1),
         sorted(views),
         threshold,
         sum(int(np.count_nonzero(frame.measured)) for frame in frames),
         separation,
-        None
-        if separation.by_geometry
-        else station_cloud(
-            dict(zip(views, (steady for _, _, steady in clouds), strict=True)),
-            view_step.matrix,
-            placed,
-        ),
+        None if separation.by_geometry else (joined(2), joined(3)),
     )
     return scan, warnings
 
@@ -438,14 +439,14 @@ def _green_and_soil(
     grid: NDArray[np.intp],
     rays: NDArray[np.float64],
     crop: CropSettings,
-) -> tuple[Cloud, Cloud, Cloud]:
+) -> tuple[Cloud, Cloud, Cloud, Cloud]:
     """One frame's green points (``green_keys``: (EXG_KEYS + 1,) which colour keys are green,
     and which weakly green, ``NO_KEY`` neither; grown into the weak green next to the green,
     :func:`grown_into_weak_green`, and over the leaves' rims, :func:`grown_over_edges`) and
     its soil sample
-    (the measured ``grid`` pixels (M,) not green), in its camera frame, and the soil sample
-    again at its blocks' median depths (:func:`soil_depths`, for the registration); by
-    geometry every measured point is "green" and the soil the whole grid (twice, the same)."""
+    (the measured ``grid`` pixels (M,) not green), in its camera frame, then both again at
+    their blocks' median depths (:func:`block_median_depths`, for the registration); by geometry
+    every measured point is "green" and the soil the whole grid (the last two the same)."""
     if frame.measured.shape != rays.shape[:2]:
         raise ValueError(f"depth {frame.measured.shape} does not match the camera {rays.shape[:2]}")
     if separation.by_geometry or frame.keys is None:
@@ -468,20 +469,43 @@ def _green_and_soil(
         return backproject_pixels(pixels, depth_m, colors, rays, crop.radius_m, crop.min_depth_m)
 
     depth = frame.images.depth_m
+    green_cloud = cloud(green, depth.reshape(-1)[green])
     soil_cloud = cloud(soil, depth.reshape(-1)[soil])
-    steady = soil_cloud if separation.by_geometry else cloud(soil, soil_depths(depth, soil))
-    return cloud(green, depth.reshape(-1)[green]), soil_cloud, steady
+    if separation.by_geometry:
+        return green_cloud, soil_cloud, green_cloud, soil_cloud
+    soil_median = block_median_depths(depth, soil)
+    noise = noise_per_m2(depth.reshape(-1)[soil], soil_median)
+    green_median = block_median_depths(depth, green, SAME_SURFACE_SIGMAS * noise)
+    return green_cloud, soil_cloud, cloud(green, green_median), cloud(soil, soil_median)
 
 
-def soil_depths(
-    depth_m: NDArray[np.float32], pixels: NDArray[np.intp], window_px: int = SOIL_WINDOW_PX
+def noise_per_m2(own_m: NDArray[np.float32], median_m: NDArray[np.float32]) -> float:
+    """A frame's depth noise (standard deviation) per square metre of depth, from how far its
+    soil sample's pixels (``own_m`` (M,)) moved to their blocks' medians (``median_m``;
+    those that kept their own depth left out): robust (1.4826 x the median distance), and at
+    least :data:`MIN_NOISE_PER_M2`. A time-of-flight pixel's noise grows about as its distance
+    squared (the light it gets back falls so), in the shade and in the sun alike."""
+    moved = median_m != own_m
+    if not moved.any():
+        return MIN_NOISE_PER_M2
+    distance = np.abs(median_m[moved] - own_m[moved]) / own_m[moved] ** 2
+    return max(float(1.4826 * np.median(distance)), MIN_NOISE_PER_M2)
+
+
+def block_median_depths(
+    depth_m: NDArray[np.float32],
+    pixels: NDArray[np.intp],
+    reach_per_m2: float | None = None,
+    window_px: int = BLOCK_PX,
 ) -> NDArray[np.float32]:
-    """(M,) the depth each soil sample pixel (``pixels``, (M,) flat indices of measured
-    pixels of ``depth_m`` (H, W), NaN unmeasured) is given: the median of the measured depths
+    """(M,) the depth each of ``pixels`` ((M,) flat indices of measured pixels of ``depth_m``
+    (H, W), NaN unmeasured) is given for the registration: the median of the measured depths
     in the ``window_px`` square around it where that median continues the pixel's own surface
     (within :data:`CONTINUOUS_SHARE` of its depth), its own depth elsewhere (beside an edge,
     where most of the window is another surface, and at the image's border, where the window
-    is not centred).
+    is not centred). With ``reach_per_m2``, only the window's depths within that times the
+    pixel's depth squared of its own are taken: a leaf over another a centimetre behind it is
+    two surfaces, which a median of both would blur into one between them.
 
     Each soil sample point stands for the block of pixels around it, and the registration
     fits the overlaps' surfaces through these points: its own depth carries the whole of a
@@ -498,15 +522,16 @@ def soil_depths(
     width = depth_m.shape[1]
     padded = np.pad(depth_m, half, constant_values=np.nan)
     rows, columns = np.divmod(pixels, width)
-    steps = np.arange(window_px)
-    window = padded[
-        rows[:, None, None] + steps[None, :, None], columns[:, None, None] + steps[None, None, :]
-    ].reshape(len(pixels), window_px * window_px)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, (window_px, window_px))
+    window = windows[rows, columns].reshape(len(pixels), window_px * window_px)
+    own = depth_m.reshape(-1)[pixels]
+    if reach_per_m2 is not None:
+        reach = np.float32(reach_per_m2) * own * own
+        window[np.abs(window - own[:, None]) > reach[:, None]] = np.nan
     window.sort(axis=1)  # NaN last
     count = np.count_nonzero(np.isfinite(window), axis=1)
     index = np.arange(len(pixels))
     median = (window[index, (count - 1) // 2] + window[index, count // 2]) / np.float32(2)
-    own = depth_m.reshape(-1)[pixels]
     height = depth_m.shape[0]
     inside = (rows >= half) & (rows < height - half) & (columns >= half) & (columns < width - half)
     continuous = inside & (np.abs(median - own) <= np.float32(CONTINUOUS_SHARE) * own)

@@ -243,7 +243,12 @@ def filter_plants(
         ground.soil_band_m,
         ground.soil_voxel_m,
         scan.separation.by_geometry,
-        None if scan.steady_soil is None else scan.steady_soil.transformed(T_field_station),
+        None
+        if scan.steady is None
+        else (
+            scan.steady[0].transformed(T_field_station),
+            scan.steady[1].transformed(T_field_station),
+        ),
     )
 
 
@@ -396,15 +401,15 @@ def _registration_points(
     T_field_levelled: dict[int, Matrix4],
     include_soil: bool,
 ) -> dict[int, NDArray[np.float64]]:
-    """Per station, the (N, 3) points ICP aligns (plants, and soil when ``include_soil``),
-    in its view-0 frame."""
-    points = {}
-    for station, result in filtered.items():
-        chosen = [result.plants.points] + ([result.registration_soil_m] if include_soil else [])
-        points[station] = transform_points(
-            invert(T_field_levelled[station]), np.concatenate(chosen)
+    """Per station, the (N, 3) points ICP aligns (plants, and soil when ``include_soil``, at
+    their blocks' median depths where read so: ``FilteredStation.registration_points``), in
+    its view-0 frame."""
+    return {
+        station: transform_points(
+            invert(T_field_levelled[station]), result.registration_points(include_soil)
         )
-    return points
+        for station, result in filtered.items()
+    }
 
 
 def fuse(

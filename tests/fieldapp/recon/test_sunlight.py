@@ -1,11 +1,11 @@
-"""Sunlight (``fieldapp simulate --sunlight S``): the soil sample takes its block's median
-depth (``scans.soil_depths``), so the noise a sunlit time-of-flight pixel carries does not tilt
-the registration of the overlaps, where the stations see the soil farthest and noisiest.
+"""Sunlight (``fieldapp simulate --sunlight S``): the registration takes the plants and the
+soil sample at their blocks' median depths (``scans.block_median_depths``), so the noise a
+sunlit time-of-flight pixel carries does not bias the registration of the overlaps, where the
+stations see each other's ground and plants farthest and noisiest.
 
 Measured (RECONSTRUCTION.md, "Sunlight"): a 3 x 3 seedling plot in a clear midday sun was
-registered with every station raised 3-8 mm and pulled 5-11 mm towards the middle (the
-overlaps' soil, 3-4 times noisier than in the shade, tilted GICP's local covariances); a 2 x 2
-block (the test below, 32 frames) 4.6-6.8 mm off, now within 3.1 mm.
+registered with stations up to 8 mm off, now 2.0 mm; a 2 x 2 block (the test below, 32
+frames) 4.6-6.8 mm, now 0.9-1.9 mm (seeds 3 and 4: 6.8 and 8.3 -> 1.8 and 2.3 mm).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from devices.geometry import invert, pose_error
 from fieldapp.cli import main
 from fieldapp.io.session import load_session
 from fieldapp.recon.pipeline import run_reconstruction
-from fieldapp.recon.scans import CONTINUOUS_SHARE, soil_depths
+from fieldapp.recon.scans import CONTINUOUS_SHARE, block_median_depths, noise_per_m2
 from fieldapp.recon.settings import ReconstructionSettings
 
 
@@ -33,15 +33,15 @@ def _plane_depth(shape: tuple[int, int]) -> np.ndarray:
 def test_the_median_of_a_plane_is_its_centre_and_a_fifth_of_its_noise() -> None:
     exact = _plane_depth((120, 160))
     pixels = np.flatnonzero(np.ones(exact.shape, bool))
-    np.testing.assert_allclose(soil_depths(exact, pixels), exact.reshape(-1), rtol=1e-6)
+    np.testing.assert_allclose(block_median_depths(exact, pixels), exact.reshape(-1), rtol=1e-6)
     noisy = exact + np.random.default_rng(0).normal(0.0, 0.01, exact.shape).astype(np.float32)
     border = np.ones(exact.shape, bool)
     border[2:-2, 2:-2] = False  # its window not centred: its own depth
-    np.testing.assert_array_equal(soil_depths(noisy, np.flatnonzero(border)), noisy[border])
+    np.testing.assert_array_equal(block_median_depths(noisy, np.flatnonzero(border)), noisy[border])
     inner = np.zeros(exact.shape, bool)
     inner[2:-2, 2:-2] = True
     inner_pixels = np.flatnonzero(inner)
-    residual = soil_depths(noisy, inner_pixels) - exact.reshape(-1)[inner_pixels]
+    residual = block_median_depths(noisy, inner_pixels) - exact.reshape(-1)[inner_pixels]
     assert residual.std() < 0.01 / 3.5  # the median of 25: 1.25 / 5 of it
     assert abs(residual.mean()) < 0.0005
 
@@ -51,7 +51,9 @@ def test_unmeasured_pixels_are_left_out_of_the_median() -> None:
     holed = exact.copy()
     holed[::2, ::3] = np.nan
     pixels = np.flatnonzero(np.isfinite(holed))
-    np.testing.assert_allclose(soil_depths(holed, pixels), exact.reshape(-1)[pixels], rtol=2e-3)
+    np.testing.assert_allclose(
+        block_median_depths(holed, pixels), exact.reshape(-1)[pixels], rtol=2e-3
+    )
 
 
 def test_soil_beside_an_edge_keeps_its_own_depth() -> None:
@@ -60,13 +62,39 @@ def test_soil_beside_an_edge_keeps_its_own_depth() -> None:
     depth[:, :16] = 1.9  # a leaf over the left half
     soil = np.array([np.ravel_multi_index((15, 16), depth.shape)])
     assert abs(1.9 - 2.0) > CONTINUOUS_SHARE * 2.0 * 0.5
-    assert soil_depths(depth, soil)[0] == pytest.approx(2.0)
+    assert block_median_depths(depth, soil)[0] == pytest.approx(2.0)
+
+
+def test_a_leaf_over_another_just_behind_is_not_blurred_into_it() -> None:
+    """Two leaves 1 cm apart in depth (within the 3 % that makes one surface): the median of
+    the window takes the far leaf's depths for a near-leaf pixel, unless the window is held to
+    depths near the pixel's own, by the frame's noise."""
+    depth = np.full((30, 30), 2.01, np.float32)
+    depth[:16, :15] = 2.0  # the near leaf, its corner at (15, 14)
+    near = np.array([np.ravel_multi_index((15, 14), depth.shape)])  # 16 of 25 far
+    assert block_median_depths(depth, near)[0] == pytest.approx(2.01)
+    assert block_median_depths(depth, near, 3 * 0.0005)[0] == pytest.approx(2.0)
+
+
+def test_the_frame_noise_is_read_from_how_far_the_soil_moved() -> None:
+    exact = _plane_depth((120, 160))
+    inner = np.zeros(exact.shape, bool)
+    inner[2:-2, 2:-2] = True
+    pixels = np.flatnonzero(inner)
+    rng = np.random.default_rng(2)
+    for sigma_per_m2 in (0.0005, 0.003):
+        noisy = exact + (sigma_per_m2 * exact**2 * rng.standard_normal(exact.shape)).astype(
+            np.float32
+        )
+        own = noisy.reshape(-1)[pixels]
+        estimate = noise_per_m2(own, block_median_depths(noisy, pixels))
+        assert estimate == pytest.approx(sigma_per_m2, rel=0.15)
 
 
 def test_a_frame_without_soil_gives_none() -> None:
     """A frame all plant or all unmeasured has no soil sample pixels."""
     depth = _plane_depth((20, 20))
-    assert soil_depths(depth, np.zeros(0, np.intp)).shape == (0,)
+    assert block_median_depths(depth, np.zeros(0, np.intp)).shape == (0,)
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +119,7 @@ def test_a_block_in_a_clear_midday_sun_is_registered_within_a_few_millimetres(
         if s != reference
     ]
     shifts = [shift for shift, _ in errors]
-    assert np.mean(shifts) < 0.0045 and max(shifts) < 0.006, shifts
+    assert max(shifts) < 0.0035, shifts
     assert max(turn for _, turn in errors) < 0.15, errors
     assert all(r.verdict == "refined" for s, r in result.registrations.items() if s != reference)
     assert len(result.plants) == 16
