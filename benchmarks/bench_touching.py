@@ -90,7 +90,7 @@ def prepare(
         if target.exists():
             continue
         original = stages.find_plants
-        stages.find_plants = _keeper(target)  # type: ignore[assignment]
+        stages.find_plants = _keeper(target)
         try:
             run_reconstruction(load_session(session), ReconstructionSettings(threads=1))
         except _Stop:
@@ -117,9 +117,10 @@ def _settings(overrides: list[str]) -> Any:
 def evaluate(inputs: dict[str, Any], truth_path: Path, settings: Any) -> dict[str, Any]:
     """The plants step on one input, matched to the truth."""
     from fieldapp.evaluate.metrics import agreement
-    from fieldapp.evaluate.references import load_truth, match_positions
+    from fieldapp.evaluate.references import load_truth
     from fieldapp.recon.cloud import Cloud
     from fieldapp.recon.plants import search_plants
+    from fieldapp.results.identity import match_positions
 
     cloud = Cloud(inputs["points"], inputs["colors"])
     start = time.process_time()
