@@ -335,7 +335,8 @@ class _Streaming:
         self._filtered: dict[int, FilteredStation] = {}
 
     def take(self, scan: StationScan) -> StationScan:
-        """``scan`` without its green points, levelled and filtered now or when it can be."""
+        """``scan`` without its green points (nor their steady copy), levelled and filtered now
+        or when it can be."""
         if scan.station not in self._to_reference:  # skipped with a warning: nothing to place
             return scan
         self._waiting[scan.station] = scan
@@ -344,7 +345,7 @@ class _Streaming:
         if self._T_field_ref is not None:
             for station in list(self._waiting):
                 self._place(station)
-        return replace(scan, green=Cloud.empty())
+        return replace(scan, green=Cloud.empty(), steady=None)
 
     def placed(
         self, reference: int, scans: dict[int, StationScan]
