@@ -243,11 +243,6 @@ def parse_arrival(
     return sigma_m, sigma_deg
 
 
-def parse_depth_offset(text: str | None) -> float | None:
-    """``"0.02"`` -> 0.02 m, within :data:`MAX_DEPTH_OFFSET_M` either way; ``None`` stays."""
-    return parse_number("--depth-offset", text, -MAX_DEPTH_OFFSET_M, MAX_DEPTH_OFFSET_M, "metres")
-
-
 def parse_color_shift(text: str | None) -> tuple[int, int] | None:
     """``"1,-2"`` -> (1, -2) pixels, each within
     :data:`~devices.sim.sensor.MAX_COLOR_SHIFT_PX`; ``None`` stays (exact registration)."""
@@ -296,7 +291,7 @@ def check_scene_options(args: argparse.Namespace) -> None:
     for dest, scenes in SCENE_OPTIONS.items():
         if getattr(args, dest) not in (None, False) and args.scene not in scenes:
             option = "--" + dest.replace("_", "-")
-            takers = " and ".join(scenes) if len(scenes) < 3 else "all but the turntable"
+            takers = ", ".join(scenes[:-1]) + " and " * (len(scenes) > 1) + scenes[-1]
             raise FieldappError(
                 f"{option}: the {args.scene} scene does not take it (only {takers})"
             )
@@ -337,7 +332,9 @@ def run(args: argparse.Namespace) -> int:
     lean = parse_degrees("--lean", args.lean, MAX_LEAN_DEG)
     table_error = parse_degrees("--table-error", args.table_error, MAX_TABLE_ERROR_DEG)
     color_shift = parse_color_shift(args.color_shift)
-    depth_offset = parse_depth_offset(args.depth_offset)
+    depth_offset = parse_number(
+        "--depth-offset", args.depth_offset, -MAX_DEPTH_OFFSET_M, MAX_DEPTH_OFFSET_M, "metres"
+    )
     sunlight = parse_number("--sunlight", args.sunlight, 0.0, 1.0, "of a clear midday sun")
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
     if localisation is not None:

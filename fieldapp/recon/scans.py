@@ -464,19 +464,25 @@ def _green_and_soil(
         green = np.flatnonzero(mask)
         soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
 
-    def cloud(pixels: NDArray[np.intp], depth_m: NDArray[np.float32]) -> Cloud:
-        colors = np.take(frame.images.color.reshape(-1, 3), pixels, axis=0)
-        return backproject_pixels(pixels, depth_m, colors, rays, crop.radius_m, crop.min_depth_m)
-
     depth = frame.images.depth_m
-    green_cloud = cloud(green, depth.reshape(-1)[green])
-    soil_cloud = cloud(soil, depth.reshape(-1)[soil])
+    green_m, soil_m = depth.reshape(-1)[green], depth.reshape(-1)[soil]
+    green_rgb, soil_rgb = (
+        np.take(frame.images.color.reshape(-1, 3), p, axis=0) for p in (green, soil)
+    )
+
+    def cloud(
+        pixels: NDArray[np.intp], depth_m: NDArray[np.float32], rgb: NDArray[np.uint8]
+    ) -> Cloud:
+        return backproject_pixels(pixels, depth_m, rgb, rays, crop.radius_m, crop.min_depth_m)
+
+    green_cloud, soil_cloud = cloud(green, green_m, green_rgb), cloud(soil, soil_m, soil_rgb)
     if separation.by_geometry:
         return green_cloud, soil_cloud, green_cloud, soil_cloud
     soil_median = block_median_depths(depth, soil)
-    noise = noise_per_m2(depth.reshape(-1)[soil], soil_median)
+    noise = noise_per_m2(soil_m, soil_median)
     green_median = block_median_depths(depth, green, SAME_SURFACE_SIGMAS * noise)
-    return green_cloud, soil_cloud, cloud(green, green_median), cloud(soil, soil_median)
+    steady = cloud(green, green_median, green_rgb), cloud(soil, soil_median, soil_rgb)
+    return green_cloud, soil_cloud, *steady
 
 
 def noise_per_m2(own_m: NDArray[np.float32], median_m: NDArray[np.float32]) -> float:
@@ -509,8 +515,8 @@ def block_median_depths(
 
     Each soil sample point stands for the block of pixels around it, and the registration
     fits the overlaps' surfaces through these points: its own depth carries the whole of a
-    pixel's noise, the block's median a quarter of it (the median of
-    25 values spreads 1.25 / 5 as much as one). In the shade it hardly matters (1.5-2 mm at
+    pixel's noise, the block's median a quarter of it (the median of 25 values spreads 1.25 /
+    5 as much as one). In the shade it hardly matters (1.5-2 mm at
     1-2 m); in sunlight, where a time-of-flight pixel's noise grows with the ambient light (3
     to 4 times the shade's, more at the far end of the views, where the stations overlap),
     the noise of the overlaps' soil biased the registration: a plot came out up to a

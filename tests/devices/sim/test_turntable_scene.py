@@ -82,9 +82,9 @@ def test_cli_writes_a_depth_only_plot_session(
 @pytest.mark.parametrize(
     ("scene", "option", "takers"),
     [
-        ("turntable", ["--depth-offset", "0.02"], "all but the turntable"),
-        ("turntable", ["--color-shift", "1,0"], "all but the turntable"),
-        ("turntable", ["--grid", "4"], "all but the turntable"),
+        ("turntable", ["--depth-offset", "0.02"], "plot, spheres, soil and checkerboard"),
+        ("turntable", ["--color-shift", "1,0"], "plot, spheres, soil and checkerboard"),
+        ("turntable", ["--grid", "4"], "plot, spheres, soil and checkerboard"),
         ("turntable", ["--stage", "touching"], "plot"),
         ("soil", ["--lean", "10"], "plot"),
         ("plot", ["--plants"], "spheres"),
