@@ -19,7 +19,12 @@ from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.geometry_split import LOW_M as LOCAL_SOIL_M
-from fieldapp.recon.geometry_split import height_above_local_ground, plants_above_local_ground
+from fieldapp.recon.geometry_split import (
+    LocalGround,
+    height_above,
+    plants_above_local_ground,
+    station_ground,
+)
 from fieldapp.recon.settings import FilterSettings
 
 log = logging.getLogger(__name__)
@@ -140,6 +145,7 @@ def filter_station(
     ``steady``: the green points and the soil sample again at their blocks' median depths
     (colour only), filtered the same way for the registration.
     """
+    steady_points = None
     if by_geometry:
         is_plant, height_m, soil_height_m = plants_above_local_ground(
             green_field.points, soil_field.points, soil_band_m
@@ -154,27 +160,26 @@ def filter_station(
         # it: weeds, moss, and the soil beside a leaf that took its colour where the colour
         # image is registered a pixel or two off (RECONSTRUCTION.md, "Colour a pixel or two
         # off the depth")
-        plants = _passed_through(green_field, soil_field, settings, soil_band_m)
+        ground = station_ground(soil_field.points, soil_band_m)  # once for both copies
+        plants = _passed_through(green_field, ground, settings)
+        if steady is not None:
+            steady_points = (
+                voxel_mean(
+                    _passed_through(steady[0], ground, settings), settings.voxel_size_m
+                ).points,
+                _soil_sample(steady[1], soil_band_m, soil_voxel_m),
+            )
     kept["pass_through"] = len(plants)
     plants = voxel_mean(plants, settings.voxel_size_m)
     kept["voxel_mean"] = len(plants)
-    steady_points = None
-    if steady is not None and not by_geometry:
-        steady_plants = _passed_through(steady[0], soil_field, settings, soil_band_m)
-        steady_points = (
-            voxel_mean(steady_plants, settings.voxel_size_m).points,
-            _soil_sample(steady[1], soil_band_m, soil_voxel_m),
-        )
     soil = _soil_sample(soil_field, soil_band_m, soil_voxel_m)
     return FilteredStation(plants, soil, kept, steady_points)
 
 
-def _passed_through(
-    green_field: Cloud, soil_field: Cloud, settings: FilterSettings, soil_band_m: float
-) -> Cloud:
-    """The green points standing ``pass_through_min_m`` clear of the local ground and at most
-    ``pass_through_max_m`` above the plane."""
-    clear = height_above_local_ground(green_field.points, soil_field.points, soil_band_m)
+def _passed_through(green_field: Cloud, ground: LocalGround, settings: FilterSettings) -> Cloud:
+    """The green points standing ``pass_through_min_m`` clear of the local ``ground`` and at
+    most ``pass_through_max_m`` above the plane."""
+    clear = height_above(ground, green_field.points)
     return green_field.select(
         (clear >= settings.pass_through_min_m)  # off the soil where it lies
         & (green_field.points[:, 2] <= settings.pass_through_max_m)  # above the plane

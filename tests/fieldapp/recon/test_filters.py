@@ -23,7 +23,7 @@ from fieldapp.recon.filters import (
     statistical_outliers,
     voxel_mean,
 )
-from fieldapp.recon.geometry_split import local_ground_m
+from fieldapp.recon.geometry_split import LocalGround
 from fieldapp.recon.settings import FilterSettings
 
 from .synthetic import LEAF_RGB, SOIL_RGB, colored, cylinder, ground_patch
@@ -167,7 +167,7 @@ def test_filter_chain_keeps_the_plant_and_drops_soil_and_strays() -> None:
     )
     assert list(result.kept) == ["excess_green", "pass_through", "voxel_mean"]
     z = green.points[:, 2]
-    clear = z - local_ground_m(soil[np.abs(soil[:, 2]) <= 0.03], green.points[:, :2])
+    clear = z - LocalGround(soil[np.abs(soil[:, 2]) <= 0.03]).under(green.points[:, :2])
     assert result.kept["excess_green"] == 20_002
     assert result.kept["pass_through"] == int(np.sum((clear >= 0.01) & (z <= 1.5))) < 20_001
     assert result.kept["voxel_mean"] < 20_001
@@ -177,7 +177,7 @@ def test_filter_chain_keeps_the_plant_and_drops_soil_and_strays() -> None:
     kept, counts_after = remove_outliers(result.plants, FilterSettings())
     points = kept.points
     assert np.all(np.hypot(points[:, 0] - 0.2, points[:, 1] - 0.1) < 0.0125)
-    ground = local_ground_m(soil[np.abs(soil[:, 2]) <= 0.03], points[:, :2])
+    ground = LocalGround(soil[np.abs(soil[:, 2]) <= 0.03]).under(points[:, :2])
     assert (points[:, 2] - ground).min() >= 0.0099 and points[:, 2].max() <= 0.3 + 1e-9
     assert list(counts_after) == ["statistical_outliers", "radius_outliers"]
     assert counts_after["radius_outliers"] == len(kept) > 0.95 * len(result.plants)
