@@ -88,11 +88,30 @@ def backproject_pixels(
         index, z, colors = index[near], z[near], colors[near]
     ray = np.take(rays.reshape(-1, 3), index, axis=0)  # three times faster than rays[index]
     points = ray * z[:, None]
-    range_m = z * np.sqrt(ray[:, 0] ** 2 + ray[:, 1] ** 2 + 1.0)
-    inside = range_m <= crop_radius_m
+    inside = _within_radius(ray, z, crop_radius_m)
     if inside.all():
         return Cloud(points, colors)
     return Cloud(np.compress(inside, points, axis=0), np.compress(inside, colors, axis=0))
+
+
+def in_crop(
+    index: NDArray[np.intp],
+    depth_m: NDArray[np.floating],
+    rays: NDArray[np.float64],
+    crop_radius_m: float,
+    min_depth_m: float = 0.0,
+) -> NDArray[np.bool_]:
+    """(M,) which of the pixels ``index`` (M,) at ``depth_m`` (M,) :func:`backproject_pixels`
+    keeps: nearer than the crop's radius and farther than its least depth."""
+    z = np.asarray(depth_m, dtype=np.float64)
+    ray = np.take(rays.reshape(-1, 3), index, axis=0)
+    return (z > max(min_depth_m, 0.0)) & _within_radius(ray, z, crop_radius_m)
+
+
+def _within_radius(
+    ray: NDArray[np.float64], z: NDArray[np.float64], crop_radius_m: float
+) -> NDArray[np.bool_]:
+    return z * np.sqrt(ray[:, 0] ** 2 + ray[:, 1] ** 2 + 1.0) <= crop_radius_m
 
 
 def rig_crop(crop: CropSettings, calibration: Calibration) -> CropSettings:

@@ -111,7 +111,7 @@ class FilteredStation:
     """A station's plant points (green, above the ground, voxel means) and a sparse sample of
     its soil, both in the field frame, with the points each filter kept; ``steady``: the same
     two at their blocks' median depths (``scans.block_median_depths``), as the registration
-    takes them (``None``: ``plants`` and ``soil_m`` themselves, by geometry)."""
+    takes them (``None``: ``plants`` and ``soil_m`` themselves)."""
 
     plants: Cloud
     soil_m: NDArray[np.float64]
@@ -142,17 +142,27 @@ def filter_station(
     :func:`~fieldapp.recon.geometry_split.plants_above_local_ground`) and the soil sample the
     points that do not.
 
-    ``steady``: the green points and the soil sample again at their blocks' median depths
-    (colour only), filtered the same way for the registration.
+    ``steady``: the green points and the soil sample again at their blocks' median depths,
+    filtered the same way for the registration; by geometry, point for point the same as
+    ``green_field`` and ``soil_field``: what tells the plants from the soil, and the soil
+    sample the registration takes.
     """
     steady_points = None
+    steady_soil = None
     if by_geometry:
+        # told apart on the steady points where given (the same points, point for point): in
+        # the sun the soil's noise stands clear of its ground and joined the plants
+        # (RECONSTRUCTION.md, "Sunlight"); the plants are measured on their own depths
+        told = steady or (green_field, soil_field)
         is_plant, height_m, soil_height_m = plants_above_local_ground(
-            green_field.points, soil_field.points, soil_band_m
+            told[0].points, told[1].points, soil_band_m
         )
         kept = {"geometry": int(is_plant.sum())}
+        local_soil = soil_height_m < LOCAL_SOIL_M
         plants = green_field.select(is_plant & (height_m <= settings.pass_through_max_m))
-        soil_field = soil_field.select(soil_height_m < LOCAL_SOIL_M)
+        soil_field = soil_field.select(local_soil)
+        if steady is not None:
+            steady_soil = _soil_sample(steady[1].select(local_soil), soil_band_m, soil_voxel_m)
     else:
         kept = {"excess_green": len(green_field)}
         # over the local ground, not the plane: real soil has clods, ridges and furrows (the
@@ -172,6 +182,11 @@ def filter_station(
     kept["pass_through"] = len(plants)
     plants = voxel_mean(plants, settings.voxel_size_m)
     kept["voxel_mean"] = len(plants)
+    if steady_soil is not None:
+        # the registration takes the plants' own voxel means: the plain medians of every
+        # pixel (not held to a leaf's surface, which is not known when they are taken) blur
+        # the leaves (a shaded plot's stations 1.4 -> 2.7 mm off)
+        steady_points = (plants.points, steady_soil)
     soil = _soil_sample(soil_field, soil_band_m, soil_voxel_m)
     return FilteredStation(plants, soil, kept, steady_points)
 
