@@ -155,7 +155,10 @@ def filter_station(
         # (RECONSTRUCTION.md, "Sunlight"); the plants are measured on their own depths
         told = steady or (green_field, soil_field)
         is_plant, height_m, soil_height_m = plants_above_local_ground(
-            told[0].points, told[1].points, soil_band_m
+            told[0].points,
+            told[1].points,
+            soil_band_m,
+            None if steady is None else green_field.points,
         )
         kept = {"geometry": int(is_plant.sum())}
         local_soil = soil_height_m < LOCAL_SOIL_M

@@ -108,17 +108,25 @@ def height_above(ground: LocalGround, points_m: NDArray[np.float64]) -> NDArray[
 
 
 def plants_above_local_ground(
-    points_m: NDArray[np.float64], soil_m: NDArray[np.float64], soil_band_m: float
+    points_m: NDArray[np.float64],
+    soil_m: NDArray[np.float64],
+    soil_band_m: float,
+    own_m: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
     """Plant points of a levelled station (z up, z = 0 the station's ground plane).
 
     ``points_m``: (N, 3) every measured point; ``soil_m``: (M, 3) the sparse soil sample (all
-    pixels of a sparse grid). Returns (is_plant (N,), the height of each soil-sample point
-    above the local ground (M,)).
+    pixels of a sparse grid). ``own_m``: (N, 3) the same points at their own depths where
+    ``points_m`` are their blocks' medians: a point must stand clear at both, or a soil pixel
+    beside a low leaf, whose block's median the leaf lifts, joins the plant at the soil's
+    own depth. Returns (is_plant (N,), the height of each point (N,) and of each soil-sample
+    point (M,) above the local ground).
     """
     ground = station_ground(soil_m, soil_band_m)
     height, soil_height = height_above(ground, points_m), height_above(ground, soil_m)
     low = height > LOW_M
+    if own_m is not None:
+        low &= height_above(ground, own_m) > LOW_M
     is_plant = np.zeros(len(points_m), dtype=bool)
     candidates = np.flatnonzero(low)
     if len(candidates):

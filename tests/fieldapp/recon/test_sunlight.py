@@ -186,10 +186,10 @@ def test_plants_told_by_geometry_in_the_sun_are_not_joined_by_the_soils_noise(
     truth = json.loads((sunlit_depth_only_block / "truth.json").read_text())
     assert len(result.plants) == 16
     errors = matched_errors(result, truth)
-    # 2.3 cm (174 cm before); its heights are not checked: the block's corner plants are seen
+    # 1.6 cm (174 cm before); its heights are not checked: the block's corner plants are seen
     # only from beyond 2 m, where in full sun half the pixels drown, and their tops are lost
     # without colour as with it (height RMSE 2.7 cm either way, 0.4 on a full plot)
-    assert np.sqrt(np.mean(errors["dw_cm"] ** 2)) <= 3.0
+    assert np.sqrt(np.mean(errors["dw_cm"] ** 2)) <= 2.5
     T = {int(s): np.array(m) for s, m in truth["T_field_camera"].items()}
     shifts = [
         pose_error(result.T_reference_station(s), invert(T[result.reference]) @ T[s])[0]
