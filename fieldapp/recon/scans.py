@@ -264,9 +264,17 @@ def read_station(
     views = [frame.capture.view for frame in frames]
     placed = _placed_at_reached_angles(station, frames, view_step, warnings)
 
+    parts: list[list[Cloud | None]] = [list(frame_clouds) for frame_clouds in clouds]
+    del clouds
+
     def joined(part: int) -> Cloud:
-        """Part ``part`` of every frame's clouds, joined in view 0."""
-        by_view = dict(zip(views, (cloud[part] for cloud in clouds), strict=True))
+        """Part ``part`` of every frame's clouds, joined in view 0, and let go of: each part
+        of a depth-only frame is every pixel it measured."""
+        by_view = {}
+        for view, frame_parts in zip(views, parts, strict=True):
+            cloud, frame_parts[part] = frame_parts[part], None
+            assert cloud is not None  # each part is joined once
+            by_view[view] = cloud
         return station_cloud(by_view, view_step.matrix, placed)
 
     scan = StationScan(
