@@ -94,23 +94,34 @@ def backproject_pixels(
     return Cloud(np.compress(inside, points, axis=0), np.compress(inside, colors, axis=0))
 
 
-def in_crop(
+def backproject_pixels_twice(
     index: NDArray[np.intp],
     depth_m: NDArray[np.floating],
+    other_depth_m: NDArray[np.floating],
+    colors: NDArray[np.uint8],
     rays: NDArray[np.float64],
     crop_radius_m: float,
     min_depth_m: float = 0.0,
-) -> NDArray[np.bool_]:
-    """(M,) which of the pixels ``index`` (M,) at ``depth_m`` (M,) :func:`backproject_pixels`
-    keeps: nearer than the crop's radius and farther than its least depth."""
+) -> tuple[Cloud, Cloud]:
+    """:func:`backproject_pixels` of the same pixels at two depths each (a frame's own and
+    its blocks' medians, ``other_depth_m``), keeping a pixel in both clouds where the crop
+    keeps it at both depths, so that the two are the same points, point for point; each
+    ray gathered once for both."""
     z = np.asarray(depth_m, dtype=np.float64)
+    other = np.asarray(other_depth_m, dtype=np.float64)
     ray = np.take(rays.reshape(-1, 3), index, axis=0)
-    return (z > max(min_depth_m, 0.0)) & _within_radius(ray, z, crop_radius_m)
+    floor = max(min_depth_m, 0.0)
+    keep = (z > floor) & (other > floor)
+    keep &= _within_radius(ray, z, crop_radius_m) & _within_radius(ray, other, crop_radius_m)
+    if not keep.all():
+        ray, z, other, colors = ray[keep], z[keep], other[keep], colors[keep]
+    return Cloud(ray * z[:, None], colors), Cloud(ray * other[:, None], colors)
 
 
 def _within_radius(
     ray: NDArray[np.float64], z: NDArray[np.float64], crop_radius_m: float
 ) -> NDArray[np.bool_]:
+    """Which points ``ray * z`` lie within ``crop_radius_m`` of the camera."""
     return z * np.sqrt(ray[:, 0] ** 2 + ray[:, 1] ** 2 + 1.0) <= crop_radius_m
 
 

@@ -27,7 +27,7 @@ from devices.geometry import Matrix4
 from fieldapp.errors import FieldappError, FormatError
 from fieldapp.io.calibration import ViewStep
 from fieldapp.io.session import Capture, CaptureImages, Session
-from fieldapp.recon.backproject import backproject_pixels, in_crop
+from fieldapp.recon.backproject import backproject_pixels, backproject_pixels_twice
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.depth_only import read_scan_capture
 from fieldapp.recon.exg import (
@@ -493,19 +493,16 @@ def _green_and_soil(
         # points is the split of the points themselves.
         medians = np.full(depth.size, np.nan, dtype=np.float32)
         medians[green] = block_median_depths(depth, green)
-        green_keep, soil_keep = (
-            in_crop(pixels, own, rays, crop.radius_m, crop.min_depth_m)
-            & in_crop(pixels, medians[pixels], rays, crop.radius_m, crop.min_depth_m)
-            for pixels, own in ((green, green_m), (soil, soil_m))
+        (green_cloud, green_steady), (soil_cloud, soil_steady) = (
+            backproject_pixels_twice(
+                pixels, own, medians[pixels], rgb, rays, crop.radius_m, crop.min_depth_m
+            )
+            for pixels, own, rgb in ((green, green_m, green_rgb), (soil, soil_m, soil_rgb))
         )
-        green, soil = green[green_keep], soil[soil_keep]
-        green_m, soil_m = green_m[green_keep], soil_m[soil_keep]
-        green_rgb, soil_rgb = green_rgb[green_keep], soil_rgb[soil_keep]
-        green_median, soil_median = medians[green], medians[soil]
-    else:
-        soil_median = block_median_depths(depth, soil)
-        noise = noise_per_m2(soil_m, soil_median)
-        green_median = block_median_depths(depth, green, SAME_SURFACE_SIGMAS * noise)
+        return green_cloud, soil_cloud, green_steady, soil_steady
+    soil_median = block_median_depths(depth, soil)
+    noise = noise_per_m2(soil_m, soil_median)
+    green_median = block_median_depths(depth, green, SAME_SURFACE_SIGMAS * noise)
     return (
         cloud(green, green_m, green_rgb),
         cloud(soil, soil_m, soil_rgb),
