@@ -13,7 +13,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from devices.geometry import Matrix4
+from devices.geometry import Matrix4, transform_points
 from fieldapp.io.calibration import T_view0_view
 from fieldapp.recon.cloud import Cloud
 
@@ -64,8 +64,7 @@ def station_cloud(
     for view in sorted(views):
         cloud, end = views[view], start + len(views[view])
         T = placed[view] if view in placed else T_view0_view(T_view_next, view)
-        np.matmul(cloud.points, T[:3, :3].T, out=points[start:end])
-        points[start:end] += T[:3, 3]
+        points[start:end] = transform_points(T, cloud.points)  # one view's copy at a time
         colors[start:end] = cloud.colors
         start = end
     return Cloud(points, colors)

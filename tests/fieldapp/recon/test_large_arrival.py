@@ -48,7 +48,9 @@ def poorly_localised(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
-def _errors(result: Reconstruction, folder: Path) -> dict[int, tuple[float, float]]:
+def station_errors(result: Reconstruction, folder: Path) -> dict[int, tuple[float, float]]:
+    """Each station's pose error (shift m, turn degrees) against the truth, relative to the
+    reference station."""
     truth = json.loads((folder / "truth.json").read_text())
     T = {int(s): np.array(m) for s, m in truth["T_field_camera"].items()}
     reference = result.reference
@@ -64,7 +66,7 @@ def test_every_station_is_placed_despite_arrivals_beyond_the_settings(block: Pat
     fractions = [e.fraction for e in events]
     assert fractions == sorted(fractions)  # the second run does not send the bar back
     assert any(e.message.startswith("registering again from where the base") for e in events)
-    for station, (shift_m, turn_deg) in _errors(result, block).items():
+    for station, (shift_m, turn_deg) in station_errors(result, block).items():
         assert shift_m < 0.005 and turn_deg < 0.2, (station, shift_m, turn_deg)
     assert all(r.verdict in ("refined", "reference") for r in result.registrations.values())
     assert len(result.plants) == 16
@@ -81,7 +83,7 @@ def test_without_the_reported_stops_and_the_second_run_the_stations_are_flagged(
     result = run_reconstruction(load_session(block), settings)
     flagged = [s for s, r in result.registrations.items() if r.verdict == "unreliable"]
     assert len(flagged) >= 2  # never silently wrong, but not placed
-    errors = _errors(result, block)
+    errors = station_errors(result, block)
     assert max(errors[s][0] for s in flagged) > 0.1
 
 
@@ -92,7 +94,7 @@ def test_a_base_that_does_not_know_where_it_stopped_is_registered_with_a_wider_p
     arrivals = [s["arrival_error"] for s in truth["stations"].values()]
     assert max(np.hypot(a["x_m"], a["y_m"]) for a in arrivals) > 0.2  # large, not reported
     result = run_reconstruction(load_session(poorly_localised), ReconstructionSettings())
-    for station, (shift_m, turn_deg) in _errors(result, poorly_localised).items():
+    for station, (shift_m, turn_deg) in station_errors(result, poorly_localised).items():
         assert shift_m < 0.005 and turn_deg < 0.2, (station, shift_m, turn_deg)
     assert all(r.verdict in ("refined", "reference") for r in result.registrations.values())
     assert len(result.plants) == 16
@@ -113,7 +115,7 @@ def test_with_the_prior_no_wider_than_twice_the_settings_that_base_is_flagged(
     result = run_reconstruction(load_session(poorly_localised), settings)
     flagged = [s for s, r in result.registrations.items() if r.verdict == "unreliable"]
     assert flagged  # never silently wrong, but not placed
-    errors = _errors(result, poorly_localised)
+    errors = station_errors(result, poorly_localised)
     assert max(errors[s][0] for s in flagged) > 0.1
 
 

@@ -21,7 +21,7 @@ from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
 
 from .test_end_to_end import matched_errors
-from .test_large_arrival import _errors
+from .test_large_arrival import station_errors
 
 pytestmark = pytest.mark.slow
 
@@ -55,7 +55,7 @@ def test_on_a_higher_rig_the_crop_scaled_to_it_lets_every_station_register(high:
     result = run_reconstruction(session, ReconstructionSettings())
     assert result.report()["crop_radius_m"] == 2.44  # what was used, in report.json
     assert all(r.verdict in ("refined", "reference") for r in result.registrations.values())
-    for shift_m, turn_deg in _errors(result, high).values():
+    for shift_m, turn_deg in station_errors(result, high).values():
         assert shift_m < 0.01 and turn_deg < 0.3
     truth = json.loads((high / "truth.json").read_text())
     e = matched_errors(result, truth)  # every true plant found, once

@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from devices.geometry import invert, pose_error
 from fieldapp.cli import main
 from fieldapp.io.session import load_session
 from fieldapp.recon.pipeline import run_reconstruction
@@ -24,6 +23,7 @@ from fieldapp.recon.scans import CONTINUOUS_SHARE, block_median_depths, noise_pe
 from fieldapp.recon.settings import ReconstructionSettings
 
 from .test_end_to_end import matched_errors
+from .test_large_arrival import station_errors
 
 
 def _plane_depth(shape: tuple[int, int]) -> np.ndarray:
@@ -136,12 +136,17 @@ def test_whole_windows_take_the_fast_median_and_give_the_same_depths(
     np.testing.assert_allclose(got, _sorted_medians(depth, pixels, reach_per_m2), rtol=1e-6)
 
 
+def _sunlit_block(factory: pytest.TempPathFactory, *options: str) -> Path:
+    """A 2 x 2 block of the plot (stations 4, 5, 7, 8) in a clear midday sun."""
+    folder = factory.mktemp("sunlit") / "session"
+    block = ["--seed", "2", "--stations", "4,5,7,8", "--sunlight", "1", *options]
+    assert main(["simulate", "--out", str(folder), *block]) == 0
+    return folder
+
+
 @pytest.fixture(scope="module")
 def sunlit_block(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("sunlit") / "session"
-    options = ["--seed", "2", "--stations", "4,5,7,8", "--sunlight", "1"]
-    assert main(["simulate", "--out", str(folder), *options]) == 0
-    return folder
+    return _sunlit_block(tmp_path_factory)
 
 
 @pytest.mark.slow
@@ -149,14 +154,8 @@ def test_a_block_in_a_clear_midday_sun_is_registered_within_a_few_millimetres(
     sunlit_block: Path,
 ) -> None:
     result = run_reconstruction(load_session(sunlit_block), ReconstructionSettings())
-    truth = json.loads((sunlit_block / "truth.json").read_text())
-    T = {int(s): np.array(m) for s, m in truth["T_field_camera"].items()}
     reference = result.reference
-    errors = [
-        pose_error(result.T_reference_station(s), invert(T[reference]) @ T[s])
-        for s in result.registrations
-        if s != reference
-    ]
+    errors = [e for s, e in station_errors(result, sunlit_block).items() if s != reference]
     shifts = [shift for shift, _ in errors]
     assert max(shifts) < 0.0035, shifts
     assert max(turn for _, turn in errors) < 0.15, errors
@@ -166,10 +165,7 @@ def test_a_block_in_a_clear_midday_sun_is_registered_within_a_few_millimetres(
 
 @pytest.fixture(scope="module")
 def sunlit_depth_only_block(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("sunlit-depth") / "session"
-    options = ["--seed", "2", "--stations", "4,5,7,8", "--sunlight", "1", "--depth-only"]
-    assert main(["simulate", "--out", str(folder), *options]) == 0
-    return folder
+    return _sunlit_block(tmp_path_factory, "--depth-only")
 
 
 @pytest.mark.slow
@@ -190,10 +186,5 @@ def test_plants_told_by_geometry_in_the_sun_are_not_joined_by_the_soils_noise(
     # only from beyond 2 m, where in full sun half the pixels drown, and their tops are lost
     # without colour as with it (height RMSE 2.7 cm either way, 0.4 on a full plot)
     assert np.sqrt(np.mean(errors["dw_cm"] ** 2)) <= 2.5
-    T = {int(s): np.array(m) for s, m in truth["T_field_camera"].items()}
-    shifts = [
-        pose_error(result.T_reference_station(s), invert(T[result.reference]) @ T[s])[0]
-        for s in result.registrations
-        if s != result.reference
-    ]
+    shifts = [shift for shift, _ in station_errors(result, sunlit_depth_only_block).values()]
     assert max(shifts) < 0.005, shifts
