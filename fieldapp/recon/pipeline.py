@@ -445,6 +445,7 @@ def _result(
         cpu_s=dict(timer.cpu_seconds),
         warnings=warnings,
         separation=plot.scanned.separation,
+        colour_offsets=plot.scanned.colour_offsets,
         turntable=plot.scanned.turntable,
         organs=plot.organs,
         search=plot.search,

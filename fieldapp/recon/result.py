@@ -43,6 +43,9 @@ class Reconstruction:
     """The organ step's result per plant id (empty when organs were not measured)."""
     separation: dict[int, str] = field(default_factory=dict)
     """Per station, how its plants were told from the soil (colour, or geometry and why)."""
+    colour_offsets: dict[int, tuple[int, int]] = field(default_factory=dict)
+    """Per station whose colour told it, how far (dx, dy pixels) its colour was found off its
+    depth and moved back (``recon/colour_offset.py``); (0, 0): in place."""
     turntable: dict[str, Any] | None = None
     """A plant-on-turntable session: the working volume and how the views were placed."""
 
@@ -186,6 +189,7 @@ class Reconstruction:
             "crop_radius_m": self.crop_radius_m,
             "plant_separation": {str(s): line for s, line in sorted(self.separation.items())},
             "exg_thresholds": {str(s): round(t, 4) for s, t in sorted(self.exg_thresholds.items())},
+            "colour_offset_px": {str(s): list(o) for s, o in sorted(self.colour_offsets.items())},
             "timings_s": {name: round(t, 4) for name, t in self.timings_s.items()},
             "cpu_s": {name: round(t, 4) for name, t in self.cpu_s.items()},
             "warnings": self.warnings,

@@ -11,12 +11,14 @@ the station's threshold is found from a few thousand distinct values, not 1.6 mi
 from __future__ import annotations
 
 import ctypes
+import functools
 import logging
+import operator
 import os
 from collections import defaultdict
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal, TypeVar
 
 import cv2
@@ -29,6 +31,13 @@ from fieldapp.io.calibration import ViewStep
 from fieldapp.io.session import Capture, CaptureImages, Session
 from fieldapp.recon.backproject import backproject_pixels, backproject_pixels_twice
 from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.colour_offset import (
+    ColourOffset,
+    EdgeContrasts,
+    colour_offset,
+    edge_contrasts,
+    moved_colour,
+)
 from fieldapp.recon.depth_only import read_scan_capture
 from fieldapp.recon.exg import (
     BY_COLOUR,
@@ -107,6 +116,9 @@ class StationScan:
     """``green`` and ``soil`` again, point for point, each at its block's median depth
     (:func:`block_median_depths`), for the registration and, by geometry, for telling the
     plants from the soil; ``None``: the two themselves (a turntable's scan)."""
+    colour_offset: ColourOffset | None = None
+    """How far the station's colour was found registered off its depth, and moved back
+    (:mod:`fieldapp.recon.colour_offset`); ``None``: not told (no colour, too few depth edges)."""
 
 
 def captures_by_station(session: Session) -> dict[int, list[Capture]]:
@@ -254,6 +266,7 @@ def read_station(
         warnings = [warning for warning in read if isinstance(warning, str)]
         if not frames:
             return None, warnings
+        frames, offset = _colour_on_depth(frames, workers)
         separation, threshold, weak = _separation(frames, exg_threshold)
         grid = _soil_grid(frames[0].measured.shape, soil_pixel_stride)
         exg = exg_of_keys()
@@ -286,8 +299,35 @@ def read_station(
         sum(int(np.count_nonzero(frame.measured)) for frame in frames),
         separation,
         (joined(2), joined(3)),
+        offset,
     )
     return scan, warnings
+
+
+def _colour_on_depth(
+    frames: list[ReadFrame], workers: FrameWorkers
+) -> tuple[list[ReadFrame], ColourOffset | None]:
+    """The station's frames with their colour moved onto their depth where it was found
+    registered off it (:mod:`fieldapp.recon.colour_offset`), and the offset found: one for
+    the station's views, which one camera took."""
+    coloured = [frame for frame in frames if frame.keys is not None]
+    if not coloured:
+        return frames, None
+    offset = colour_offset(functools.reduce(operator.add, workers.map(_edge_contrasts, coloured)))
+    if offset is None or not offset.moved:
+        return frames, offset
+
+    def moved(frame: ReadFrame) -> ReadFrame:
+        if frame.keys is None:
+            return frame
+        return frame_of(replace(frame.images, color=moved_colour(frame.images.color, offset)))
+
+    return workers.map(moved, frames), offset
+
+
+def _edge_contrasts(frame: ReadFrame) -> EdgeContrasts:
+    assert frame.keys is not None  # a frame with colour
+    return edge_contrasts(frame.keys, frame.images.depth_m, CONTINUOUS_SHARE)
 
 
 def _placed_at_reached_angles(

@@ -9,8 +9,9 @@ plan (the planting grid) is the only input they do.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Generator, Mapping, Sequence
-from dataclasses import dataclass, replace
+from collections import defaultdict
+from collections.abc import Collection, Generator, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
@@ -93,6 +94,9 @@ class ScanSummary:
     kept: dict[str, int]
     turntable: dict[str, object] | None
     views: dict[int, tuple[int, ...]]
+    colour_offsets: dict[int, tuple[int, int]] = field(default_factory=dict)
+    """Per station whose colour told it (:mod:`fieldapp.recon.colour_offset`), how far
+    (dx, dy pixels) its colour was found off its depth and moved back: (0, 0) in place."""
 
 
 @dataclass(frozen=True)
@@ -266,8 +270,40 @@ def summarise(
         kept=measured | _kept_by_filters(filtered),
         turntable=local.value.turntable,
         views={scan.station: tuple(scan.views) for scan in scans},
+        colour_offsets={
+            scan.station: (scan.colour_offset.dx_px, scan.colour_offset.dy_px)
+            for scan in scans
+            if scan.colour_offset is not None
+        },
     )
-    return Staged(summary, local.warnings)
+    return Staged(summary, local.warnings + _colour_offset_warnings(scans))
+
+
+def _colour_offset_warnings(scans: Iterable[StationScan]) -> tuple[str, ...]:
+    """One warning per offset at which stations' colour was found off their depth: the
+    sensor's registration wants calibrating, and the operator should know the colour was
+    moved."""
+    by_offset: dict[tuple[int, int], list[StationScan]] = defaultdict(list)
+    for scan in scans:
+        offset = scan.colour_offset
+        if offset is not None and offset.moved:
+            by_offset[offset.dx_px, offset.dy_px].append(scan)
+    warnings = []
+    for moved in by_offset.values():
+        offset, stations = moved[0].colour_offset, [scan.station for scan in moved]
+        assert offset is not None
+        named = f"station{'s' if len(stations) > 1 else ''} {', '.join(map(str, stations))}"
+        border = (
+            " (as far as looked for: the registration may be further off)"
+            if offset.at_search_border
+            else ""
+        )
+        warnings.append(
+            f"{named}: the colour images lie {offset.describe()} of the depth{border}; moved "
+            "back onto it (to where the colour's edges meet the depth's). The sensor's "
+            "colour-to-depth registration wants calibrating"
+        )
+    return tuple(warnings)
 
 
 def join_stations(
