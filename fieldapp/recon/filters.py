@@ -174,14 +174,17 @@ def filter_station(
         # image is registered a pixel or two off (RECONSTRUCTION.md, "Colour a pixel or two
         # off the depth")
         ground = station_ground(soil_field.points, soil_band_m)  # once for both copies
-        plants = _passed_through(green_field, ground, settings)
+        passed = _passes_through(green_field, ground, settings)
         if steady is not None:
+            # point for point the same pixels at their blocks' median depths: a point passes
+            # where both stand clear (in the sun the soil's noise lifts a pixel of green soil,
+            # not its block)
+            passed &= _passes_through(steady[0], ground, settings)
             steady_points = (
-                voxel_mean(
-                    _passed_through(steady[0], ground, settings), settings.voxel_size_m
-                ).points,
+                voxel_mean(steady[0].select(passed), settings.voxel_size_m).points,
                 _soil_sample(steady[1], soil_band_m, soil_voxel_m),
             )
+        plants = green_field.select(passed)
     kept["pass_through"] = len(plants)
     plants = voxel_mean(plants, settings.voxel_size_m)
     kept["voxel_mean"] = len(plants)
@@ -194,14 +197,16 @@ def filter_station(
     return FilteredStation(plants, soil, kept, steady_points)
 
 
-def _passed_through(green_field: Cloud, ground: LocalGround, settings: FilterSettings) -> Cloud:
-    """The green points standing ``pass_through_min_m`` clear of the local ``ground`` and at
-    most ``pass_through_max_m`` above the plane."""
+def _passes_through(
+    green_field: Cloud, ground: LocalGround, settings: FilterSettings
+) -> NDArray[np.bool_]:
+    """(N,) which green points stand ``pass_through_min_m`` clear of the local ``ground`` and
+    at most ``pass_through_max_m`` above the plane."""
     clear = height_above(ground, green_field.points)
-    return green_field.select(
-        (clear >= settings.pass_through_min_m)  # off the soil where it lies
-        & (green_field.points[:, 2] <= settings.pass_through_max_m)  # above the plane
+    passes: NDArray[np.bool_] = (clear >= settings.pass_through_min_m) & (  # off the soil
+        green_field.points[:, 2] <= settings.pass_through_max_m  # above the plane
     )
+    return passes
 
 
 def _soil_sample(soil_field: Cloud, soil_band_m: float, soil_voxel_m: float) -> NDArray[np.float64]:

@@ -49,6 +49,7 @@ from fieldapp.recon.exg import (
     exg_tally,
     exg_values,
     keep_soil,
+    mixed_pixel_threshold,
     otsu_threshold,
     uncoloured_keys,
 )
@@ -471,7 +472,10 @@ def _separation(
         return choose_separation(None), np.inf, np.inf
     otsu = otsu_threshold(values, weights)
     separation = choose_separation(values, weights, otsu)
-    threshold = otsu if exg_threshold == "otsu" else float(exg_threshold)
+    if exg_threshold == "otsu":
+        threshold = mixed_pixel_threshold(values, weights, otsu)
+    else:
+        threshold = float(exg_threshold)
     separation = keep_soil(separation, values, threshold, weights)
     if separation.by_geometry:
         return separation, np.inf, np.inf
@@ -543,10 +547,15 @@ def _green_and_soil(
     soil_median = block_median_depths(depth, soil)
     noise = noise_per_m2(soil_m, soil_median)
     green_median = block_median_depths(depth, green, SAME_SURFACE_SIGMAS * noise)
+    # the green point for point at its own depth and its block's: the pass-through takes
+    # both (filters.filter_station), or in the sun green soil stood clear of its ground
+    green_cloud, green_steady = backproject_pixels_twice(
+        green, green_m, green_median, green_rgb, rays, crop.radius_m, crop.min_depth_m
+    )
     return (
-        cloud(green, green_m, green_rgb),
+        green_cloud,
         cloud(soil, soil_m, soil_rgb),
-        cloud(green, green_median, green_rgb),
+        green_steady,
         cloud(soil, soil_median, soil_rgb),
     )
 

@@ -152,7 +152,7 @@ def test_the_cli_checks_the_colour_shift(simulate_refuses: SimulateRefuses) -> N
     )
 
 
-def _to_jpeg(session: Path, quality: int) -> None:
+def to_jpeg(session: Path, quality: int) -> None:
     """The session's colour images as JPEG (allowed by the session format), as a recorder
     that keeps the Kinect v2's compressed colour stream writes them."""
     document = json.loads((session / "session.json").read_text())
@@ -185,7 +185,7 @@ def test_jpeg_colour_is_measured_as_well_as_png(
     session = tmp_path / "session"
     assert main(["simulate", "--out", str(session), "--seed", "63"]) == 0
     png = _width_rmse_cm(session, tmp_path / "png")
-    _to_jpeg(session, 90)
+    to_jpeg(session, 90)
     jpeg = _width_rmse_cm(session, tmp_path / "jpeg")
     capsys.readouterr()
     assert jpeg <= png + 0.2  # measured +0.14 (+0.32 before)
