@@ -82,7 +82,12 @@ def test_green_soil_lifted_by_noise_at_its_own_depth_is_not_a_plant() -> None:
     assert both.steady is not None and len(both.steady[0]) == len(both.plants)
 
 
-def _rmse_cm(session: Path, out: Path) -> dict[str, float]:
+def _jpeg_plot_rmse_cm(tmp_path: Path, options: list[str], quality: int) -> dict[str, float]:
+    """Height and width RMSE (cm) of a simulated 3 x 3 plot (``options``) whose colour is
+    stored as JPEG of ``quality``."""
+    session, out = tmp_path / "session", tmp_path / "out"
+    assert main(["simulate", "--out", str(session), *options]) == 0
+    to_jpeg(session, quality)
     assert main(["reconstruct", "--quiet", str(session), "--out", str(out)]) == 0
     assert main(["evaluate", "traits", "--truth", str(session / "truth.json"), str(out)]) == 0
     with (out / "evaluation" / "traits_metrics.csv").open() as f:
@@ -97,11 +102,7 @@ def test_jpeg_colour_seen_from_higher_keeps_the_tips(
 ) -> None:
     """3 x 3 plot, the camera 1.5 m high at 40 degrees, its colour as JPEG quality 75 (about
     20 s). Before: heights 1.21 cm RMSE, widths 1.27 (as PNG: 0.46 / 0.74)."""
-    session = tmp_path / "session"
-    options = ["--seed", "65", "--camera", "1.5,40"]
-    assert main(["simulate", "--out", str(session), *options]) == 0
-    to_jpeg(session, 75)
-    rmse = _rmse_cm(session, tmp_path / "out")
+    rmse = _jpeg_plot_rmse_cm(tmp_path, ["--seed", "65", "--camera", "1.5,40"], 75)
     capsys.readouterr()
     assert rmse["height"] <= 0.9  # measured 0.62
     assert rmse["width"] <= 1.1  # measured 0.84
@@ -114,11 +115,8 @@ def test_jpeg_colour_with_black_bands_in_the_sun_keeps_the_soil_out(
     """3 x 3 plot of the second plant model, libfreenect2's black bands, 0.6 of a midday sun,
     colour as JPEG quality 80 (about 25 s). Before: widths 1.93 cm RMSE; with the lower
     threshold and the pass-through on the own depths alone, 22.7 cm on another seed."""
-    session = tmp_path / "session"
     options = ["--seed", "68", "--plant-model", "irregular", "--color-holes", "--sunlight", "0.6"]
-    assert main(["simulate", "--out", str(session), *options]) == 0
-    to_jpeg(session, 80)
-    rmse = _rmse_cm(session, tmp_path / "out")
+    rmse = _jpeg_plot_rmse_cm(tmp_path, options, 80)
     capsys.readouterr()
     assert rmse["height"] <= 0.8  # measured 0.53
     assert rmse["width"] <= 1.2  # measured 0.58
