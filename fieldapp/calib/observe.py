@@ -10,23 +10,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.geometry import Matrix4, pose_error
-from fieldapp.calib.board import (
-    Board,
-    corner_zero_is_dark,
-    detect_all_corners,
-    detect_corners,
-)
+from fieldapp.calib.board import Board, corner_zero_is_dark, detect_all_corners, detect_corners
 from fieldapp.calib.corners3d import Corners3D, lift_corners
 from fieldapp.calib.rigid import fit_rigid_weighted
 from fieldapp.io.session import Capture, CaptureImages, Session
 
 MIN_LIFTED_FRACTION = 0.8
-MAX_INFRARED_MOVE_PX = 4.0
-"""The farthest the board's corners are moved from the colour onto the infrared: a
-registration a pixel or two off, and twice that (:func:`on_infrared`)."""
-MAX_INFRARED_SPREAD_PX = 1.0
-"""How far one corner's move may stray from the median move and the infrared's board still be
-the colour's: colour off its depth moves every corner alike."""
 SYMMETRIC_MARGIN_DEG = 20.0
 """On a symmetric board the corner order chosen must fit the rig this much better than its
 reverse (the two differ by a half turn, so a right choice wins by well over 100 degrees)."""
@@ -65,27 +54,20 @@ class Observation:
 
 def observe(session: Session, capture: Capture, board: Board) -> Observation | None:
     """Detect ``board`` in the capture's colour image and lift its corners; None if not found."""
-    images = session.read_capture(capture, with_ir=True)
+    images = session.read_capture(capture)
     corners_px = detect_corners(images.color, board)
     if corners_px is None:
         return None
-    infrared = _infrared_boards(images, board)
-    return _observation(session, capture, images, corners_px, board, infrared)
+    return _observation(session, capture, images, corners_px, board)
 
 
 def observe_all(session: Session, capture: Capture, board: Board) -> list[Observation]:
     """Every board of this kind visible in the capture."""
-    images = session.read_capture(capture, with_ir=True)
-    found = detect_all_corners(images.color, board)
-    infrared = _infrared_boards(images, board) if found else []
+    images = session.read_capture(capture)
     return [
-        _observation(session, capture, images, corners_px, board, infrared) for corners_px in found
+        _observation(session, capture, images, corners_px, board)
+        for corners_px in detect_all_corners(images.color, board)
     ]
-
-
-def _infrared_boards(images: CaptureImages, board: Board) -> list[NDArray[np.float32]]:
-    """Every board of this kind the capture's infrared image shows (none without one)."""
-    return [] if images.ir is None else detect_all_corners(images.ir, board)
 
 
 def _observation(
@@ -94,46 +76,14 @@ def _observation(
     images: CaptureImages,
     corners_px: NDArray[np.float32],
     board: Board,
-    infrared_boards: Sequence[NDArray[np.float32]],
 ) -> Observation:
     intrinsics = session.calibration.depth_camera.intrinsics()
-    on_depth = on_infrared(corners_px, infrared_boards)
     return Observation(
         capture,
-        on_depth,
+        corners_px,
         corner_zero_is_dark(images.color, corners_px, board),
-        lift_corners(on_depth, images.depth_m, intrinsics, plane_radius_px(on_depth, board)),
+        lift_corners(corners_px, images.depth_m, intrinsics, plane_radius_px(corners_px, board)),
     )
-
-
-def on_infrared(
-    corners_px: NDArray[np.float32], infrared_boards: Sequence[NDArray[np.float32]]
-) -> NDArray[np.float32]:
-    """The board's corners found on the colour image (``corners_px`` (N, 2)), taken from the
-    capture's infrared image where the same board is found there (``infrared_boards``, each
-    (N, 2)): the infrared is the depth camera's own, on the depth's pixels exactly, where the
-    colour is registered to them through a calibration that can leave it pixels off. The same
-    board: every corner moved by one offset (within :data:`MAX_INFRARED_SPREAD_PX` of the
-    median move, at most :data:`MAX_INFRARED_MOVE_PX`), in either corner order; the colour's
-    corners otherwise (a board the infrared does not show: a dye ink that reflects it, the
-    sun). Whether a board is seen at all is the colour's to say, as before.
-
-    Colour two pixels off its depth moved the view step 0.16 degrees and 2 mm and the unit's
-    depth offset by 3 mm (the corners lifted from the depth beside them); from the infrared,
-    0.04 degrees, 0.6 mm and 0.3 mm, as with the colour in place."""
-    for found in infrared_boards:
-        if found.shape != corners_px.shape:
-            continue
-        for ordered in (found, found[::-1]):
-            moves = ordered - corners_px
-            median = np.median(moves, axis=0)
-            spread = np.linalg.norm(moves - median, axis=1)
-            if (
-                np.linalg.norm(median) <= MAX_INFRARED_MOVE_PX
-                and np.max(spread) <= MAX_INFRARED_SPREAD_PX
-            ):
-                return np.ascontiguousarray(ordered, dtype=np.float32)
-    return corners_px
 
 
 def plane_radius_px(corners_px: NDArray[np.float32], board: Board) -> int:

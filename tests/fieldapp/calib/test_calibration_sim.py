@@ -13,7 +13,7 @@ import pytest
 from devices.geometry import invert, pose_error
 from fieldapp.calib.board import Board
 from fieldapp.calib.intrinsics import calibrate_intrinsics, read_calibration_image
-from fieldapp.calib.observe import Observation, align_order, on_infrared
+from fieldapp.calib.observe import Observation, align_order
 from fieldapp.calib.stations import calibrate_stations
 from fieldapp.calib.views import calibrate_view_step
 from fieldapp.cli import main
@@ -236,35 +236,3 @@ def test_flipped_corner_order_is_corrected_when_the_colours_tell():
 
 def test_corner_order_that_nothing_tells_is_not_guessed():
     assert align_order(_observation(None), _observation(True), VIEW_BOARD) is None
-
-
-def test_colour_registered_off_the_depth_does_not_move_the_view_step(tmp_path, boards_session):
-    """Colour two pixels off its depth: the corners lifted from the depth beside them moved
-    the view step 0.16 degrees and 2 mm and the unit's depth offset by 3 mm; found on the
-    colour, taken from the infrared (``observe.on_infrared``), as with the colour in place."""
-    folder = tmp_path / "shifted"
-    args = ["simulate", "--out", str(folder), "--scene", "checkerboard", "--seed", "7"]
-    assert main([*args, "--stations", "5", "--intrinsics-images", "0", "--color-shift", "2,1"]) == 0
-    shifted = calibrate_view_step(load_session(folder), VIEW_BOARD)
-    exact = calibrate_view_step(load_session(boards_session), VIEW_BOARD, station=5)
-    nominal = load_session(folder).calibration.view_step
-    assert nominal is not None
-    moved_m, turned_deg = pose_error(shifted.T_view_k_view_k1, nominal.matrix)
-    assert moved_m < 0.002
-    assert turned_deg < 0.1
-    assert shifted.depth_offset is not None and exact.depth_offset is not None
-    assert shifted.depth_offset.offset_m == pytest.approx(exact.depth_offset.offset_m, abs=0.001)
-
-
-def test_corners_are_taken_from_the_infrared_only_where_it_shows_the_same_board():
-    rng = np.random.default_rng(2)
-    colour = rng.uniform(50, 400, (54, 2)).astype(np.float32)
-    off = colour + np.float32([2.0, 1.0]) + rng.normal(0, 0.1, colour.shape).astype(np.float32)
-    np.testing.assert_array_equal(on_infrared(colour, [off]), off)
-    np.testing.assert_array_equal(on_infrared(colour, [off[::-1]]), off)  # either corner order
-    other = off.copy()
-    other[7] += 3.0  # one corner elsewhere: not the same board
-    np.testing.assert_array_equal(on_infrared(colour, [other]), colour)
-    np.testing.assert_array_equal(on_infrared(colour, [colour + 6.0]), colour)  # too far
-    np.testing.assert_array_equal(on_infrared(colour, [off[:20]]), colour)  # another board
-    np.testing.assert_array_equal(on_infrared(colour, []), colour)  # no infrared
