@@ -79,18 +79,9 @@ class EdgeContrasts:
 
     sums: NDArray[np.float64]
     counts: NDArray[np.int64]
-    measured: int = 0
-    """The frames' measured pixels, and of them..."""
-    uncoloured: int = 0
-    """...those without colour."""
 
     def __add__(self, other: EdgeContrasts) -> EdgeContrasts:
-        return EdgeContrasts(
-            self.sums + other.sums,
-            self.counts + other.counts,
-            self.measured + other.measured,
-            self.uncoloured + other.uncoloured,
-        )
+        return EdgeContrasts(self.sums + other.sums, self.counts + other.counts)
 
 
 @dataclass(frozen=True)
@@ -172,23 +163,22 @@ def edge_contrasts(
     difference = np.abs(table[keys[moved]] - table[keys[moved + step[None, :]]])
     scored = np.isfinite(difference)
     sums = np.where(scored, difference, 0.0).sum(axis=1, dtype=np.float64)
-    measured = int(np.count_nonzero(keys != NO_KEY))
-    uncoloured = int(np.count_nonzero(uncoloured_keys()[keys]))
-    return EdgeContrasts(sums, scored.sum(axis=1), measured, uncoloured)
+    return EdgeContrasts(sums, scored.sum(axis=1))
 
 
-def colour_offset(contrasts: EdgeContrasts) -> ColourOffset | None:
+def colour_offset(contrasts: EdgeContrasts, uncoloured_share: float) -> ColourOffset | None:
     """The offset (:class:`ColourOffset`) at which a station's colour best agrees with its
     depth edges (``contrasts``, summed over its frames); (0, 0) unless its contrast there is
     at least :data:`MIN_PEAK_RATIO` times the registered one's (:data:`MIN_PEAK_RATIO_WITH_HOLES`
-    where many pixels have no colour); ``None`` where fewer than :data:`MIN_PAIRS` pairs tell."""
+    where more than :data:`HOLES_SHARE` of the station's measured pixels have no colour,
+    ``uncoloured_share``); ``None`` where fewer than :data:`MIN_PAIRS` pairs tell."""
     pairs = int(contrasts.counts[_UNMOVED])
     if pairs < MIN_PAIRS or contrasts.counts.min() == 0:
         return None
     means = contrasts.sums / contrasts.counts
     best = int(np.argmax(means))
     registered = float(means[_UNMOVED])
-    holes = contrasts.uncoloured > HOLES_SHARE * contrasts.measured
+    holes = uncoloured_share > HOLES_SHARE
     if means[best] < (MIN_PEAK_RATIO_WITH_HOLES if holes else MIN_PEAK_RATIO) * registered:
         best = _UNMOVED
     dx, dy = (int(n) for n in _OFFSETS[best])

@@ -314,7 +314,10 @@ def _colour_on_depth(
     coloured = [frame for frame in frames if frame.keys is not None]
     if not coloured:
         return frames, None
-    offset = colour_offset(functools.reduce(operator.add, workers.map(_edge_contrasts, coloured)))
+    contrasts = functools.reduce(operator.add, workers.map(_edge_contrasts, coloured))
+    measured = sum(int(np.count_nonzero(frame.measured)) for frame in coloured)
+    uncoloured = sum(frame.uncoloured for frame in coloured) / max(measured, 1)
+    offset = colour_offset(contrasts, uncoloured)
     if offset is None or not offset.moved:
         return frames, offset
 

@@ -29,7 +29,7 @@ from fieldapp.recon.colour_offset import (
     edge_contrasts,
     moved_colour,
 )
-from fieldapp.recon.exg import NO_KEY, exg_keys
+from fieldapp.recon.exg import NO_KEY, exg_keys, uncoloured_keys
 from fieldapp.recon.scans import CONTINUOUS_SHARE
 
 SOIL_RGB = (120, 95, 70)
@@ -77,8 +77,12 @@ def _registered(color: np.ndarray, dx: int, dy: int) -> np.ndarray:
 
 
 def _offset(frames: list[tuple[np.ndarray, np.ndarray]]) -> ColourOffset | None:
-    contrasts = (edge_contrasts(_keys(d, c), d, CONTINUOUS_SHARE) for d, c in frames)
-    return colour_offset(functools.reduce(operator.add, contrasts))
+    keys = [_keys(d, c) for d, c in frames]
+    depths = [depth for depth, _ in frames]
+    contrasts = (edge_contrasts(k, d, CONTINUOUS_SHARE) for k, d in zip(keys, depths, strict=True))
+    measured = sum(int(np.count_nonzero(k != NO_KEY)) for k in keys)
+    uncoloured = sum(int(np.count_nonzero(uncoloured_keys()[k])) for k in keys)
+    return colour_offset(functools.reduce(operator.add, contrasts), uncoloured / measured)
 
 
 @pytest.mark.parametrize("dx_dy", [(0, 0), (2, 1), (-1, 2), (0, -1), (3, -3), (-4, 4)])
@@ -125,7 +129,7 @@ def test_nothing_is_moved_where_nothing_tells() -> None:
     flat = np.linspace(1.6, 2.4, 212, dtype=np.float32)[:, None].repeat(256, axis=1)
     assert _offset([(flat, noisy)]) is None  # bare, smooth soil: no depth edge at all
     depth_only = np.full(flat.shape, np.nan, np.float32)
-    assert colour_offset(edge_contrasts(_keys(depth_only, noisy), depth_only, 0.03)) is None
+    assert colour_offset(edge_contrasts(_keys(depth_only, noisy), depth_only, 0.03), 0.0) is None
 
 
 def test_colour_without_a_value_is_not_read() -> None:
@@ -137,7 +141,7 @@ def test_colour_without_a_value_is_not_read() -> None:
     keys = _keys(depth, np.zeros_like(color))  # every pixel black
     contrasts = edge_contrasts(keys, depth, CONTINUOUS_SHARE)
     assert contrasts.counts.sum() == 0
-    assert colour_offset(contrasts) is None
+    assert colour_offset(contrasts, 1.0) is None
     summed = contrasts + EdgeContrasts(np.ones_like(contrasts.sums), np.ones_like(contrasts.counts))
     assert summed.counts.sum() == len(contrasts.counts)
 
@@ -220,10 +224,10 @@ def test_with_many_pixels_without_colour_a_clearer_peak_is_asked_for() -> None:
     sums = np.full(81, 1000.0)
     sums[40 + 1] = 1300.0  # (1, 0): 1.3 times the registered (0, 0)'s contrast
     counts = np.full(81, 10_000)
-    clean = colour_offset(EdgeContrasts(sums, counts, 200_000, 0))
+    clean = colour_offset(EdgeContrasts(sums, counts), 0.0)
     assert clean is not None and (clean.dx_px, clean.dy_px) == (1, 0)
-    holes = colour_offset(EdgeContrasts(sums, counts, 200_000, 20_000))
+    holes = colour_offset(EdgeContrasts(sums, counts), 0.1)
     assert holes is not None and not holes.moved
     sums[40 + 1] = 3000.0
-    clear = colour_offset(EdgeContrasts(sums, counts, 200_000, 20_000))
+    clear = colour_offset(EdgeContrasts(sums, counts), 0.1)
     assert clear is not None and (clear.dx_px, clear.dy_px) == (1, 0)
