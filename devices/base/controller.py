@@ -3,8 +3,9 @@
 No I/O and no clock of its own: :class:`BaseController` is given each request, the client it
 came from and the time, and is ticked with the backend's snapshot. The socket side lives in
 ``server.py``. The ``session`` value is new for every controller (every start of the base):
-requests carrying another one are refused, and ``goto`` needs it, so a captured request cannot
-be replayed against a restarted base. Only the client that sent the active goal (its
+requests carrying another one are refused (except ``stop``, which halting makes always safe to
+execute), and ``goto`` needs it, so a captured request cannot be replayed against a restarted
+base. Only the client that sent the active goal (its
 :data:`ClientId`) feeds the lost-link watchdog.
 """
 
@@ -36,8 +37,9 @@ LINK_LOST = "link lost"
 STOP_REQUESTED = "stop requested"
 
 ClientId = tuple[bytes, bytes]
-"""Who sent a request: (the client's CURVE public key in Z85, or b"" without keys; the
-connection's routing id, which the client keeps across its reconnections)."""
+"""Who sent a request: with keys (the client's CURVE public key in Z85, b""), whichever
+connection it came on, as the spec keys the reply cache; without keys (b"", the connection's
+routing id, which fieldapp's client keeps across its reconnections)."""
 ANONYMOUS: ClientId = (b"", b"")
 
 
@@ -106,6 +108,8 @@ class BaseController:
         return Reply.success(request.id, outcome)
 
     def _session_problem(self, request: Request) -> Reply | None:
+        if request.cmd is Command.STOP:
+            return None  # a stop is always executed: halting never does harm
         if request.session is not None and request.session != self.session:
             return Reply.failure(
                 None, ErrorCode.STALE_SESSION, "the base restarted since hello: send hello again"

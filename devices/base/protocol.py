@@ -222,8 +222,10 @@ def decode_request(data: bytes) -> Request:
         raise ProtocolError(
             ErrorCode.VERSION, f"protocol version {obj['v']!r} unsupported, expected 1", request_id
         )
+    if not isinstance(obj.get("cmd"), str):
+        raise _bad("cmd (the command's name, a string) is missing", request_id)
     try:
-        cmd = Command(obj.get("cmd", ""))
+        cmd = Command(obj["cmd"])
     except ValueError:
         raise ProtocolError(
             ErrorCode.UNKNOWN_COMMAND, f"unknown command {obj.get('cmd')!r}", request_id

@@ -8,8 +8,9 @@ Security (``shared/spec/base-protocol.md``): the sockets enforce ZAP, so with no
 CURVE client gets in, and the loop serves nothing while the handler thread is dead (fail
 closed); the authorised-keys folder is re-read every ``keys_reload_s`` (or at once after
 :meth:`ProtocolServer.reload_keys`) and a request whose key was removed is dropped. Replies are
-cached per client (its CURVE key and routing id) and request id: a byte-identical retry gets the
-cached reply, another request with a used id is refused (``id reused``), a ``stop`` always runs.
+cached per client (its CURVE key with keys, its routing id without) and request id: a
+byte-identical retry gets the cached reply, another request with a used id is refused (``id
+reused``), a ``stop`` always runs.
 
 With ``context`` the server binds on a ZeroMQ context it is handed and leaves open (an
 in-process base on ``inproc://``, reached by clients sharing that context); otherwise it makes
@@ -280,7 +281,8 @@ class ProtocolServer:
             router.send_multipart([*envelope, reply])
 
     def _client_of(self, frames: list[zmq.Frame]) -> ClientId | None:
-        """Who sent ``frames``; None (and logged) for a key no longer authorised."""
+        """Who sent ``frames`` (:data:`ClientId`: with keys the key alone, so a retry on a new
+        connection finds its cached reply); None (and logged) for a key no longer authorised."""
         routing_id = frames[0].bytes
         if self._authorized is None:
             return (b"", routing_id)
@@ -292,7 +294,7 @@ class ProtocolServer:
             log.warning("request from client key %s refused: not authorised (revoked?)",
                         user.decode() or "<none>")  # fmt: skip
             return None
-        return (user, routing_id)
+        return (user, b"")
 
     def _answer(self, frames: list[bytes], client: ClientId) -> tuple[list[bytes], bytes]:
         envelope, body = split_envelope(frames)

@@ -50,6 +50,9 @@ def run(args: argparse.Namespace) -> int:
             watchdog_s=args.watchdog,
         )
         base.start()
+        # the spec: the authorised-keys folder is read again at once on SIGHUP (the default
+        # action would end the base)
+        signal.signal(signal.SIGHUP, lambda _signum, _frame: base.server.reload_keys())
     except (BaseError, OSError, zmq.ZMQError) as error:
         print(f"fieldapp sim-base: {error}", file=sys.stderr)
         return 1

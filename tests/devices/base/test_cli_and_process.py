@@ -73,6 +73,35 @@ def test_killed_base_process_is_reported_offline(
     assert isinstance(outcome[0], BaseOffline)
 
 
+def test_sim_base_survives_sighup(tmp_path: Path, make_client: MakeClient) -> None:
+    """The spec has SIGHUP read the authorised-keys folder again (``ProtocolServer.reload_keys``,
+    tested in test_link_security.py); the signal's default action had ended the base."""
+    from devices.base.keys import AUTHORIZED_CLIENTS_DIR, ClientKeys, generate_key_pair
+
+    base, workstation = tmp_path / "base", tmp_path / "ws"
+    generate_key_pair(base, "base")
+    generate_key_pair(workstation, "client")
+    (base / AUTHORIZED_CLIENTS_DIR).mkdir()
+    (base / AUTHORIZED_CLIENTS_DIR / "ws.key").write_text((workstation / "client.key").read_text())
+    (workstation / "base.key").write_text((base / "base.key").read_text())
+    command = [sys.executable, "-m", "fieldapp", "sim-base", "--bind", "tcp://127.0.0.1:*"]
+    command += ["--telemetry", "tcp://127.0.0.1:*", "--keys", str(base)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        match = re.search(r"command (tcp://\S+) telemetry", _first_line(process, 30.0))
+        assert match
+        process.send_signal(signal.SIGHUP)
+        client = make_client(match.group(1), keys=ClientKeys.from_dir(workstation))
+        assert client.hello().name == "fieldapp-sim-base"
+        assert process.poll() is None
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=60) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.communicate(timeout=60)
+
+
 def test_sim_base_stops_cleanly_on_sigterm(sim_process: tuple[subprocess.Popen[str], str]) -> None:
     process, _endpoint = sim_process
     process.send_signal(signal.SIGTERM)

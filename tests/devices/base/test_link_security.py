@@ -130,6 +130,60 @@ def test_a_stop_reusing_a_goto_id_is_executed(
     assert sim.latched and sim.status().state is BaseState.STOPPED
 
 
+def test_a_stop_carrying_another_session_s_value_is_executed(
+    tcp_sim: SimulatedBase, raw_dealer: RawDealer
+) -> None:
+    """Refusing a stale session guards against replayed gotos; a stop does no harm replayed,
+    and refusing one (a client that missed the base's restart) would leave the base moving."""
+    sim = tcp_sim
+    sock = raw_dealer(sim.command_endpoint)
+    accepted = _ask(sock, _goto("s-1", sim.server.session, 4.0))
+    assert accepted is not None and accepted["ok"]
+    reply = _ask(sock, {"v": 1, "id": "s-2", "cmd": "stop", "session": "an-older-base"})
+    assert reply == {"v": 1, "id": "s-2", "ok": True, "result": {}}
+    assert sim.latched and sim.status().state is BaseState.STOPPED
+    refused = _ask(sock, {"v": 1, "id": "s-3", "cmd": "reset", "session": "an-older-base"})
+    assert refused is not None and refused["error"]["code"] == "stale_session"
+
+
+def test_a_retry_on_a_new_connection_with_the_same_key_is_not_executed_again(
+    key_folders: Any, make_sim: MakeSim
+) -> None:
+    """With keys the reply cache is keyed by the client's public key (the spec), so a retry
+    after a lost reply that comes on a new connection, as a REQ client's must, gets the
+    cached reply and starts nothing."""
+    sim = make_sim(keys=key_folders.server_keys())
+    keys = key_folders.client_keys()
+    context: zmq.Context[zmq.Socket[bytes]] = zmq.Context()
+    sockets: list[zmq.Socket[bytes]] = []
+
+    def connection() -> zmq.Socket[bytes]:
+        sock = context.socket(zmq.DEALER)
+        sockets.append(sock)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.curve_secretkey = keys.pair.secret.reveal()
+        sock.curve_publickey = keys.pair.public
+        sock.curve_serverkey = keys.server_public
+        sock.connect(sim.command_endpoint)
+        return sock
+
+    try:
+        first = connection()
+        goto = _goto("k-1", sim.server.session, 4.0)
+        accepted = _ask(first, goto)
+        assert accepted is not None and accepted["ok"]
+        assert _ask(first, {"v": 1, "id": "k-2", "cmd": "cancel", "args": {"goal_id": "k-1"}})
+        first.close()
+        retry = _ask(connection(), goto)
+        assert retry == accepted
+        assert sim.executed[Command.GOTO] == 1
+        assert sim.status().state is not BaseState.MOVING
+    finally:
+        for sock in sockets:
+            sock.close(linger=0)
+        context.term()
+
+
 def test_a_reused_id_with_another_request_is_refused(
     tcp_sim: SimulatedBase, raw_dealer: RawDealer
 ) -> None:

@@ -67,6 +67,9 @@ def test_request_round_trip() -> None:
         (b'{"v": 2, "id": "a", "cmd": "status"}', ErrorCode.VERSION, "a"),
         (b'{"v": true, "id": "a", "cmd": "status"}', ErrorCode.VERSION, "a"),
         (b'{"v": 1, "id": "a", "cmd": "fly"}', ErrorCode.UNKNOWN_COMMAND, "a"),
+        (b'{"v": 1, "id": "a"}', ErrorCode.BAD_REQUEST, "a"),  # no command: malformed
+        (b'{"v": 1, "id": "a", "cmd": 3}', ErrorCode.BAD_REQUEST, "a"),
+        (b'{"v": 1, "id": "a", "cmd": null}', ErrorCode.BAD_REQUEST, "a"),
         (b'{"v": 1, "id": "a", "cmd": "status", "args": [1]}', ErrorCode.BAD_REQUEST, "a"),
         (b'{"v": 1, "id": "a", "cmd": "stop", "args": {"now": 1}}', ErrorCode.BAD_REQUEST, "a"),
     ],
