@@ -91,6 +91,7 @@ def labels(folder: Path, session: str) -> tuple[NDArray[np.intp], list[str]]:
         stage=truth["stage"],
         plant_model=truth.get("plant_model", "distichous"),
         max_lean_deg=truth.get("max_lean_deg"),  # simulate --lean
+        leaf_width=truth.get("leaf_width", 1.0),  # simulate --leaf-width
     )
     samples, owner, names = _surface_samples(scene, offset)
     tree = cKDTree(samples)

@@ -36,6 +36,10 @@ LEAN_DEG = (1.0, 5.0)
 """This model's stems lean this many degrees (uniform), each in its own direction."""
 MAX_LEAN_DEG = 30.0
 """The largest lean a plot can be asked for (``max_lean_deg``): lodging is not simulated."""
+LEAF_WIDTH_RANGE = (0.3, 1.5)
+"""How much narrower or broader than the model's own a plot's leaf blades can be asked for
+(``leaf_width``). The first model's seedling blades are 5-11 cm wide, the second's about 4.5:
+a maize seedling's are 1.5-4 cm at V2-V5, so 0.3-0.5 is the real plant's."""
 TOUCHING_HEIGHT_M = (0.55, 0.90)
 """Heights of the ``touching`` stage (uniform; ``--day`` does not change them)."""
 TOUCHING_LEAF_REACH = 1.8
@@ -92,6 +96,14 @@ def leaves_on_day(base_leaves: int, day: int) -> int:
     return int(min(MAX_LEAVES, base_leaves + max(day, 0) // 5))
 
 
+def check_leaf_width(leaf_width: float) -> float:
+    """``leaf_width`` if it is within :data:`LEAF_WIDTH_RANGE`."""
+    low, high = LEAF_WIDTH_RANGE
+    if not low <= leaf_width <= high:
+        raise ValueError(f"leaf_width must be within {low:g}..{high:g}, got {leaf_width!r}")
+    return leaf_width
+
+
 def check_lean(max_lean_deg: float) -> float:
     """``max_lean_deg`` if it is a lean a plot can have (0 to :data:`MAX_LEAN_DEG`)."""
     if not 0.0 <= max_lean_deg <= MAX_LEAN_DEG:
@@ -112,11 +124,13 @@ def make_plant(
     stage: str = "seedling",
     model: str = "distichous",
     max_lean_deg: float | None = None,
+    leaf_width: float = 1.0,
 ) -> PlantMesh:
     """Draw the plant of ``seed`` on ``day`` at ``stage`` (one of :data:`STAGES`), standing at
     ``base_xy_m`` on ground ``ground_z_m``, from plant ``model`` (one of :data:`PLANT_MODELS`).
     ``max_lean_deg``: the model's lean range scaled to end there (same draws, so the same plant
-    leaning more or less); ``None``: the model's own.
+    leaning more or less); ``None``: the model's own. ``leaf_width``: every leaf blade that many
+    times as wide as the model draws it (:data:`LEAF_WIDTH_RANGE`; same draws otherwise).
 
     Leaf tips may droop below uneven soil: lift them with :func:`settle_on_ground`.
     """
@@ -124,10 +138,13 @@ def make_plant(
         raise ValueError(f"stage must be one of {', '.join(STAGES)}, got {stage!r}")
     if model not in PLANT_MODELS:
         raise ValueError(f"plant model must be one of {', '.join(PLANT_MODELS)}, got {model!r}")
+    check_leaf_width(leaf_width)
     if model == "irregular":
         from devices.sim.plants_irregular import make_irregular_plant
 
-        return make_irregular_plant(seed, day, base_xy_m, ground_z_m, stage, max_lean_deg)
+        return make_irregular_plant(
+            seed, day, base_xy_m, ground_z_m, stage, max_lean_deg, leaf_width
+        )
     rng = np.random.default_rng([seed, 7])
     base_leaves = int(rng.integers(5, 8))
     count = leaves_on_day(base_leaves, day)
@@ -148,7 +165,7 @@ def make_plant(
     for k in range(MAX_LEAVES):
         params = rng.uniform(0.0, 1.0, 6)  # drawn for every leaf, so growth keeps the old ones
         if k < count:
-            parts.append(_leaf(k, count, azimuth0 + np.pi * k, params, reach))
+            parts.append(_leaf(k, count, azimuth0 + np.pi * k, params, reach, leaf_width))
     vertices = np.concatenate([p[0] for p in parts])
     triangles = np.concatenate(_offset_triangles([p[1] for p in parts])).astype(np.int32)
     albedo = np.concatenate([p[2] for p in parts])
@@ -214,16 +231,23 @@ def _stem(count: int) -> Part:
     return vertices, triangles, albedo
 
 
-def _leaf(k: int, count: int, azimuth: float, p: NDArray[np.float64], reach: float = 1.0) -> Part:
+def _leaf(
+    k: int,
+    count: int,
+    azimuth: float,
+    p: NDArray[np.float64],
+    reach: float = 1.0,
+    breadth: float = 1.0,
+) -> Part:
     """Leaf ``k`` of ``count`` (0 lowest) as a folded ribbon with three vertices per section,
-    ``reach`` times the seedling's length.
+    ``reach`` times the seedling's length, ``breadth`` times its width.
 
     Lower leaves are shorter, start flatter and arch over; the top ones stand up in the whorl.
     """
     rank = k / max(count - 1, 1)
     node_z = 0.06 + 0.035 * k
     length = reach * (0.20 + 0.22 * np.sin(np.pi * (0.25 + 0.6 * rank))) * (0.85 + 0.3 * p[0])
-    width = (0.05 + 0.06 * np.sin(np.pi * min(rank, 0.92))) * (0.85 + 0.3 * p[1])
+    width = (0.05 + 0.06 * np.sin(np.pi * min(rank, 0.92))) * (0.85 + 0.3 * p[1]) * breadth
     rise = np.radians(np.interp(rank, [0, 0.7, 1], [45, 30, 8]) + 10 * (p[2] - 0.5))
     tip = np.radians(np.interp(rank, [0, 0.7, 1], [135, 105, 35]) + 20 * (p[3] - 0.5))
     az = (

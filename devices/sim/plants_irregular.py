@@ -70,9 +70,10 @@ def make_irregular_plant(
     ground_z_m: float,
     stage: str,
     max_lean_deg: float | None = None,
+    leaf_width: float = 1.0,
 ) -> PlantMesh:
     """The ``irregular`` plant of ``seed`` on ``day`` at ``stage`` standing at ``base_xy_m``
-    (``max_lean_deg``: as :func:`devices.sim.plants.make_plant`'s)."""
+    (``max_lean_deg``, ``leaf_width``: as :func:`devices.sim.plants.make_plant`'s)."""
     rng = np.random.default_rng([seed, 29])
     base_leaves = int(rng.integers(4, 8))
     count = leaves_on_day(base_leaves, day)
@@ -87,6 +88,7 @@ def make_irregular_plant(
         longest_m = height_m * float(grown.uniform(*TOUCHING_LONGEST_LEAF))
         stem_diameter_m = float(grown.uniform(0.022, 0.03))
         breadth = 0.10
+    breadth *= leaf_width
     azimuth0 = float(rng.uniform(0.0, 2 * np.pi))
     lean_dir = float(rng.uniform(0.0, 360.0))
     lean_deg = float(rng.uniform(*LEAN_DEG))

@@ -189,18 +189,26 @@ def add_plot(
     stage: str = "seedling",
     plant_model: str = "distichous",
     max_lean_deg: float | None = None,
+    leaf_width: float = 1.0,
 ) -> None:
     """Sow the plot of ``seed`` (positions and plants do not depend on ``day``) at ``stage``
     (:data:`devices.sim.plants.STAGES`) with plants of ``plant_model``
     (:data:`devices.sim.plants.PLANT_MODELS`), leaning up to ``max_lean_deg`` (``None``: as the
-    model's plants do)."""
+    model's plants do), their leaf blades ``leaf_width`` times the model's width."""
     if scene.soil is None:
         raise ValueError("a plot needs soil")
     rng = np.random.default_rng([seed, 11])
     for index, (x, y) in enumerate(layout.positions(rng)):
         ground_z = scene.soil.height_at(x, y)
         mesh = make_plant(
-            seed * 1000 + index, day, (x, y), ground_z, stage, plant_model, max_lean_deg
+            seed * 1000 + index,
+            day,
+            (x, y),
+            ground_z,
+            stage,
+            plant_model,
+            max_lean_deg,
+            leaf_width,
         )
         ground = scene.soil.height_m(mesh.vertices_m[:, 0], mesh.vertices_m[:, 1])
         scene.add_plant(f"p{index + 1:02d}", settle_on_ground(mesh, ground))
@@ -236,11 +244,13 @@ def plot_scene(
     stage: str = "seedling",
     plant_model: str = "distichous",
     max_lean_deg: float | None = None,
+    leaf_width: float = 1.0,
 ) -> Scene:
     """The paper's plot: 16 maize plants at 0.8 m on uneven soil (seedlings by default; or
-    ``layout``; plants of ``plant_model``, leaning up to ``max_lean_deg``)."""
+    ``layout``; plants of ``plant_model``, leaning up to ``max_lean_deg``, leaf blades
+    ``leaf_width`` times the model's width)."""
     scene = empty_scene(seed, soil)
-    add_plot(scene, seed, day, layout or PlotLayout(), stage, plant_model, max_lean_deg)
+    add_plot(scene, seed, day, layout or PlotLayout(), stage, plant_model, max_lean_deg, leaf_width)
     return scene
 
 

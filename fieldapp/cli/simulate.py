@@ -50,6 +50,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "stage": ("plot",),
     "plant_model": ("plot",),
     "lean": ("plot",),
+    "leaf_width": ("plot",),
     "plants": ("spheres",),
     "intrinsics_images": ("checkerboard",),
 }
@@ -157,6 +158,14 @@ def register(subparsers: Any) -> None:
         metavar="DEG",
         help="plot scene: the largest lean of a plant's stem in degrees, 0..30 (default: the "
         "plant model's own, 5 or 6); each plant leans its own share of it, its own way",
+    )
+    parser.add_argument(
+        "--leaf-width",
+        default=None,
+        metavar="F",
+        help="plot scene: every leaf blade F times as wide as the plant model draws it, "
+        "0.3..1.5 (default 1: seedling blades 5-11 cm wide in the first model, about 4.5 in "
+        "the second; a maize seedling's are 1.5-4 cm, about 0.35)",
     )
     parser.add_argument(
         "--stations", default=None, help="stations to visit, e.g. 4,5 or 1-9 (default: all)"
@@ -305,7 +314,7 @@ def run(args: argparse.Namespace) -> int:
     args.stage = args.stage or "seedling"
     args.plant_model = args.plant_model or "distichous"
     args.intrinsics_images = args.intrinsics_images or "20"
-    from devices.sim.plants import MAX_LEAN_DEG, PLANT_MODELS, STAGES
+    from devices.sim.plants import LEAF_WIDTH_RANGE, MAX_LEAN_DEG, PLANT_MODELS, STAGES
 
     seed = parse_int("seed", args.seed, 0, 2**31 - 1)
     day = parse_int("day", args.day, 0, 120)
@@ -330,6 +339,7 @@ def run(args: argparse.Namespace) -> int:
         (MAX_LOCALISATION_M, MAX_LOCALISATION_DEG),
     )
     lean = parse_degrees("--lean", args.lean, MAX_LEAN_DEG)
+    leaf_width = parse_number("--leaf-width", args.leaf_width, *LEAF_WIDTH_RANGE, "times the width")
     table_error = parse_degrees("--table-error", args.table_error, MAX_TABLE_ERROR_DEG)
     color_shift = parse_color_shift(args.color_shift)
     depth_offset = parse_number(
@@ -360,6 +370,7 @@ def run(args: argparse.Namespace) -> int:
                 lean,
                 depth_offset,
                 sunlight,
+                leaf_width,
             )
             about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
             about |= {"stage": args.stage, "grid": rig.grid}
@@ -367,6 +378,8 @@ def run(args: argparse.Namespace) -> int:
                 about["plant_model"] = args.plant_model
             if lean is not None:  # absent: the model's own leans (sessions unchanged)
                 about["max_lean_deg"] = lean
+            if leaf_width is not None:  # absent: the model's own blades (sessions unchanged)
+                about["leaf_width"] = leaf_width
             if arrival:
                 about["arrival_error"] = {"sigma_m": arrival[0], "sigma_deg": arrival[1]}
             if localisation is not None:  # absent: the arrival's share (sessions unchanged)
@@ -418,6 +431,7 @@ def build_world(
     max_lean_deg: float | None = None,
     depth_offset_m: float | None = None,
     sunlight: float | None = None,
+    leaf_width: float | None = None,
 ) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.render import SensorModel
@@ -434,7 +448,9 @@ def build_world(
     layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
     soil = soil_for_plot(rig.plot_half_extent_m)
     if scene_name == "plot":
-        scene = plot_scene(seed, day, layout, soil, stage, plant_model, max_lean_deg)
+        scene = plot_scene(
+            seed, day, layout, soil, stage, plant_model, max_lean_deg, leaf_width or 1.0
+        )
     elif scene_name == "spheres":
         scene = spheres_scene(seed, day, plants, layout, soil)
     elif scene_name == "soil":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -125,3 +126,27 @@ def test_the_cli_names_a_bad_plant_model(tmp_path, capsys: pytest.CaptureFixture
     assert not (tmp_path / "s").exists()
     with pytest.raises(ValueError, match="plant model"):
         make_plant(1, 0, (0.0, 0.0), 0.0, "seedling", "rice")
+
+
+@pytest.mark.parametrize("model", PLANT_MODELS)
+def test_narrower_leaf_blades_change_the_widths_alone(model: str) -> None:
+    """``leaf_width`` (``simulate --leaf-width``): the same plant with its blades that many
+    times as wide; the rest of it (its height, how long and where its leaves are) kept."""
+    wide = organ_truth(make_plant(21, 0, (0.0, 0.0), 0.0, "seedling", model))
+    narrow = organ_truth(make_plant(21, 0, (0.0, 0.0), 0.0, "seedling", model, leaf_width=0.35))
+    assert len(narrow["leaves"]) == len(wide["leaves"]) >= 4
+    for thin, broad in zip(narrow["leaves"], wide["leaves"], strict=True):
+        assert thin["max_width_cm"] == pytest.approx(0.35 * broad["max_width_cm"], rel=0.1)
+        assert thin["length_cm"] == pytest.approx(broad["length_cm"], rel=0.03)
+        assert thin["insertion_height_cm"] == pytest.approx(broad["insertion_height_cm"], abs=0.5)
+    with pytest.raises(ValueError, match="leaf_width"):
+        make_plant(21, 0, (0.0, 0.0), 0.0, "seedling", model, leaf_width=0.1)
+
+
+def test_simulate_records_the_leaf_width_and_refuses_it_off_the_plot(tmp_path: Path) -> None:
+    out = tmp_path / "narrow"
+    options = ["--grid", "2", "--stations", "1", "--views", "0", "--leaf-width", "0.4"]
+    assert main(["simulate", "--out", str(out), *options]) == 0
+    assert json.loads((out / "truth.json").read_text())["leaf_width"] == 0.4
+    soil = ["simulate", "--out", str(tmp_path / "soil"), "--scene", "soil", "--leaf-width", "0.4"]
+    assert main(soil) == 1
