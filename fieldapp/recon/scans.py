@@ -67,6 +67,15 @@ log = logging.getLogger(__name__)
 REGISTRATION_PX = 2
 """How far (pixels) a colour image registered to its depth may be off at a surface's edge:
 Kinect v2 registration (libfreenect2, the SDK) is within a pixel or two."""
+MIXED_RIM_REACH_PX = 4
+"""How far (pixels) from a green pixel a leaf's own surface may have lost its green where a
+station's colour is mixed over the leaves' rims (:func:`grown_over_edges`; the valley between
+soil and leaves filled with mixed pixels, so :func:`~fieldapp.recon.exg.mixed_pixel_threshold`
+cut below Otsu's: JPEG): :data:`REGISTRATION_PX`, and two more for the chroma at half
+resolution, which gives the whole of a blade a few pixels wide (a maize seedling's is 1.5-4
+cm, 4-10 px at 1.5-2 m) the soil's colour over its last centimetres (RECONSTRUCTION.md,
+"Narrow leaf blades"). Where the classes stand apart (PNG) the rim is grown
+:data:`REGISTRATION_PX`, as before."""
 CONTINUOUS_SHARE = 0.03
 """Neighbouring pixels within this share of their distance lie on one surface: at 2 m, 6 cm
 over the two pixels' reach, so a surface seen up to about 75 degrees from face-on is continuous,
@@ -268,12 +277,13 @@ def read_station(
         if not frames:
             return None, warnings
         frames, offset = _colour_on_depth(frames, workers)
-        separation, threshold, weak = _separation(frames, exg_threshold)
+        separation, threshold, weak, rim_px = _separation(frames, exg_threshold)
         grid = _soil_grid(frames[0].measured.shape, soil_pixel_stride)
         exg = exg_of_keys()
         keys = (np.append(exg > threshold, False), np.append(exg > weak, False))  # green, weak
         clouds = workers.map(
-            lambda frame: _green_and_soil(frame, separation, keys, grid, rays, crop), frames
+            lambda frame: _green_and_soil(frame, separation, keys, rim_px, grid, rays, crop),
+            frames,
         )
     views = [frame.capture.view for frame in frames]
     placed = _placed_at_reached_angles(station, frames, view_step, warnings)
@@ -378,22 +388,27 @@ class DepthEdges:
         return cls(far, behind, measured)
 
 
-def grown_over_edges(green: NDArray[np.bool_], edges: DepthEdges) -> NDArray[np.bool_]:
-    """(H, W) the green pixels (``green`` (H, W)) and the measured ones within
-    :data:`REGISTRATION_PX` of them that continue their surface: within
+def grown_over_edges(
+    green: NDArray[np.bool_], edges: DepthEdges, reach_px: int = REGISTRATION_PX
+) -> NDArray[np.bool_]:
+    """(H, W) the green pixels (``green`` (H, W)) and the measured ones within ``reach_px``
+    (:data:`REGISTRATION_PX`, :data:`MIXED_RIM_REACH_PX`) of them that continue their surface:
+    within
     :data:`CONTINUOUS_SHARE` of the distance of the nearest green pixel there, and not behind
     a nearer surface (``edges``).
 
     A Kinect v2's colour image is registered to its depth through a calibration that leaves it
-    a pixel or two off at the edges, so a leaf's rim (and the whole of a tip a few pixels
-    wide) takes the colour of the soil beside it and is not green. Those pixels are in front:
+    a pixel or two off at the edges (and a JPEG's half-resolution chroma mixes two more pixels
+    of the soil's colour into a leaf's edge), so a leaf's rim (and the whole of a tip a few
+    pixels wide) takes the colour of the soil beside it and is not green. Those pixels are in front:
     nothing nearer lies beside them, and the leaf's green pixels next to them are at their
     distance. The soil beside a leaf that takes the leaf's green is behind the leaf, far
     beyond it: nothing is grown from it, and its points lie on the local ground, where the
     pass-through drops them (``filters.filter_station``)."""
     far = edges.far_m
     in_front = green & ~edges.behind  # the soil beside a leaf that took its green grows nothing
-    nearest_green = cv2.erode(np.where(in_front, far, NOT_MEASURED_M).astype(np.float32), _REACH)
+    reach = _REACH if reach_px == REGISTRATION_PX else np.ones((2 * reach_px + 1,) * 2, np.uint8)
+    nearest_green = cv2.erode(np.where(in_front, far, NOT_MEASURED_M).astype(np.float32), reach)
     continues = np.abs(far - nearest_green) <= CONTINUOUS_SHARE * far
     grown: NDArray[np.bool_] = green | (edges.measured & ~edges.behind & continues)
     return grown
@@ -458,39 +473,45 @@ def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame |
 
 def _separation(
     frames: list[ReadFrame], exg_threshold: float | Literal["otsu"]
-) -> tuple[Separation, float, float]:
-    """How the station's plants are told from its soil, the ExG threshold and the weaker one a
+) -> tuple[Separation, float, float, int]:
+    """How the station's plants are told from its soil, the ExG threshold, the weaker one a
     pixel next to green needs (:data:`WEAK_SHARE` of the way from the soil's mean ExG to the
-    threshold; both infinite by geometry), judged on every measured pixel of the station:
-    from their tally by colour key, the same threshold as of the pixels' values one by one,
-    at a fraction of the cost."""
+    threshold; both infinite by geometry) and how far the leaves' rims are grown
+    (:data:`MIXED_RIM_REACH_PX` where mixed pixels fill the valley, else
+    :data:`REGISTRATION_PX`), judged on every measured pixel of the station: from their tally
+    by colour key, the same threshold as of the pixels' values one by one, at a fraction of
+    the cost."""
     tallies = [frame.tally for frame in frames if frame.tally is not None]
     if len(tallies) < len(frames):
-        return choose_separation(None), np.inf, np.inf
+        return choose_separation(None), np.inf, np.inf, REGISTRATION_PX
     station_tally = tallies[0].copy()
     for tally in tallies[1:]:
         station_tally += tally  # in place: np.sum over the list is 200 times slower
     values, weights = exg_values(station_tally)
     if len(values) == 0:  # every pixel black: a colour stream that gave nothing
-        return choose_separation(None), np.inf, np.inf
+        return choose_separation(None), np.inf, np.inf, REGISTRATION_PX
     otsu = otsu_threshold(values, weights)
     separation = choose_separation(values, weights, otsu)
+    rim_px = REGISTRATION_PX
     if exg_threshold == "otsu":
         threshold = mixed_pixel_threshold(values, weights, otsu)
+        if threshold < otsu:  # the valley filled with mixed pixels: JPEG's colour
+            rim_px = MIXED_RIM_REACH_PX
     else:
         threshold = float(exg_threshold)
     separation = keep_soil(separation, values, threshold, weights)
     if separation.by_geometry:
-        return separation, np.inf, np.inf
+        return separation, np.inf, np.inf, rim_px
     soil = values <= threshold
     soil_mean = float(np.average(values[soil], weights=weights[soil])) if soil.any() else threshold
-    return separation, threshold, soil_mean + WEAK_SHARE * (threshold - soil_mean)
+    return separation, threshold, soil_mean + WEAK_SHARE * (threshold - soil_mean), rim_px
 
 
 def _green_and_soil(
     frame: ReadFrame,
     separation: Separation,
     green_keys: tuple[NDArray[np.bool_], NDArray[np.bool_]],
+    rim_px: int,
     grid: NDArray[np.intp],
     rays: NDArray[np.float64],
     crop: CropSettings,
@@ -517,7 +538,7 @@ def _green_and_soil(
         if frame.uncoloured:
             uncoloured = np.take(uncoloured_keys(), frame.keys).reshape(shape)
             grown = grown_into_uncoloured(grown, uncoloured, edges)
-        mask = grown_over_edges(grown, edges).reshape(-1)
+        mask = grown_over_edges(grown, edges, rim_px).reshape(-1)
         green = np.flatnonzero(mask)
         soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
 
