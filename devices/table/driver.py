@@ -230,7 +230,9 @@ class GrblTable:
         def new_alarm() -> TableException | None:
             return self._alarm_error() if self._link.state.alarms > alarms else None
 
-        self._run(p.HOME_LINE, self.timeouts.move_max_s, new_alarm, poll=True)
+        # no polls: Grbl answers no ``?`` during its homing cycle (one report when it ends), so
+        # silence there is no dead controller; an ALARM line (a switch not found) still ends it
+        self._run(p.HOME_LINE, self._homing_timeout_s(), new_alarm)
         with self._link.cond:
             self._position_known = True
             self._link.state.position_lost = False
@@ -294,6 +296,21 @@ class GrblTable:
         if critical:
             advice = "operator: check the table, reset it (Ctrl-X), then unlock or home"
         return TableAlarm(code or None, meaning, advice + "; moves refused until then")
+
+    def _homing_timeout_s(self) -> float:
+        """Grbl's homing at most: each axis's search over 1.5 x its max travel (``$130``-``$132``:
+        the firmware's default cycles home Z, then X and Y, whatever the table uses) at ``$25``
+        (seek rate), then the locating approach and pull-off over up to 5 x ``$27`` each at
+        ``$24`` (feed rate); x 1.5 plus ``move_margin_s``. ``move_max_s`` when those settings
+        are not known."""
+        settings = self.settings
+        seek_deg_s, feed_deg_s = settings.get(25, 0.0) / 60.0, settings.get(24, 0.0) / 60.0
+        travels = [settings.get(number, 0.0) for number in (130, 131, 132)]
+        if seek_deg_s <= 0.0 or feed_deg_s <= 0.0 or travels[0] <= 0.0:
+            return self.timeouts.move_max_s
+        locate_s = 3 * 5.0 * settings.get(27, 0.0) / feed_deg_s
+        cycle_s = sum(1.5 * travel / seek_deg_s + locate_s for travel in travels if travel > 0.0)
+        return 1.5 * cycle_s + self.timeouts.move_margin_s
 
     def _move_timeout_s(self, distance_deg: float) -> float:
         settings = self.settings

@@ -33,6 +33,9 @@ log = logging.getLogger(__name__)
 
 READ_POLL_S = 0.05
 MAX_STALE_LINES = 3
+TELL_DISCONNECT_S = 5.0
+"""How long a second thread that finds the port gone waits for the first to have told the
+listeners, before it raises anyway (a listener that hangs does not hang the driver)."""
 
 
 class SerialPort(Protocol):
@@ -110,6 +113,7 @@ class GrblLink:
         self._write_lock = threading.Lock()
         self._closing = threading.Event()
         self._disconnect_seen = False
+        self._telling: threading.Thread | None = None
         self._thread = threading.Thread(target=self._read_loop, name="grbl-reader", daemon=True)
 
     def start(self) -> None:
@@ -350,10 +354,21 @@ class GrblLink:
             self._pending.popleft().error = error
 
     def _disconnect(self, reason: str) -> None:
+        """Tell the listeners, then fail every waiting line. Called by whichever thread finds
+        the port gone first (the reader, a write); a second one waits until the listeners
+        were told, so no TableDisconnected is raised before they hear of it."""
         with self.cond:
-            if self._disconnect_seen:
-                return
-            self._disconnect_seen = True
+            first = not self._disconnect_seen
+            if first:
+                self._disconnect_seen = True
+                self._telling = threading.current_thread()
+        if not first:
+            if self._telling is not threading.current_thread():  # not a listener's own write
+                with self.cond:  # waiting releases the lock, even one this thread held already
+                    self.cond.wait_for(
+                        lambda: self.state.disconnected is not None, TELL_DISCONNECT_S
+                    )
+            return
         log.error("table disconnected: %s", reason)
         try:  # first the listeners, so the operator is told before a waiting move raises
             self._on_disconnect(reason)

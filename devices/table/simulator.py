@@ -83,6 +83,7 @@ class GrblSimulator:
         self._critical = False
         self._limit_pin = False
         self._silent = False
+        self._report_after_homing = False
         self._garble_skip = 0
         self._garble_count = 0
         self._wco_counter = 0
@@ -141,6 +142,10 @@ class GrblSimulator:
                 if byte == p.SOFT_RESET[0]:
                     self.soft_resets_received += 1
                     self._soft_reset()
+                elif byte == p.STATUS_QUERY[0] and self.motion.homing:
+                    # Grbl's homing loop runs no real-time protocol: the queries are one
+                    # report, sent when the cycle ends (limits.c)
+                    self._report_after_homing = True
                 elif byte == p.STATUS_QUERY[0]:
                     self._emit(self._status_line())
                 elif byte == p.FEED_HOLD[0]:
@@ -264,6 +269,9 @@ class GrblSimulator:
             self.motion.push(wait.block)
         elif wait.kind == "homing" and self.motion.idle:
             self._alarm_code = None
+            if self._report_after_homing:
+                self._report_after_homing = False
+                self._emit(self._status_line())
         elif wait.kind == "barrier" and self.motion.idle:
             wait.dwell_s -= dt_s
             if wait.dwell_s > 0.0:
@@ -373,6 +381,7 @@ class GrblSimulator:
             self._raise_alarm(6 if self.motion.homing else 3, pin=False)
         if self._wait is not None:
             self._answer(0)  # the interrupted line still reports, as the firmware does
+        self._report_after_homing = False
         self._critical = False
         self._limit_pin = False
         self._clear_motion_and_input()

@@ -19,10 +19,11 @@ from devices.table import (
     TableTimeout,
     TableTimeouts,
 )
+from devices.table.link import GrblLink
 from devices.table.protocol import BARRIER_LINE
 
 from ..fake_clock import FakeClock, wait_real
-from .conftest import FAST, advance_while_polling, goto_in_background
+from .conftest import FAST, QUICK_TABLE, advance_while_polling, goto_in_background
 
 MakeServer = Callable[..., PtyGrblServer]
 MakeTable = Callable[..., GrblTable]
@@ -181,6 +182,79 @@ def test_unplug_mid_move(timed_server: PtyGrblServer, make_table: MakeTable) -> 
     assert not table.position_known
     with pytest.raises(TableDisconnected):
         table.status()
+
+
+def test_a_homing_cycle_longer_than_the_failure_budget_is_no_silent_controller(
+    make_server: MakeServer, make_table: MakeTable
+) -> None:
+    """Grbl answers no ``?`` during its homing cycle (one report when it ends); the driver
+    had taken 2 s of silence for a dead controller, so every homing of a real table longer
+    than that failed (found against grbl-sim). A cycle of about 3 s, in real time."""
+    settings = {**QUICK_TABLE, 22: 1.0, 25: 300.0}  # homing enabled, seeking at 5 deg/s
+    server = make_server(GrblSimulator(settings=settings), time_scale=1.0)
+    server.simulator.motion.position_deg = 15.0  # the switch 15 degrees away
+    table = make_table(server, BUDGET)
+    assert table.status().state == "Alarm"
+    before = table.statuses_received
+    assert table.home() == pytest.approx(0.0)
+    assert table.statuses_received - before <= 2  # the coalesced report, then home()'s own
+    assert table.position_known
+
+
+class _GonePort:
+    """A serial port that was unplugged: reads wait until released, then fail; writes fail."""
+
+    def __init__(self) -> None:
+        self.release = threading.Event()
+        self.in_waiting = 0
+
+    def read(self, size: int = 1) -> bytes:
+        self.release.wait(10.0)
+        raise OSError("device reports readiness to read but returned no data")
+
+    def write(self, data: bytes, /) -> int | None:
+        raise OSError("[Errno 5] Input/output error")
+
+    def close(self) -> None:
+        self.release.set()
+
+
+def test_a_write_that_finds_the_port_gone_raises_only_after_the_listeners_were_told() -> None:
+    """The reader and a write both find the port gone; whichever is second waits for the
+    first to have told the listeners (grbl-sim unplugged mid-move: the move raised
+    TableDisconnected before the ``disconnected`` signal fired, 1 run in 28)."""
+    events: list[str] = []
+    telling, told = threading.Event(), threading.Event()
+
+    def on_disconnect(reason: str) -> None:
+        events.append("told")
+        telling.set()
+        told.wait(10.0)  # a listener that takes its time (the GUI's signal, a log handler)
+
+    port = _GonePort()
+    link = GrblLink(port, lambda reply: None, on_disconnect)
+    link.start()
+    port.release.set()  # the reader finds the port gone first
+    assert telling.wait(10.0)
+    outcome: list[BaseException] = []
+
+    def write() -> None:
+        try:
+            with link.cond:  # as a move's status poll writes, under the link's lock
+                link.write(b"?")
+        except TableDisconnected as error:
+            events.append("raised")
+            outcome.append(error)
+
+    writer = threading.Thread(target=write)
+    writer.start()
+    writer.join(0.3)
+    assert events == ["told"]  # not raised while the listeners are still being told
+    told.set()
+    writer.join(10.0)
+    assert events == ["told", "raised"] and outcome
+    assert link.state.disconnected is not None and link.state.position_lost  # all told
+    link.close()
 
 
 # --- issue 23, finding 6: failures under line noise within the budget; unknown position ----

@@ -136,6 +136,28 @@ def test_the_firmware_s_errors_are_typed(table: GrblTable):
     assert table.goto_deg(10.0) == pytest.approx(10.0, abs=0.2)
 
 
+def test_a_homing_cycle_that_finds_no_switch_is_its_alarm_not_a_silent_controller(
+    firmware: FirmwarePty,
+):
+    """Homing on (``$22=1``), a 3 s search (1.5 x 20 degrees of max travel at ``$25`` 10
+    deg/s, Z first as the firmware's default cycles go) on a board with no switch wired
+    (grbl-sim's pins read as a bare board's pull-ups, docs/TABLE.md): Grbl answers no ``?``
+    while it searches, then reports ALARM:9. The driver had taken the silence for a dead
+    controller after 2 s (``TableTimeout``)."""
+    travels = {130: 20.0, 131: 20.0, 132: 20.0}
+    _write_settings(firmware.device_path, {22: 1, **travels, 25: 600.0, 24: 300.0})
+    port = serial.serial_for_url(firmware.device_path, baudrate=115200, timeout=0.05)
+    table = GrblTable(port, timeouts=TIMEOUTS)
+    try:
+        table.connect()  # Idle: set while running, homing locks only from the next power-up
+        with pytest.raises(TableAlarm) as caught:
+            table.home()
+        assert caught.value.code == 9
+        assert not table.position_known
+    finally:
+        table.close()
+
+
 def test_a_silent_controller_times_out_within_the_bound(table: GrblTable, firmware: FirmwarePty):
     bound = TIMEOUTS.move_margin_s + 1.5 * (90.0 / 60.0 + 60.0 / ACCEL_DEG_S2)
     thread, outcome = goto_in_background(table, 90.0)
