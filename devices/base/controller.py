@@ -37,9 +37,11 @@ LINK_LOST = "link lost"
 STOP_REQUESTED = "stop requested"
 
 ClientId = tuple[bytes, bytes]
-"""Who sent a request: with keys (the client's CURVE public key in Z85, b""), whichever
-connection it came on, as the spec keys the reply cache; without keys (b"", the connection's
-routing id, which fieldapp's client keeps across its reconnections)."""
+"""Who sent a request: (the client's CURVE public key in Z85, or b"" without keys; the
+connection's routing id, which fieldapp's client keeps across its reconnections). The
+watchdog is fed by the connection that sent the goal (another process with the same key, a
+``fieldapp base status`` beside the app, does not keep a dead app's goal going); the reply
+cache is keyed by the key alone where there is one (the server's)."""
 ANONYMOUS: ClientId = (b"", b"")
 
 

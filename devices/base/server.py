@@ -281,8 +281,8 @@ class ProtocolServer:
             router.send_multipart([*envelope, reply])
 
     def _client_of(self, frames: list[zmq.Frame]) -> ClientId | None:
-        """Who sent ``frames`` (:data:`ClientId`: with keys the key alone, so a retry on a new
-        connection finds its cached reply); None (and logged) for a key no longer authorised."""
+        """Who sent ``frames`` (:data:`ClientId`); None (and logged) for a key no longer
+        authorised."""
         routing_id = frames[0].bytes
         if self._authorized is None:
             return (b"", routing_id)
@@ -294,7 +294,7 @@ class ProtocolServer:
             log.warning("request from client key %s refused: not authorised (revoked?)",
                         user.decode() or "<none>")  # fmt: skip
             return None
-        return (user, b"")
+        return (user, routing_id)
 
     def _answer(self, frames: list[bytes], client: ClientId) -> tuple[list[bytes], bytes]:
         envelope, body = split_envelope(frames)
@@ -308,7 +308,10 @@ class ProtocolServer:
             log.warning("bad request (id %r): %s", error.request_id, error.message)
             reply = Reply.failure(error.request_id, error.code, error.message)
             return envelope, encode_reply(reply)
-        answered = self._cache.get(client, request.id)
+        # the spec keys the replies by the client's CURVE key where there is one: a retry after a
+        # lost reply comes on a new connection (a REQ client must reconnect) and is not run again
+        replier: ClientId = (client[0], b"") if client[0] else client
+        answered = self._cache.get(replier, request.id)
         if answered is not None and request.cmd is not Command.STOP:
             if answered.request == body[0]:
                 log.info("repeated request %s (%s): the cached reply", request.id, request.cmd)
@@ -319,7 +322,7 @@ class ProtocolServer:
         data = encode_reply(self.controller.handle(request, self._clock(), client))
         with self._lock:  # status() reflects every command whose reply has been sent
             self._status = self.controller.status()
-        self._cache.put(client, request.id, body[0], data)
+        self._cache.put(replier, request.id, body[0], data)
         return envelope, data
 
     def _tick(self, publisher: zmq.Socket[bytes], telemetry: TelemetrySchedule) -> None:

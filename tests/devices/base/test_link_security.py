@@ -254,6 +254,25 @@ def test_another_client_polling_does_not_keep_a_goal_alive(
     assert sim.status().error == "link lost"
 
 
+def test_another_process_with_the_same_key_does_not_keep_a_dead_app_s_goal_alive(
+    key_folders: Any, make_sim: MakeSim, make_client: MakeClient
+) -> None:
+    """With keys the reply cache is the key's (a retry on a new connection is answered from
+    it), but the watchdog is the connection's: a ``fieldapp base status`` beside the app,
+    with the workstation's key, must not keep a dead app's goal going."""
+    clock = FakeClock()
+    sim = make_sim(keys=key_folders.server_keys(), time_scale=0.1, clock=clock)
+    owner = make_client(sim.command_endpoint, keys=key_folders.client_keys())
+    owner.goto("g", Pose(3.0, 0.0, 0.0), wait=False)
+    owner.close()  # the app dies
+    watcher = make_client(sim.command_endpoint, keys=key_folders.client_keys())
+    for _ in range(4):
+        clock.advance(0.3)
+        assert watcher.status().state is BaseState.MOVING or sim.latched
+    assert wait_real(lambda: sim.latched)
+    assert sim.status().error == "link lost"
+
+
 def test_the_owner_s_heartbeats_keep_its_goal_alive_across_a_reconnection(
     make_sim: MakeSim, make_client: MakeClient, make_link: Callable[[str], Any]
 ) -> None:
