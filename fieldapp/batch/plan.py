@@ -64,12 +64,12 @@ def session_plot(session_dir: Path, plot: str | None) -> tuple[str, str]:
     session document's ``plot`` field, else the session id. Raises ``FieldappError``."""
     from fieldapp.io.session import load_session
 
-    document = load_session(session_dir).document
-    extra = document.model_extra or {}
+    session = load_session(session_dir)
+    extra = session.document.model_extra or {}
     own_plot = extra.get("plot")
     if plot is None and isinstance(own_plot, str) and own_plot.strip():
         plot = own_plot
-    return document.id, plot or document.id
+    return session.id, plot or session.id
 
 
 def plan_batch(

@@ -109,7 +109,9 @@ class SessionDocument(SpecModel):
     """The ``session.json`` document."""
 
     format: Literal["fieldapp-session/1"]
-    id: str = Field(min_length=1)
+    id: str | None = Field(default=None, min_length=1)
+    """Optional here: the spec lists no top-level field as required, and another recorder's
+    session without one is read under its folder's name (:attr:`Session.id`)."""
     created: datetime | None = None
     calibration: RelativePath
     captures: list[Capture]
@@ -142,7 +144,8 @@ class Session:
 
     @property
     def id(self) -> str:
-        return self.document.id
+        """The document's ``id``, or the folder's name where it has none."""
+        return self.document.id or self.folder.resolve().name
 
     @property
     def captures(self) -> list[Capture]:

@@ -156,6 +156,16 @@ def test_depth_camera_converts_to_device_intrinsics():
     assert DepthCamera.from_intrinsics(intrinsics) == camera
 
 
+def test_a_session_without_an_id_is_read_under_its_folder_s_name(make_spec_session, edit_json):
+    """The spec shows ``id`` in its example but lists no top-level field as required; a
+    session another recorder wrote without one was refused ("id: Field required")."""
+    folder = make_spec_session()
+    edit_json(folder / "session.json", lambda d: (d.pop("id"), d.pop("created")))
+    session = load_session(folder)
+    assert session.id == folder.resolve().name
+    assert verify_session(folder).usable
+
+
 def test_a_session_needs_view_step_and_stations(make_spec_session, edit_json):
     folder = make_spec_session()
     edit_json(folder / "calibration.json", lambda d: (d.pop("view_step"), d.pop("stations")))
