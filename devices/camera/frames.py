@@ -34,6 +34,10 @@ class Intrinsics:
 
 
 KINECT_V2_PAPER = Intrinsics(width=512, height=424, fx=365.18, fy=364.49, cx=256.00, cy=209.59)
+KINECT_V2_DISTORTION = (0.09, -0.27, 0.0, 0.0, 0.09)
+"""A Kinect v2 depth lens's radial distortion, OpenCV's k1, k2, p1, p2, k3, of the size each
+unit's factory calibration reports (libfreenect2 reads the unit's own): a pixel at the image's
+corner moves about 10 px."""
 """The Kinect v2 depth camera as the seed paper calibrated it (Zhang, IR images)."""
 
 

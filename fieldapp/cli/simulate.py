@@ -44,6 +44,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "table_error": _ON_THE_RIG,
     "color_shift": _ON_THE_RIG,
     "depth_offset": _ON_THE_RIG,
+    "lens_distortion": _ON_THE_RIG,
     "sunlight": _ON_THE_RIG,
     "camera": _ON_THE_RIG,
     "stations": _ON_THE_RIG,
@@ -172,6 +173,13 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--views", default="0-7", help="views per station, e.g. 0,1 or 0-7")
     parser.add_argument("--plants", action="store_true", help="spheres scene: add the plants")
+    parser.add_argument(
+        "--lens-distortion",
+        action="store_true",
+        help="depth and colour images as a Kinect v2 gives them before undistortion: its "
+        "lens's radial distortion (k1 0.09, k2 -0.27, k3 0.09) in the images, and in the "
+        "calibration as a recorder of raw frames writes it",
+    )
     parser.add_argument(
         "--depth-only",
         action="store_true",
@@ -371,6 +379,7 @@ def run(args: argparse.Namespace) -> int:
                 depth_offset,
                 sunlight,
                 leaf_width,
+                args.lens_distortion,
             )
             about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
             about |= {"stage": args.stage, "grid": rig.grid}
@@ -398,6 +407,10 @@ def run(args: argparse.Namespace) -> int:
                 about["sunlight"] = sunlight
             if args.depth_only:
                 about["depth_only"] = True
+            if args.lens_distortion:  # absent: undistorted images (sessions unchanged)
+                from devices.camera.frames import KINECT_V2_DISTORTION
+
+                about["lens_distortion"] = list(KINECT_V2_DISTORTION)
             if camera:  # absent: the paper's rig (sessions unchanged)
                 about["camera"] = camera
             plan = simulated_plan(rig, sown=args.scene == "plot")
@@ -432,6 +445,7 @@ def build_world(
     depth_offset_m: float | None = None,
     sunlight: float | None = None,
     leaf_width: float | None = None,
+    lens_distortion: bool = False,
 ) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.render import SensorModel
@@ -460,7 +474,12 @@ def build_world(
     sensor = SensorModel(
         depth_offset_m=depth_offset_m or 0.0, sun_ir=(sunlight or 0.0) * FULL_SUN_IR
     )
-    return SimWorld(scene, rig, seed=seed, sensor=sensor)
+    from devices.camera.frames import KINECT_V2_DISTORTION, KINECT_V2_PAPER
+
+    intrinsics = KINECT_V2_PAPER
+    if lens_distortion:
+        intrinsics = replace(KINECT_V2_PAPER, distortion=KINECT_V2_DISTORTION)
+    return SimWorld(scene, rig, intrinsics, seed=seed, sensor=sensor)
 
 
 def simulated_plan(rig: RigGeometry, sown: bool = True) -> dict[str, Any]:
