@@ -177,14 +177,16 @@ class ReadFrame:
     :func:`~fieldapp.recon.exg.exg_keys` of every pixel in row-major order,
     :data:`~fieldapp.recon.exg.NO_KEY` where none is measured, and ``tally``:
     (EXG_KEYS,) int64, how many measured pixels with colour have each key; both ``None`` for
-    a depth-only capture (no colour: its plants are told by geometry). ``uncoloured``: how
-    many measured pixels have no colour (black, :data:`~fieldapp.recon.exg.NO_COLOUR_SUM`).
+    a depth-only capture (no colour: its plants are told by geometry). ``measured_pixels``: how
+    many are measured, ``uncoloured``: how many of them have no colour (black,
+    :data:`~fieldapp.recon.exg.NO_COLOUR_SUM`).
     """
 
     images: CaptureImages
     measured: NDArray[np.bool_]
     keys: NDArray[np.int32] | None
     tally: NDArray[np.int64] | None
+    measured_pixels: int
     uncoloured: int = 0
 
     @property
@@ -195,12 +197,13 @@ class ReadFrame:
 def frame_of(images: CaptureImages) -> ReadFrame:
     """A capture's images with the colour keys of its measured pixels and their tally."""
     measured = np.isfinite(images.depth_m)
+    count = int(np.count_nonzero(measured))
     if images.capture.color is None:
-        return ReadFrame(images, measured, None, None)
+        return ReadFrame(images, measured, None, None, count)
     keys = exg_keys(images.color.reshape(-1, 3))
     keys[~measured.reshape(-1)] = NO_KEY
     tally = exg_tally(keys)
-    return ReadFrame(images, measured, keys, tally, int(measured.sum() - tally.sum()))
+    return ReadFrame(images, measured, keys, tally, count, count - int(tally.sum()))
 
 
 class FrameWorkers:
@@ -307,7 +310,7 @@ def read_station(
         joined(1),
         sorted(views),
         threshold,
-        sum(int(np.count_nonzero(frame.measured)) for frame in frames),
+        sum(frame.measured_pixels for frame in frames),
         separation,
         (joined(2), joined(3)),
         offset,
@@ -325,7 +328,7 @@ def _colour_on_depth(
     if not coloured:
         return frames, None
     contrasts = functools.reduce(operator.add, workers.map(_edge_contrasts, coloured))
-    measured = sum(int(np.count_nonzero(frame.measured)) for frame in coloured)
+    measured = sum(frame.measured_pixels for frame in coloured)
     uncoloured = sum(frame.uncoloured for frame in coloured) / max(measured, 1)
     offset = colour_offset(contrasts, uncoloured)
     if offset is None or not offset.moved:
@@ -364,8 +367,12 @@ def _placed_at_reached_angles(
     return placed
 
 
-_REACH = np.ones((2 * REGISTRATION_PX + 1,) * 2, np.uint8)
-"""The square of pixels within :data:`REGISTRATION_PX` of one (OpenCV's structuring element)."""
+@functools.cache
+def _square(reach_px: int) -> NDArray[np.uint8]:
+    """The square of pixels within ``reach_px`` of one (OpenCV's structuring element)."""
+    return np.ones((2 * reach_px + 1,) * 2, np.uint8)
+
+
 _NEIGHBOURS = np.ones((3, 3), np.uint8)
 """A pixel and its eight neighbours: one step of the pixel-by-pixel growths."""
 
@@ -384,7 +391,7 @@ class DepthEdges:
     @classmethod
     def of(cls, depth_m: NDArray[np.float32], measured: NDArray[np.bool_]) -> DepthEdges:
         far = np.where(measured, depth_m, NOT_MEASURED_M).astype(np.float32)
-        behind = far - cv2.erode(far, _REACH) > CONTINUOUS_SHARE * far
+        behind = far - cv2.erode(far, _square(REGISTRATION_PX)) > CONTINUOUS_SHARE * far
         return cls(far, behind, measured)
 
 
@@ -407,8 +414,9 @@ def grown_over_edges(
     pass-through drops them (``filters.filter_station``)."""
     far = edges.far_m
     in_front = green & ~edges.behind  # the soil beside a leaf that took its green grows nothing
-    reach = _REACH if reach_px == REGISTRATION_PX else np.ones((2 * reach_px + 1,) * 2, np.uint8)
-    nearest_green = cv2.erode(np.where(in_front, far, NOT_MEASURED_M).astype(np.float32), reach)
+    nearest_green = cv2.erode(
+        np.where(in_front, far, NOT_MEASURED_M).astype(np.float32), _square(reach_px)
+    )
     continues = np.abs(far - nearest_green) <= CONTINUOUS_SHARE * far
     grown: NDArray[np.bool_] = green | (edges.measured & ~edges.behind & continues)
     return grown
