@@ -8,7 +8,9 @@ It follows the firmware where the driver can tell: the banner, the status line (
 Ov fields on Grbl's refresh counters), one ``ok``/``error:N`` per line in order, ``G4`` as a
 barrier that answers only once the planner is empty, real-time ``?`` ``!`` ``~`` Ctrl-X acting
 at once even mid-line, Alarm locking G-code (``error:9``) until ``$X`` or ``$H``, a hard limit
-(ALARM:1) ignoring every line until a reset, and a reset while moving raising ALARM:3.
+(ALARM:1) ignoring every line until a reset, a reset while moving raising ALARM:3, check mode
+(``$C``: G-code parsed and answered, nothing moves; ``$C`` again resets) and sleep (``$SLP``:
+lines ignored until a reset, which comes up in Alarm).
 Injectable faults: stall (hard limit), any alarm, silence, garbled bytes; the pty server adds
 unplugging. Thread-safe: every public method takes the model's lock.
 """
@@ -84,6 +86,9 @@ class GrblSimulator:
         self._limit_pin = False
         self._silent = False
         self._report_after_homing = False
+        self._check_mode = False
+        self._asleep = False
+        self._reset_after_answer = False
         self._garble_skip = 0
         self._garble_count = 0
         self._wco_counter = 0
@@ -148,6 +153,8 @@ class GrblSimulator:
                     self._report_after_homing = True
                 elif byte == p.STATUS_QUERY[0]:
                     self._emit(self._status_line())
+                elif self._asleep:
+                    continue  # asleep, the firmware reads no line and no hold, only ? and Ctrl-X
                 elif byte == p.FEED_HOLD[0]:
                     self._feed_hold()
                 elif byte == p.CYCLE_START[0]:
@@ -193,7 +200,7 @@ class GrblSimulator:
     # --- lines --------------------------------------------------------------------------
 
     def _run_lines(self) -> None:
-        while self._wait is None and not self._critical:
+        while self._wait is None and not self._critical and not self._asleep:
             ends = [i for i in (self._rx.find(b"\n"), self._rx.find(b"\r")) if i >= 0]
             if not ends:
                 return
@@ -211,6 +218,11 @@ class GrblSimulator:
             self._answer(0)
         elif text.startswith("$"):
             self._answer(self._system(text[1:]))
+            if self._reset_after_answer:  # leaving check mode: ok, then the reset's banner
+                self._reset_after_answer = False
+                self._soft_reset()
+            elif self._asleep:
+                self._emit(p.format_reply(p.Message("Sleeping")))
         elif self._alarm_code is not None:
             self._answer(9)
         else:
@@ -238,7 +250,7 @@ class GrblSimulator:
         if block.codes.get("stopping") in (2, 30):
             self._modal = _Modal()
             self._emit(p.format_reply(p.Message("Pgm End")))
-        if block.codes.get("non_modal") == 4:
+        if block.codes.get("non_modal") == 4 and not self._check_mode:
             self._wait = _Wait("barrier", move, block.words["P"])
             return None
         return self._queue(move) if move else 0
@@ -254,6 +266,8 @@ class GrblSimulator:
         return MoveBlock(target_deg, rate_per_min / 60.0)
 
     def _queue(self, move: MoveBlock) -> int | None:
+        if self._check_mode:
+            return 0  # parsed and answered; nothing moves
         if self.motion.full:
             self._wait = _Wait("planner", move)
             return None
@@ -291,6 +305,8 @@ class GrblSimulator:
             self._emit(p.format_reply(p.Feedback("HLP", HELP)))
         elif command in ("$", "G", "X"):
             return self._system_any_state(command)
+        elif command == "C":
+            return self._toggle_check_mode()
         elif command[:1] in ("$", "G", "X", "C", "J"):
             return 3
         elif self._state() not in ("Idle", "Alarm"):
@@ -307,13 +323,17 @@ class GrblSimulator:
             self._emit(p.format_reply(p.Feedback("OPT", "V,15,128")))
         elif command == "N":
             self._emit(b"$N0=\r\n$N1=\r\n")
+        elif command == "SLP":
+            self._asleep = True  # "ok", then the firmware's sleep message (_execute)
+        elif command[:1] == "S":
+            return 3
         else:
             return self._store_setting(command)
         return 0
 
     def _system_any_state(self, command: str) -> int:
         if command == "$":
-            if self._state() not in ("Idle", "Alarm"):
+            if self._state().partition(":")[0] in ("Run", "Hold", "Home"):
                 return 8
             for number, value in self.settings.items():
                 self._emit(p.format_setting(number, value, number in INTEGER_SETTINGS))
@@ -346,6 +366,18 @@ class GrblSimulator:
         self.motion.accel_deg_s2 = self.settings[120]
         return 0
 
+    def _toggle_check_mode(self) -> int:
+        """``$C``: into check mode from Idle; out of it by a reset after the ``ok``."""
+        if self._check_mode:
+            self._emit(p.format_reply(p.Message("Disabled")))
+            self._reset_after_answer = True
+            return 0
+        if self._state() != "Idle":
+            return 8
+        self._check_mode = True
+        self._emit(p.format_reply(p.Message("Enabled")))
+        return 0
+
     def _home(self) -> int | None:
         if not self.settings[22]:
             return 5
@@ -359,7 +391,7 @@ class GrblSimulator:
     # --- real-time bytes, alarms, reset -------------------------------------------------------
 
     def _feed_hold(self) -> None:
-        if self._alarm_code is None and not self._critical:
+        if self._alarm_code is None and not self._critical and not self._check_mode:
             self.motion.held = True
 
     def _cycle_start(self) -> None:
@@ -384,6 +416,10 @@ class GrblSimulator:
         self._report_after_homing = False
         self._critical = False
         self._limit_pin = False
+        self._check_mode = False
+        if self._asleep:  # the steppers were off: Grbl comes up locked
+            self._asleep = False
+            self._alarm_code = 0
         self._clear_motion_and_input()
         self._announce_start()
 
@@ -403,8 +439,12 @@ class GrblSimulator:
     # --- output -----------------------------------------------------------------------------
 
     def _state(self) -> str:
+        if self._asleep:
+            return "Sleep"
         if self._alarm_code is not None or self._critical:
             return "Alarm"
+        if self._check_mode:
+            return "Check"
         if self.motion.held:
             return "Hold:1" if self.motion.velocity_deg_s > 0.0 else "Hold:0"
         if self.motion.homing:

@@ -189,8 +189,12 @@ SCRIPT = (
     b"\x18", b"$$\n", b"?", b"?", b"?", b"$I\n", b"$G\n", b"\n", b"g0 x1.5\n", b"G4 P0 (sync)\n",
     b"?", b"G0 X10 Q3\n", b"G1 X2\n", b"$Z\n", b"$999=1\n", b"$H\n", b"$X\n", b"G0 X\n",
     b"$10=0\n", b"?", b"$10=1\n", b"\x18", b"?",
+    b"$C x\n", b"$C\n", b"?", b"G0 X20\n", b"G4 P0\n", b"?", b"!", b"?", b"$H\n", b"$SLP\n",
+    b"$X\n", b"$C\n", b"?", b"$SLP\n", b"?", b"!", b"?", b"\x18", b"?", b"$C\n", b"$X\n", b"?",
 )  # fmt: skip
-"""Exchanges whose answers do not depend on timing, each read to its last line."""
+"""Exchanges whose answers do not depend on timing, each read to its last line: among them
+check mode (``$C``: moves answered, nothing turns; ``$C`` again resets) and sleep (``$SLP``:
+a reset wakes it, locked)."""
 
 NORMALISE = (
     (rb"\$(\d+)=\d+\.\d{3}", rb"$\1=<dec>"),
@@ -207,6 +211,8 @@ def _last_line(sent: bytes) -> re.Pattern[bytes]:
         return re.compile(rb">\r\n$")
     if sent == b"\x18":
         return re.compile(rb"help\]\r\n$")
+    if sent in (b"!", b"~"):
+        return re.compile(rb"")  # real-time: no answer of their own
     return re.compile(rb"(ok|error:\d+)\r\n$")
 
 

@@ -186,6 +186,35 @@ def test_homing_when_enabled_starts_locked_and_homes_to_zero() -> None:
     assert (sim.state, sim.angle_deg) == ("Idle", 0.0)
 
 
+def test_check_mode_answers_moves_without_turning_and_leaves_by_a_reset() -> None:
+    """As the Grbl 1.1h firmware does (the byte-for-byte test of ``test_grbl_firmware.py``)."""
+    sim = powered()
+    assert exchange(sim, b"$C x\n") == b"error:3\r\n"
+    assert exchange(sim, b"$C\n") == b"[MSG:Enabled]\r\nok\r\n"
+    assert exchange(sim, b"G0 X20\nG4 P0\n") == b"ok\r\nok\r\n"
+    assert (sim.state, sim.angle_deg) == ("Check", 0.0)
+    assert exchange(sim, b"!") == b""  # a feed hold does nothing in check mode
+    assert exchange(sim, b"$H\n$SLP\n$X\n") == b"error:8\r\nerror:8\r\nok\r\n"
+    assert exchange(sim, b"$C\n") == b"[MSG:Disabled]\r\nok\r\n" + BANNER
+    assert sim.state == "Idle"
+    exchange(sim, b"G0 X20\nG4 P0\n")
+    assert sim.angle_deg == pytest.approx(20.0)
+    exchange(sim, b"!")
+    assert exchange(sim, b"$C\n") == b"error:8\r\n"  # from Idle only (here Hold:0)
+
+
+def test_sleep_reads_nothing_but_status_and_reset_and_wakes_locked() -> None:
+    sim = powered()
+    assert exchange(sim, b"$SLP\n") == b"ok\r\n[MSG:Sleeping]\r\n"
+    assert sim.state == "Sleep"
+    assert exchange(sim, b"G0 X10\n$X\n!~") == b""  # dropped: no answer at all
+    assert exchange(sim, b"?").startswith(b"<Sleep|MPos:0.000,")
+    assert exchange(sim, b"\x18") == BANNER + b"[MSG:'$H'|'$X' to unlock]\r\n"
+    assert sim.state == "Alarm"
+    assert exchange(sim, b"$X\nG0 X10\n") == b"[MSG:Caution: Unlocked]\r\nok\r\nok\r\n"
+    assert sim.angle_deg == pytest.approx(10.0)
+
+
 def test_silence_and_garbled_bytes() -> None:
     sim = powered(seed=3)
     sim.set_silent(True)
