@@ -76,12 +76,13 @@ def _last_line(script: str, session: Path, out: Path) -> str:
 FROZEN_AT_EXIT = textwrap.dedent(
     """
     import atexit, gc, sys
+    start = gc.get_freeze_count()  # 0; from Python 3.12 the interpreter's own few hundred
     from fieldapp.cli import main
 
     code = main(["reconstruct", sys.argv[1], "--out", sys.argv[2], "--quiet"])
     before = gc.get_freeze_count()
     atexit._run_exitfuncs()  # what the interpreter's exit runs first
-    print(code, before, gc.get_freeze_count() > 0)
+    print(code, before - start, gc.get_freeze_count() > before)
     """
 )
 
