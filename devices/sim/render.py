@@ -181,7 +181,7 @@ class Renderer:
         depth[(depth < MIN_RANGE_M) | (depth > MAX_RANGE_M)] = np.nan
         return Frame(
             depth_m=depth,
-            color=_to_srgb8(color, rng if self.sensor.noise else None),
+            color=_to_srgb8(color, rng if self.sensor.noise else None, self.sensor.color_noise),
             ir=np.clip(ir, 0, 65535).astype(np.uint16),
             meta={COS_INCIDENCE: cos_incidence},
         )
@@ -291,11 +291,18 @@ _SRGB_TABLE = np.clip(
 ).astype(np.uint8)
 
 
-def _to_srgb8(linear: NDArray[np.float32], rng: np.random.Generator | None) -> NDArray[np.uint8]:
-    """Linear RGB 0-1 (H, W, 3) to 8-bit (gamma 2.2, by table) with a little sensor noise."""
+def _to_srgb8(
+    linear: NDArray[np.float32], rng: np.random.Generator | None, channel_noise: float = 0.0
+) -> NDArray[np.uint8]:
+    """Linear RGB 0-1 (H, W, 3) to 8-bit (gamma 2.2, by table) with a little sensor noise: 3 %
+    of brightness per pixel, and ``channel_noise`` levels (standard deviation) per channel."""
     if rng is not None:
         linear = (
             linear * (1.0 + 0.03 * rng.standard_normal(linear.shape[:2], np.float32))[..., None]
         )
     index = np.clip(linear * (_SRGB_LEVELS - 1), 0, _SRGB_LEVELS - 1).astype(np.int32)
-    return _SRGB_TABLE[index]
+    srgb = _SRGB_TABLE[index]
+    if rng is None or channel_noise <= 0.0:
+        return srgb
+    noisy = srgb + channel_noise * rng.standard_normal(srgb.shape, np.float32)
+    return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)

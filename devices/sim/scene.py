@@ -245,13 +245,72 @@ def plot_scene(
     plant_model: str = "distichous",
     max_lean_deg: float | None = None,
     leaf_width: float = 1.0,
+    clods_per_m2: float = 0.0,
 ) -> Scene:
     """The paper's plot: 16 maize plants at 0.8 m on uneven soil (seedlings by default; or
     ``layout``; plants of ``plant_model``, leaning up to ``max_lean_deg``, leaf blades
-    ``leaf_width`` times the model's width)."""
+    ``leaf_width`` times the model's width; ``clods_per_m2``: :func:`add_clods`)."""
     scene = empty_scene(seed, soil)
     add_plot(scene, seed, day, layout or PlotLayout(), stage, plant_model, max_lean_deg, leaf_width)
+    if clods_per_m2 > 0.0:
+        add_clods(scene, seed, clods_per_m2)
     return scene
+
+
+CLOD_RADIUS_M = (0.012, 0.04)
+CLOD_PROTRUSION_M = (0.01, 0.045)
+CLOD_CLEAR_OF_STEMS_M = 0.07
+CLOD_REACH_M = 2.0
+"""Clods lie out to this far inside the soil's edge (the soil reaches 3 m past the stations)."""
+
+
+def add_clods(scene: Scene, seed: int, per_m2: float) -> None:
+    """Clods and stones on the soil, ``per_m2`` of them per square metre (a tilled seedbed:
+    10-40): partly buried ellipsoids 2.4-8 cm across standing 1-4.5 cm out of the soil, darker
+    than it (their shaded and moist sides), none within 7 cm of a stem. Bodies of kind
+    ``"soil"`` (shadows fall on them; no trait is theirs), one mesh for all."""
+    if scene.soil is None:
+        raise ValueError("clods need soil")
+    rng = np.random.default_rng([seed, 23])
+    half = scene.soil.spec.half_extent_m - CLOD_REACH_M
+    count = round(per_m2 * (2 * half) ** 2)
+    xy = rng.uniform(-half, half, (count, 2))
+    stems = np.array([[p.x_m, p.y_m] for p in scene.plants]).reshape(-1, 2)
+    if len(stems):
+        nearest = np.min(np.linalg.norm(xy[:, None, :] - stems[None, :, :], axis=2), axis=1)
+        xy = xy[nearest > CLOD_CLEAR_OF_STEMS_M + CLOD_RADIUS_M[1]]
+    unit = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=5)
+    unit_vertices = np.asarray(unit.vertices)
+    unit_triangles = np.asarray(unit.triangles, dtype=np.int32)
+    vertices, triangles, shade = [], [], []
+    for i, (x, y) in enumerate(xy):
+        rx, ry = rng.uniform(*CLOD_RADIUS_M, 2)
+        out = min(rng.uniform(*CLOD_PROTRUSION_M), 1.2 * max(rx, ry))
+        rz = out * rng.uniform(0.9, 1.6)
+        turn = rng.uniform(0.0, 2 * np.pi)
+        c, s_ = np.cos(turn), np.sin(turn)
+        local = unit_vertices * np.array([rx, ry, rz])
+        local[:, :2] = local[:, :2] @ np.array([[c, s_], [-s_, c]])
+        ground = float(scene.soil.height_m(np.array([x]), np.array([y]))[0])
+        vertices.append(local + np.array([x, y, ground + out - rz]))
+        triangles.append(unit_triangles + i * len(unit_vertices))
+        shade.append(np.full(len(unit_vertices), rng.uniform(0.5, 0.9)))
+    if not vertices:
+        return
+    points = np.concatenate(vertices)
+    rgb, ir = scene.soil.albedo(points)
+    factor = np.concatenate(shade).astype(np.float32)
+    factor *= rng.uniform(0.95, 1.05, len(points)).astype(np.float32)
+    scene.bodies.append(
+        Body(
+            "clods",
+            "soil",
+            points,
+            np.concatenate(triangles),
+            (rgb * factor[:, None]).astype(np.float32),
+            (ir * factor).astype(np.float32),
+        )
+    )
 
 
 def spheres_scene(

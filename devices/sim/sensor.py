@@ -43,6 +43,11 @@ class SensorModel:
     """Cast shadow rays towards the sun for the colour image."""
     supersample: int = 1
     """Rays per pixel side (IR and colour are averaged; 3 for calibration images)."""
+    color_noise: float = 0.0
+    """Standard deviation, in 8-bit levels, of each colour channel's own noise (0: the colour
+    varies only in brightness, 3 % per pixel). A colour camera's channels are read apart: dark
+    pixels change hue from one frame to the next (3-5 levels is common for a Kinect v2's colour
+    stream in shade)."""
     depth_offset_m: float = 0.0
     """Added to every depth measured: a unit's static offset (``shared/KINECT-V2.md``: 1-4 cm
     is common after calibration)."""

@@ -46,12 +46,14 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "depth_offset": _ON_THE_RIG,
     "lens_distortion": _ON_THE_RIG,
     "sunlight": _ON_THE_RIG,
+    "color_noise": _ON_THE_RIG,
     "camera": _ON_THE_RIG,
     "stations": _ON_THE_RIG,
     "stage": ("plot",),
     "plant_model": ("plot",),
     "lean": ("plot",),
     "leaf_width": ("plot",),
+    "clods": ("plot",),
     "plants": ("spheres",),
     "intrinsics_images": ("checkerboard",),
 }
@@ -130,6 +132,22 @@ def register(subparsers: Any) -> None:
         help="the sun's infrared on the depth camera, a share of a clear midday sun (0..1): "
         "depth noise rising with the ambient light over the returned light, and no depth where "
         "the return drowns in it (default: none, as under cloud)",
+    )
+    parser.add_argument(
+        "--color-noise",
+        default=None,
+        metavar="L",
+        help="each colour channel's own noise, standard deviation in 8-bit levels (0..10): dark "
+        "pixels (shade, moist soil, clods) change hue, as a colour camera's do (default: none, "
+        "brightness noise only)",
+    )
+    parser.add_argument(
+        "--clods",
+        default=None,
+        metavar="N",
+        help="plot scene: clods and stones on the soil, N per square metre (0..60; a tilled "
+        "seedbed has 10-40): 2.4-8 cm across, standing 1-4.5 cm out of the soil, darker than "
+        "it, none within 7 cm of a stem (default: none)",
     )
     parser.add_argument(
         "--camera",
@@ -354,6 +372,8 @@ def run(args: argparse.Namespace) -> int:
         "--depth-offset", args.depth_offset, -MAX_DEPTH_OFFSET_M, MAX_DEPTH_OFFSET_M, "metres"
     )
     sunlight = parse_number("--sunlight", args.sunlight, 0.0, 1.0, "of a clear midday sun")
+    color_noise = parse_number("--color-noise", args.color_noise, 0.0, 10.0, "levels")
+    clods = parse_number("--clods", args.clods, 0.0, 60.0, "per square metre")
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
     if localisation is not None:
         errors = replace(errors, locate_m=localisation[0], locate_deg=localisation[1])
@@ -380,6 +400,8 @@ def run(args: argparse.Namespace) -> int:
                 sunlight,
                 leaf_width,
                 args.lens_distortion,
+                color_noise=color_noise,
+                clods_per_m2=clods,
             )
             about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
             about |= {"stage": args.stage, "grid": rig.grid}
@@ -405,6 +427,10 @@ def run(args: argparse.Namespace) -> int:
                 about["depth_offset_m"] = depth_offset
             if sunlight is not None:  # absent: no sun in the depth (sessions unchanged)
                 about["sunlight"] = sunlight
+            if color_noise is not None:  # absent: brightness noise only (sessions unchanged)
+                about["color_noise_levels"] = color_noise
+            if clods is not None:  # absent: no clods (sessions unchanged)
+                about["clods_per_m2"] = clods
             if args.depth_only:
                 about["depth_only"] = True
             if args.lens_distortion:  # absent: undistorted images (sessions unchanged)
@@ -446,6 +472,9 @@ def build_world(
     sunlight: float | None = None,
     leaf_width: float | None = None,
     lens_distortion: bool = False,
+    *,
+    color_noise: float | None = None,
+    clods_per_m2: float | None = None,
 ) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.render import SensorModel
@@ -463,7 +492,15 @@ def build_world(
     soil = soil_for_plot(rig.plot_half_extent_m)
     if scene_name == "plot":
         scene = plot_scene(
-            seed, day, layout, soil, stage, plant_model, max_lean_deg, leaf_width or 1.0
+            seed,
+            day,
+            layout,
+            soil,
+            stage,
+            plant_model,
+            max_lean_deg,
+            leaf_width or 1.0,
+            clods_per_m2 or 0.0,
         )
     elif scene_name == "spheres":
         scene = spheres_scene(seed, day, plants, layout, soil)
@@ -472,7 +509,9 @@ def build_world(
     else:
         scene = checkerboard_scene(seed, rig)
     sensor = SensorModel(
-        depth_offset_m=depth_offset_m or 0.0, sun_ir=(sunlight or 0.0) * FULL_SUN_IR
+        depth_offset_m=depth_offset_m or 0.0,
+        sun_ir=(sunlight or 0.0) * FULL_SUN_IR,
+        color_noise=color_noise or 0.0,
     )
     from devices.camera.frames import KINECT_V2_DISTORTION, KINECT_V2_PAPER
 
