@@ -44,6 +44,15 @@ MIN_SOIL_SHARE = 0.01
 soil sample (levelling, local ground, registration): seedling plots leave 99 %, a threshold
 of -1 (every colour, as for white reference spheres among plants) leaves none."""
 
+NOISE_SIGMAS = 4.0
+"""A pixel is green only where its excess green stands this many times its brightness's noise
+above the soil's (:func:`noise_floors`), whatever the station's threshold."""
+NOISE_SUM_BIN = 24
+"""Width (levels of R + G + B) of the brightness bins whose soil gives the noise."""
+NOISE_MIN_PIXELS = 400
+"""Least soil pixels a brightness bin needs to measure its noise; a bin with fewer takes its
+nearest darker measured bin's, scaled by the sums (:func:`noise_floors`)."""
+
 NO_COLOUR = "no colour"
 NO_GREEN_CONTRAST = "colour has no green contrast"
 NO_SOIL_LEFT = "the excess-green threshold leaves no soil"
@@ -187,6 +196,63 @@ def exg_values(tally: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[n
     which changes no histogram, count or mean."""
     present = np.flatnonzero(tally)
     return exg_of_keys()[present], tally[present]
+
+
+def noise_floors(tally: NDArray[np.int64], threshold: float, sigmas: float) -> NDArray[np.float64]:
+    """(SUM_LEVELS,) the least excess green a pixel of each brightness (R + G + B) needs to be
+    told from the soil by colour, from a station's :func:`exg_tally`: the soil's median ExG in
+    its brightness bin (:data:`NOISE_SUM_BIN` levels) plus ``sigmas`` times the soil's spread
+    there (median minus 16th percentile: the lower side, which no leaf and no threshold
+    truncates). Soil is the pixels at or below ``threshold``.
+
+    A colour camera's noise is per channel, and ExG is a ratio: a level of noise moves a dark
+    pixel's ExG by about 2.4 / (R + G + B), 0.07 at RGB 40 with 3 levels of noise, against
+    thresholds of 0.15-0.25. Dark soil (in a plant's shadow, wet, a clod's shaded side) then
+    passes the threshold pixel by pixel, and where it stands more than the pass-through above
+    the local ground (clods) it became points and small "plants" (an independent renderer's
+    plots: 1-3 soil "plants" of 200-1000 points, widths 6-9 cm too wide). Bright soil's spread
+    is its texture, 0.01-0.04: its floor lies below every threshold measured, so nothing
+    changes where the colour is clean. A bin with too few soil pixels to measure
+    (:data:`NOISE_MIN_PIXELS`) takes the nearest darker measured bin's spread scaled by the
+    ratio of their sums (noise over brightness), and its median; above the brightest measured
+    bin the brightest's; a station with none measured gets no floor (minus infinity)."""
+    exg = exg_of_keys()
+    sums = np.arange(EXG_KEYS) % SUM_LEVELS
+    soil = (tally > 0) & (exg <= threshold)
+    floors = np.full(SUM_LEVELS, -np.inf)
+    bins = (SUM_LEVELS + NOISE_SUM_BIN - 1) // NOISE_SUM_BIN
+    which = sums[soil] // NOISE_SUM_BIN
+    values, weights = exg[soil], tally[soil]
+    order = np.lexsort((values, which))
+    which, values, weights = which[order], values[order], weights[order]
+    starts = np.searchsorted(which, np.arange(bins + 1))
+    measured: list[tuple[int, float, float]] = []  # bin, median, spread
+    for b in range(bins):
+        lo, hi = starts[b], starts[b + 1]
+        if hi <= lo or int(weights[lo:hi].sum()) < NOISE_MIN_PIXELS:
+            continue
+        cumulative = np.cumsum(weights[lo:hi])
+        median = values[lo + np.searchsorted(cumulative, cumulative[-1] * 0.5)]
+        low = values[lo + np.searchsorted(cumulative, cumulative[-1] * 0.16)]
+        measured.append((b, float(median), float(median - low)))
+    if not measured:
+        return floors
+    centre = (np.arange(bins) + 0.5) * NOISE_SUM_BIN
+    known = {b: (median, spread) for b, median, spread in measured}
+    for b in range(bins):
+        darker = [m for m in measured if m[0] <= b]
+        source = darker[-1] if darker else measured[0]
+        median, spread = known.get(b, (source[1], source[2] * centre[source[0]] / centre[b]))
+        floors[b * NOISE_SUM_BIN : (b + 1) * NOISE_SUM_BIN] = median + sigmas * spread
+    return floors
+
+
+def thresholds_by_key(threshold: float, floors: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """(EXG_KEYS + 1,) which colour keys are green: ExG above ``threshold`` and above the
+    floor of their brightness (``floors`` (SUM_LEVELS,), :func:`noise_floors`); :data:`NO_KEY`
+    never."""
+    bound = np.maximum(threshold, floors[np.arange(EXG_KEYS) % SUM_LEVELS])
+    return np.append(exg_of_keys() > bound, False)
 
 
 def otsu_threshold(values: NDArray[np.float64], weights: NDArray[np.int64] | None = None) -> float:

@@ -42,6 +42,7 @@ from fieldapp.recon.depth_only import read_scan_capture
 from fieldapp.recon.exg import (
     BY_COLOUR,
     NO_KEY,
+    NOISE_SIGMAS,
     Separation,
     choose_separation,
     exg_keys,
@@ -50,7 +51,9 @@ from fieldapp.recon.exg import (
     exg_values,
     keep_soil,
     mixed_pixel_threshold,
+    noise_floors,
     otsu_threshold,
+    thresholds_by_key,
     uncoloured_keys,
 )
 from fieldapp.recon.settings import CropSettings
@@ -280,10 +283,9 @@ def read_station(
         if not frames:
             return None, warnings
         frames, offset = _colour_on_depth(frames, workers)
-        separation, threshold, weak, rim_px = _separation(frames, exg_threshold)
+        separation, threshold, weak, rim_px, tally = _separation(frames, exg_threshold)
         grid = _soil_grid(frames[0].measured.shape, soil_pixel_stride)
-        exg = exg_of_keys()
-        keys = (np.append(exg > threshold, False), np.append(exg > weak, False))  # green, weak
+        keys = _green_keys(threshold, weak, tally)
         clouds = workers.map(
             lambda frame: _green_and_soil(frame, separation, keys, rim_px, grid, rays, crop),
             frames,
@@ -479,9 +481,24 @@ def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame |
         return _skipped(station, capture, error)
 
 
+def _green_keys(
+    threshold: float, weak: float, tally: NDArray[np.int64] | None
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """(EXG_KEYS + 1,) which colour keys are green and which weakly green: above the station's
+    threshold (``weak``) and, for green with its ``tally``, above its soil's noise at their
+    brightness (:func:`~fieldapp.recon.exg.noise_floors`). Weak green is held to the
+    threshold alone: it grows only from green, along a surface (a floor there took the
+    mixed pixels of leaf tips in shade)."""
+    exg = exg_of_keys()
+    weakly = np.append(exg > weak, False)
+    if tally is None or not np.isfinite(threshold):
+        return np.append(exg > threshold, False), weakly
+    return thresholds_by_key(threshold, noise_floors(tally, threshold, NOISE_SIGMAS)), weakly
+
+
 def _separation(
     frames: list[ReadFrame], exg_threshold: float | Literal["otsu"]
-) -> tuple[Separation, float, float, int]:
+) -> tuple[Separation, float, float, int, NDArray[np.int64] | None]:
     """How the station's plants are told from its soil, the ExG threshold, the weaker one a
     pixel next to green needs (:data:`WEAK_SHARE` of the way from the soil's mean ExG to the
     threshold; both infinite by geometry) and how far the leaves' rims are grown
@@ -491,13 +508,13 @@ def _separation(
     the cost."""
     tallies = [frame.tally for frame in frames if frame.tally is not None]
     if len(tallies) < len(frames):
-        return choose_separation(None), np.inf, np.inf, REGISTRATION_PX
+        return choose_separation(None), np.inf, np.inf, REGISTRATION_PX, None
     station_tally = tallies[0].copy()
     for tally in tallies[1:]:
         station_tally += tally  # in place: np.sum over the list is 200 times slower
     values, weights = exg_values(station_tally)
     if len(values) == 0:  # every pixel black: a colour stream that gave nothing
-        return choose_separation(None), np.inf, np.inf, REGISTRATION_PX
+        return choose_separation(None), np.inf, np.inf, REGISTRATION_PX, None
     otsu = otsu_threshold(values, weights)
     separation = choose_separation(values, weights, otsu)
     rim_px = REGISTRATION_PX
@@ -509,10 +526,11 @@ def _separation(
         threshold = float(exg_threshold)
     separation = keep_soil(separation, values, threshold, weights)
     if separation.by_geometry:
-        return separation, np.inf, np.inf, rim_px
+        return separation, np.inf, np.inf, rim_px, None
     soil = values <= threshold
     soil_mean = float(np.average(values[soil], weights=weights[soil])) if soil.any() else threshold
-    return separation, threshold, soil_mean + WEAK_SHARE * (threshold - soil_mean), rim_px
+    weak = soil_mean + WEAK_SHARE * (threshold - soil_mean)
+    return separation, threshold, weak, rim_px, station_tally
 
 
 def _green_and_soil(

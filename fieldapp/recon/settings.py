@@ -51,6 +51,11 @@ class FilterSettings(_Section):
     exg_threshold: float | Literal["otsu"] = "otsu"
     sor_neighbors: int = Field(default=35, ge=2)
     sor_std_ratio: float = Field(default=1.5, gt=0.0)
+    sor_min_distance_m: float = Field(default=0.02, ge=0.0)
+    """The statistical filter never removes a point whose mean distance to its neighbours is
+    within this (``filters.sor_limit``): about 3 times the pixel footprint at the crop's 2.25
+    m, where a surface seen once has its 35 nearest 2.2 footprints away on average. 0: the
+    paper's limit alone."""
     ror_radius_m: float = Field(default=0.008, gt=0.0)
     ror_min_points: int = Field(default=1, ge=1)
     voxel_size_m: float = Field(default=0.002, gt=0.0)

@@ -9,6 +9,8 @@ import pytest
 from fieldapp.recon.exg import (
     BY_COLOUR,
     EXG_KEYS,
+    NO_KEY,
+    NOISE_SIGMAS,
     excess_green,
     exg_keys,
     exg_of_keys,
@@ -16,7 +18,9 @@ from fieldapp.recon.exg import (
     exg_values,
     green_contrast,
     keep_soil,
+    noise_floors,
     otsu_threshold,
+    thresholds_by_key,
 )
 
 
@@ -69,3 +73,39 @@ def test_the_tallied_values_give_the_pixels_otsu_threshold_bit_for_bit() -> None
     for cut in (threshold, -1.0, float(np.quantile(exg, 0.005))):
         assert keep_soil(BY_COLOUR, values, cut, weights) == keep_soil(BY_COLOUR, exg, cut)
     assert keep_soil(BY_COLOUR, values, -1.0, weights).by_geometry
+
+
+def _pixels(rgb: tuple[int, int, int], noise: float, count: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.clip(np.rint(rng.normal(rgb, noise, (count, 3))), 0, 255).astype(np.uint8)
+
+
+def test_dark_soil_s_noise_raises_the_bar_for_dark_pixels_alone() -> None:
+    """Per-channel noise of 4 levels: the dark soil's pixels spread far past a threshold the
+    bright soil's never reach; the floors hold dark soil back and keep the leaves, bright
+    and in shade."""
+    bright_soil = _pixels((150, 118, 92), 4, 200_000, 1)
+    dark_soil = _pixels((42, 37, 31), 4, 60_000, 2)
+    bright_leaf, shaded_leaf = (
+        _pixels((70, 150, 45), 4, 8_000, 3),
+        _pixels((22, 50, 14), 4, 2_000, 4),
+    )
+    colors = np.concatenate([bright_soil, dark_soil, bright_leaf, shaded_leaf])
+    tally = exg_tally(exg_keys(colors))
+    threshold = 0.2  # as the stations' thresholds measured (0.15-0.25)
+    passed = excess_green(dark_soil) > threshold
+    assert passed.sum() >= 50  # the station's threshold alone lets dark soil through
+    floors = noise_floors(tally, threshold, NOISE_SIGMAS)
+    assert floors[42 + 37 + 31] > threshold > floors[150 + 118 + 92]
+    green = thresholds_by_key(threshold, floors)
+    assert green[exg_keys(dark_soil)].sum() <= 2
+    assert not green[exg_keys(bright_soil)].any()
+    assert green[exg_keys(bright_leaf)].all()
+    assert green[exg_keys(shaded_leaf)].mean() >= 0.99
+    assert not green[NO_KEY]
+
+
+def test_without_soil_to_measure_there_is_no_floor() -> None:
+    leaves = _pixels((70, 150, 45), 4, 8_000, 5)
+    tally = exg_tally(exg_keys(leaves))
+    assert np.isneginf(noise_floors(tally, -1.0, NOISE_SIGMAS)).all()  # every pixel green
