@@ -178,6 +178,7 @@ def filter_station(
             told[1].points,
             soil_band_m,
             None if steady is None else green_field.points,
+            settings.geometry_plant_min_m,
         )
         kept = {"geometry": int(is_plant.sum())}
         local_soil = soil_height_m < LOCAL_SOIL_M

@@ -51,6 +51,10 @@ class FilterSettings(_Section):
     exg_threshold: float | Literal["otsu"] = "otsu"
     sor_neighbors: int = Field(default=35, ge=2)
     sor_std_ratio: float = Field(default=1.5, gt=0.0)
+    geometry_plant_min_m: float = Field(default=0.08, ge=0.0)
+    """Without colour (plants told by geometry), how far above the local ground a connected
+    group must reach to be a plant: clods and stones of a tilled seedbed reach 5-6 cm
+    (``geometry_split.PLANT_MIN_M``); lower it for seedlings shorter than this."""
     sor_min_distance_m: float = Field(default=0.02, ge=0.0)
     """The statistical filter never removes a point whose mean distance to its neighbours is
     within this (``filters.sor_limit``): about 3 times the pixel footprint at the crop's 2.25

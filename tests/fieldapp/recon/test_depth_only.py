@@ -88,6 +88,48 @@ def test_geometry_keeps_the_plant_down_to_its_leaf_tip_and_drops_uneven_soil(see
     assert pass_through(soil[:, 2] - soil[:, 2].mean(), 0.01, 1.5).mean() > 0.25
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_clods_standing_clear_of_the_soil_are_no_plant(seed: int) -> None:
+    """A tilled seedbed's clods stand 1-6 cm out of the soil: by geometry alone they were
+    plants from 3 cm (a simulated depth-only 2 x 2 plot with clods: 91 "plants" for 4). A
+    plant must reach ``PLANT_MIN_M`` (8 cm); the seedling keeps its leaf down to the tip."""
+    rng = np.random.default_rng(seed)
+    soil = _soil(rng)
+    plant, leaf = _plant((rng.uniform(-0.3, 0.0), rng.uniform(-0.3, 0.3)))
+    clods = np.zeros(len(soil), dtype=bool)
+    for cx, cy, tall in zip(
+        rng.uniform(0.32, 0.55, 6),
+        rng.uniform(-0.5, 0.5, 6),
+        rng.uniform(0.035, 0.06, 6),
+        strict=True,
+    ):
+        r = np.hypot(soil[:, 0] - cx, soil[:, 1] - cy)
+        soil[:, 2] += tall * np.sqrt(np.clip(1 - (r / 0.035) ** 2, 0.0, None))
+        clods |= r < 0.02
+    points = np.concatenate([soil, plant])
+    sample = points[::4]
+    is_plant, _, _ = plants_above_local_ground(points, sample, soil_band_m=0.15)
+    assert not is_plant[: len(soil)][clods].any()
+    assert is_plant[len(soil) :].mean() > 0.95
+    kept_leaf = leaf[is_plant[-len(leaf) :]]
+    assert kept_leaf[:, 0].max() > leaf[:, 0].max() - 0.02
+    lower, _, _ = plants_above_local_ground(points, sample, 0.15, plant_min_m=0.03)
+    assert lower[: len(soil)][clods].any()  # the bar of before: the clods were plants
+
+
+@pytest.mark.slow
+def test_a_depth_only_plot_with_clods_finds_its_plants_and_no_clod(tmp_path: Path) -> None:
+    session = tmp_path / "cloddy"
+    options = ["--seed", "1", "--grid", "2", "--clods", "25", "--depth-only"]
+    assert main(["simulate", "--out", str(session), *options]) == 0
+    result = run_reconstruction(load_session(session), ReconstructionSettings())
+    truth = json.loads((session / "truth.json").read_text())
+    errors = matched_errors(result, truth)
+    assert len(result.plants) == len(truth["plants"]) == 4  # 91 with the bar at 3 cm
+    assert np.sqrt(np.mean(errors["dh_cm"] ** 2)) <= 1.0  # measured 0.42
+    assert np.sqrt(np.mean(errors["dw_cm"] ** 2)) <= 1.5  # measured 1.03
+
+
 def test_soil_a_low_leaf_lifts_at_its_median_stays_soil_at_its_own_depth() -> None:
     """Told apart on the blocks' median depths (in the sun), a soil pixel beside a leaf lying
     low over it has the leaf in its window, and its median stands clear of the ground where
