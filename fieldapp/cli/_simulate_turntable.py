@@ -57,16 +57,22 @@ def write_turntable_session(
     depth_only: bool,
     rig: TurntableRig | None = None,
     color_holes: bool = False,
+    color_noise: float | None = None,
 ) -> int:
     """Simulate and write the session and its truth; returns the number of captures.
     ``color_holes``: colour black where libfreenect2's registration gives none
-    (:func:`devices.sim.sensor.registered_as_libfreenect2`)."""
+    (:func:`devices.sim.sensor.registered_as_libfreenect2`); ``color_noise``: each colour
+    channel's own noise, levels (``SensorModel.color_noise``)."""
+    from devices.sim.render import SensorModel
     from devices.sim.sensor import registered_as_libfreenect2
 
     rig = rig or TurntableRig()
     plant = turntable_plant(seed, day)
     about: dict[str, Any] = {"scene": "turntable", "seed": seed, "day": day}
     about |= {"depth_only": depth_only} | ({"color_holes": True} if color_holes else {})
+    if color_noise is not None:  # absent: brightness noise only (sessions unchanged)
+        about["color_noise_levels"] = color_noise
+    sensor = SensorModel(color_noise=color_noise or 0.0)
     writer = SessionWriter.create(
         folder,
         f"sim-turntable-seed{seed}-day{day}",
@@ -77,7 +83,7 @@ def write_turntable_session(
         },
     )
     truths: list[dict[str, Any]] = []
-    for capture in turntable_captures(plant, rig, views, seed):
+    for capture in turntable_captures(plant, rig, views, seed, sensor=sensor):
         frame = capture.frame
         color = None if depth_only else frame.color
         if color is not None and color_holes:

@@ -46,7 +46,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "depth_offset": _ON_THE_RIG,
     "lens_distortion": _ON_THE_RIG,
     "sunlight": _ON_THE_RIG,
-    "color_noise": _ON_THE_RIG,
+    "color_noise": (*_ON_THE_RIG, "turntable"),
     "camera": _ON_THE_RIG,
     "stations": _ON_THE_RIG,
     "stage": ("plot",),
@@ -385,7 +385,9 @@ def run(args: argparse.Namespace) -> int:
         raise FieldappError(f"--out: {args.out} exists and is not a folder")
     try:
         if args.scene == "turntable":
-            count = _write_turntable(args.out, seed, day, views, args.depth_only, args.color_holes)
+            count = _write_turntable(
+                args.out, seed, day, views, args.depth_only, args.color_holes, color_noise
+            )
         else:
             world = build_world(
                 args.scene,
@@ -452,11 +454,19 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_turntable(
-    out: Path, seed: int, day: int, views: list[int], depth_only: bool, color_holes: bool
+    out: Path,
+    seed: int,
+    day: int,
+    views: list[int],
+    depth_only: bool,
+    color_holes: bool,
+    color_noise: float | None = None,
 ) -> int:
     from fieldapp.cli._simulate_turntable import write_turntable_session
 
-    return write_turntable_session(out, seed, day, views, depth_only, color_holes=color_holes)
+    return write_turntable_session(
+        out, seed, day, views, depth_only, color_holes=color_holes, color_noise=color_noise
+    )
 
 
 def build_world(
