@@ -127,11 +127,15 @@ def connect(path: Path) -> sqlite3.Connection:
     and foreign keys on."""
     try:
         connection = sqlite3.connect(path, isolation_level=None, timeout=BUSY_TIMEOUT_MS / 1000)
+    except sqlite3.DatabaseError as error:
+        raise ResultsDBError(f"{path}: not a usable results database ({error})") from None
+    try:
         connection.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
         mode = connection.execute("PRAGMA journal_mode = WAL").fetchone()[0]
         connection.execute("PRAGMA synchronous = FULL")
         connection.execute("PRAGMA foreign_keys = ON")
     except sqlite3.DatabaseError as error:
+        connection.close()  # not left to the collector: it holds the file (3.13 warns)
         raise ResultsDBError(f"{path}: not a usable results database ({error})") from None
     if mode != "wal":
         log.warning("%s: journal mode %s (WAL unavailable on this file system)", path, mode)

@@ -75,6 +75,28 @@ def test_newer_schema_and_non_database_are_refused(tmp_path):
         ResultsDB.open(tmp_path / "absent.sqlite", create=False)
 
 
+def test_a_file_refused_is_not_left_open(tmp_path, monkeypatch):
+    """The connection to a file that is not a database is closed when it is refused, not left
+    to the collector (Python 3.13 warns of an unclosed database, and the suite failed on it in
+    whichever later test the collector ran)."""
+    from fieldapp.results import schema
+
+    opened, real_connect = [], sqlite3.connect
+
+    def connect(*args, **kwargs):
+        opened.append(real_connect(*args, **kwargs))
+        return opened[-1]
+
+    monkeypatch.setattr(schema.sqlite3, "connect", connect)
+    junk = tmp_path / "junk.sqlite"
+    junk.write_bytes(b"this is not a database at all" * 100)
+    with pytest.raises(ResultsDBError, match="not a usable results database"):
+        ResultsDB.open(junk)
+    assert len(opened) == 1
+    with pytest.raises(sqlite3.ProgrammingError, match="closed"):
+        opened[0].execute("SELECT 1")
+
+
 def test_one_id_per_plant_all_season(tmp_path):
     with ResultsDB.open(tmp_path / "r.sqlite") as db:
         bases = record_season(db, tmp_path)
