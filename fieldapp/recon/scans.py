@@ -44,6 +44,7 @@ from fieldapp.recon.exg import (
     NO_KEY,
     NOISE_SIGMAS,
     Separation,
+    above_the_soil,
     choose_separation,
     exg_keys,
     exg_of_keys,
@@ -515,7 +516,7 @@ def _separation(
     values, weights = exg_values(station_tally)
     if len(values) == 0:  # every pixel black: a colour stream that gave nothing
         return choose_separation(None), np.inf, np.inf, REGISTRATION_PX, None
-    otsu = otsu_threshold(values, weights)
+    otsu = above_the_soil(values, weights, otsu_threshold(values, weights))
     separation = choose_separation(values, weights, otsu)
     rim_px = REGISTRATION_PX
     if exg_threshold == "otsu":

@@ -11,6 +11,7 @@ from fieldapp.recon.exg import (
     EXG_KEYS,
     NO_KEY,
     NOISE_SIGMAS,
+    above_the_soil,
     excess_green,
     exg_keys,
     exg_of_keys,
@@ -109,3 +110,45 @@ def test_without_soil_to_measure_there_is_no_floor() -> None:
     leaves = _pixels((70, 150, 45), 4, 8_000, 5)
     tally = exg_tally(exg_keys(leaves))
     assert np.isneginf(noise_floors(tally, -1.0, NOISE_SIGMAS)).all()  # every pixel green
+
+
+CORNER_STATION_EXG = (
+    7, 7, 5, 10, 15, 40, 42, 102, 207, 482, 1123, 2903, 6599, 14819, 31771, 56661, 98173,
+    148009, 191321, 241218, 201394, 189060, 140649, 93820, 53309, 27683, 12962, 5731, 2296,
+    986, 380, 187, 82, 45, 42, 33, 31, 43, 38, 57, 83, 120, 145, 198, 383, 340, 489, 569, 628,
+    669, 584, 611, 544, 464, 400, 348, 236, 198, 168, 143,
+)  # fmt: skip
+"""The pixels of an independent renderer's corner station with twice its colour noise, by
+ExG in 60 bins over -0.4..0.8: the soil's hump (spread 0.05) and the leaves, 0.7 %."""
+
+
+def test_otsu_s_cut_inside_noisy_soil_is_moved_above_it() -> None:
+    """Otsu's criterion favours the larger class: with the leaves a sliver of the pixels it
+    cuts the soil's own hump (that station: 0.015-0.05 against 0.20 elsewhere, 39 % of its
+    pixels "green"). Above the soil's spread the leaves stand apart."""
+    edges = np.linspace(-0.4, 0.8, len(CORNER_STATION_EXG) + 1)
+    values = (edges[:-1] + edges[1:]) / 2
+    weights = np.array(CORNER_STATION_EXG, dtype=np.int64)
+    otsu = otsu_threshold(values, weights)
+    assert otsu < 0.1 and weights[values > otsu].sum() > 0.1 * weights.sum()  # in the soil
+    moved = above_the_soil(values, weights, otsu)
+    assert 0.1 < moved < 0.45  # 0.20 on the station's own pixels (these are binned by 0.02)
+    assert weights[values > moved].sum() < 0.015 * weights.sum()
+
+
+@pytest.mark.parametrize("leaf_share", [0.02, 0.6])
+def test_otsu_s_cut_between_soil_and_leaves_stays(leaf_share: float) -> None:
+    """Leaves a fair share of the pixels, or most of them (a canopy seen from above): Otsu's
+    cut lies in the valley, above the soil's spread or below the median, and is kept."""
+    rng = np.random.default_rng(8)
+    leaves = int(1_000_000 * leaf_share)
+    values = np.concatenate(
+        [rng.normal(0.0, 0.03, 1_000_000 - leaves), rng.normal(0.5, 0.08, leaves)]
+    )
+    tally, edges = np.histogram(values, bins=4000, range=(-1.0, 2.0))
+    centres = (edges[:-1] + edges[1:]) / 2
+    present = tally > 0
+    values, weights = centres[present], tally[present].astype(np.int64)
+    otsu = otsu_threshold(values, weights)
+    assert 0.1 < otsu < 0.4
+    assert above_the_soil(values, weights, otsu) == otsu
