@@ -284,7 +284,13 @@ def read_station(
         if not frames:
             return None, warnings
         frames, offset = _colour_on_depth(frames, workers)
-        separation, threshold, weak, rim_px, tally = _separation(frames, exg_threshold)
+        separation, threshold, weak, rim_px, tally, moved = _separation(frames, exg_threshold)
+        if moved is not None:
+            warnings.append(
+                f"station {station}: Otsu's excess-green threshold {moved:.3f} cut inside the "
+                f"soil's colour noise (leaves a sliver of its pixels, noisy colour): "
+                f"{threshold:.3f} used, above the soil's spread"
+            )
         grid = _soil_grid(frames[0].measured.shape, soil_pixel_stride)
         keys = _green_keys(threshold, weak, tally)
         clouds = workers.map(
@@ -499,24 +505,26 @@ def _green_keys(
 
 def _separation(
     frames: list[ReadFrame], exg_threshold: float | Literal["otsu"]
-) -> tuple[Separation, float, float, int, NDArray[np.int64] | None]:
+) -> tuple[Separation, float, float, int, NDArray[np.int64] | None, float | None]:
     """How the station's plants are told from its soil, the ExG threshold, the weaker one a
     pixel next to green needs (:data:`WEAK_SHARE` of the way from the soil's mean ExG to the
     threshold; both infinite by geometry) and how far the leaves' rims are grown
     (:data:`MIXED_RIM_REACH_PX` where mixed pixels fill the valley, else
     :data:`REGISTRATION_PX`), judged on every measured pixel of the station: from their tally
     by colour key, the same threshold as of the pixels' values one by one, at a fraction of
-    the cost."""
+    the cost. Also the station's tally (for the noise floors) and, where Otsu's cut fell
+    inside the soil and was moved (:func:`~fieldapp.recon.exg.above_the_soil`), that cut."""
     tallies = [frame.tally for frame in frames if frame.tally is not None]
     if len(tallies) < len(frames):
-        return choose_separation(None), np.inf, np.inf, REGISTRATION_PX, None
+        return choose_separation(None), np.inf, np.inf, REGISTRATION_PX, None, None
     station_tally = tallies[0].copy()
     for tally in tallies[1:]:
         station_tally += tally  # in place: np.sum over the list is 200 times slower
     values, weights = exg_values(station_tally)
     if len(values) == 0:  # every pixel black: a colour stream that gave nothing
-        return choose_separation(None), np.inf, np.inf, REGISTRATION_PX, None
-    otsu = above_the_soil(values, weights, otsu_threshold(values, weights))
+        return choose_separation(None), np.inf, np.inf, REGISTRATION_PX, None, None
+    cut = otsu_threshold(values, weights)
+    otsu = above_the_soil(values, weights, cut)
     separation = choose_separation(values, weights, otsu)
     rim_px = REGISTRATION_PX
     if exg_threshold == "otsu":
@@ -527,11 +535,12 @@ def _separation(
         threshold = float(exg_threshold)
     separation = keep_soil(separation, values, threshold, weights)
     if separation.by_geometry:
-        return separation, np.inf, np.inf, rim_px, None
+        return separation, np.inf, np.inf, rim_px, None, None
     soil = values <= threshold
     soil_mean = float(np.average(values[soil], weights=weights[soil])) if soil.any() else threshold
     weak = soil_mean + WEAK_SHARE * (threshold - soil_mean)
-    return separation, threshold, weak, rim_px, station_tally
+    moved = cut if otsu != cut and exg_threshold == "otsu" else None
+    return separation, threshold, weak, rim_px, station_tally, moved
 
 
 def _green_and_soil(

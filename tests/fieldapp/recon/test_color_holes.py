@@ -104,7 +104,7 @@ def test_a_station_whose_colour_is_all_black_is_told_by_geometry_for_want_of_col
     depth, color, _ = _scene()
     capture = Capture(station=1, view=0, depth="d.png", color="c.png")
     frames = [frame_of(CaptureImages(capture, depth, np.zeros_like(color)))]
-    separation, threshold, weak, _, _ = _separation(frames, "otsu")
+    separation, threshold, weak, _, _, _ = _separation(frames, "otsu")
     assert separation.by_geometry and separation.reason == NO_COLOUR
     assert threshold == weak == np.inf
     holed = registered_as_libfreenect2(color, depth, K)

@@ -152,3 +152,28 @@ def test_otsu_s_cut_between_soil_and_leaves_stays(leaf_share: float) -> None:
     otsu = otsu_threshold(values, weights)
     assert 0.1 < otsu < 0.4
     assert above_the_soil(values, weights, otsu) == otsu
+
+
+def test_a_moved_cut_is_said(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where Otsu's cut is moved out of the soil, the station's reading says so (the cut, the
+    threshold used); where it is kept, nothing."""
+    from devices.camera.frames import KINECT_V2_PAPER
+    from fieldapp.io.session import Capture, CaptureImages
+    from fieldapp.recon import scans
+
+    rng = np.random.default_rng(9)
+    h, w = KINECT_V2_PAPER.height, KINECT_V2_PAPER.width
+    color = np.clip(rng.normal((110, 95, 80), 4, (h, w, 3)), 0, 255).astype(np.uint8)
+    color[:40, :40] = (60, 140, 40)
+    depth = np.full((h, w), 2.0, np.float32)
+    frames = [
+        scans.frame_of(
+            CaptureImages(Capture(station=1, view=0, depth="d", color="c"), depth, color)
+        )
+    ]
+    *_, kept = scans._separation(frames, "otsu")
+    assert kept is None
+    monkeypatch.setattr(scans, "above_the_soil", lambda values, weights, cut: cut + 0.1)
+    *_, tally, moved = scans._separation(frames, "otsu")
+    assert tally is not None
+    assert moved == otsu_threshold(*exg_values(tally))  # the cut as Otsu made it
