@@ -282,8 +282,9 @@ def add_clods(scene: Scene, seed: int, per_m2: float) -> None:
     unit = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=5)
     unit_vertices = np.asarray(unit.vertices)
     unit_triangles = np.asarray(unit.triangles, dtype=np.int32)
+    grounds = scene.soil.height_m(xy[:, 0], xy[:, 1])
     vertices, triangles, shade = [], [], []
-    for i, (x, y) in enumerate(xy):
+    for i, ((x, y), ground) in enumerate(zip(xy, grounds, strict=True)):
         rx, ry = rng.uniform(*CLOD_RADIUS_M, 2)
         out = min(rng.uniform(*CLOD_PROTRUSION_M), 1.2 * max(rx, ry))
         rz = out * rng.uniform(0.9, 1.6)
@@ -291,7 +292,6 @@ def add_clods(scene: Scene, seed: int, per_m2: float) -> None:
         c, s_ = np.cos(turn), np.sin(turn)
         local = unit_vertices * np.array([rx, ry, rz])
         local[:, :2] = local[:, :2] @ np.array([[c, s_], [-s_, c]])
-        ground = float(scene.soil.height_m(np.array([x]), np.array([y]))[0])
         vertices.append(local + np.array([x, y, ground + out - rz]))
         triangles.append(unit_triangles + i * len(unit_vertices))
         shade.append(np.full(len(unit_vertices), rng.uniform(0.5, 0.9)))

@@ -217,41 +217,42 @@ def noise_floors(tally: NDArray[np.int64], threshold: float, sigmas: float) -> N
     ratio of their sums (noise over brightness), and its median; above the brightest measured
     bin the brightest's; a station with none measured gets no floor (minus infinity)."""
     exg = exg_of_keys()
-    sums = np.arange(EXG_KEYS) % SUM_LEVELS
     soil = (tally > 0) & (exg <= threshold)
-    floors = np.full(SUM_LEVELS, -np.inf)
+    values, weights, which = exg[soil], tally[soil], _key_sums()[soil] // NOISE_SUM_BIN
     bins = (SUM_LEVELS + NOISE_SUM_BIN - 1) // NOISE_SUM_BIN
-    which = sums[soil] // NOISE_SUM_BIN
-    values, weights = exg[soil], tally[soil]
-    order = np.lexsort((values, which))
-    which, values, weights = which[order], values[order], weights[order]
-    starts = np.searchsorted(which, np.arange(bins + 1))
-    measured: list[tuple[int, float, float]] = []  # bin, median, spread
+    measured = {}  # bin: (median, spread)
     for b in range(bins):
-        lo, hi = starts[b], starts[b + 1]
-        if hi <= lo or int(weights[lo:hi].sum()) < NOISE_MIN_PIXELS:
-            continue
-        cumulative = np.cumsum(weights[lo:hi])
-        median = values[lo + np.searchsorted(cumulative, cumulative[-1] * 0.5)]
-        low = values[lo + np.searchsorted(cumulative, cumulative[-1] * 0.16)]
-        measured.append((b, float(median), float(median - low)))
+        in_bin = which == b
+        if int(weights[in_bin].sum()) >= NOISE_MIN_PIXELS:
+            median, low = _weighted_quantiles(values[in_bin], weights[in_bin], 0.5, 0.16)
+            measured[b] = (median, median - low)
+    floors = np.full(SUM_LEVELS, -np.inf)
     if not measured:
         return floors
     centre = (np.arange(bins) + 0.5) * NOISE_SUM_BIN
-    known = {b: (median, spread) for b, median, spread in measured}
+    source = min(measured)  # below the darkest measured bin, the darkest's
     for b in range(bins):
-        darker = [m for m in measured if m[0] <= b]
-        source = darker[-1] if darker else measured[0]
-        median, spread = known.get(b, (source[1], source[2] * centre[source[0]] / centre[b]))
+        if b in measured:
+            source = b
+        median, spread = measured[source]
+        spread *= centre[source] / centre[b]  # 1 where measured
         floors[b * NOISE_SUM_BIN : (b + 1) * NOISE_SUM_BIN] = median + sigmas * spread
     return floors
+
+
+@cache
+def _key_sums() -> NDArray[np.int64]:
+    """(EXG_KEYS,) the brightness R + G + B of each colour key (read-only)."""
+    sums = np.arange(EXG_KEYS, dtype=np.int64) % SUM_LEVELS
+    sums.flags.writeable = False
+    return sums
 
 
 def thresholds_by_key(threshold: float, floors: NDArray[np.float64]) -> NDArray[np.bool_]:
     """(EXG_KEYS + 1,) which colour keys are green: ExG above ``threshold`` and above the
     floor of their brightness (``floors`` (SUM_LEVELS,), :func:`noise_floors`); :data:`NO_KEY`
     never."""
-    bound = np.maximum(threshold, floors[np.arange(EXG_KEYS) % SUM_LEVELS])
+    bound = np.maximum(threshold, floors[_key_sums()])
     return np.append(exg_of_keys() > bound, False)
 
 
@@ -303,11 +304,7 @@ def above_the_soil(values: NDArray[np.float64], weights: NDArray[np.int64], vall
     Otsu's of what lies above those spreads (the soil's tail and the leaves). A cut above
     them, or below the median (leaves the bulk of the pixels: a canopy seen from above), is
     kept. The threshold moved is never under those spreads."""
-    order = np.argsort(values)
-    cumulative = np.cumsum(weights[order])
-    total = cumulative[-1]
-    median = float(values[order][np.searchsorted(cumulative, total * 0.5)])
-    low = float(values[order][np.searchsorted(cumulative, total * 0.16)])
+    median, low = _weighted_quantiles(values, weights, 0.5, 0.16)
     bound = median + SOIL_MODE_SPREADS * (median - low)
     upper = values > bound
     if not median < valley < bound or not upper.any():
@@ -344,9 +341,17 @@ def mixed_pixel_threshold(
 
 
 def _weighted_median(values: NDArray[np.float64], weights: NDArray[np.int64]) -> float:
+    return _weighted_quantiles(values, weights, 0.5)[0]
+
+
+def _weighted_quantiles(
+    values: NDArray[np.float64], weights: NDArray[np.int64], *shares: float
+) -> list[float]:
+    """The values at ``shares`` (0-1) of the weight of ``values`` (N,), each counted
+    ``weights`` (N,) times."""
     order = np.argsort(values)
     cumulative = np.cumsum(weights[order])
-    return float(values[order][np.searchsorted(cumulative, cumulative[-1] / 2.0)])
+    return [float(values[order][np.searchsorted(cumulative, cumulative[-1] * q)]) for q in shares]
 
 
 def _valley(

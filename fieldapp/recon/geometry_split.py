@@ -15,11 +15,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from fieldapp.recon.settings import FilterSettings
+
 GROUND_CELL_M = 0.10
 GROUND_PERCENTILE = 0.2
 MIN_CELL_POINTS = 4
 LOW_M = 0.012
-PLANT_MIN_M = 0.08
+PLANT_MIN_M: float = FilterSettings.model_fields["geometry_plant_min_m"].default
 """How far above the local ground a connected group must reach to be a plant
 (``FilterSettings.geometry_plant_min_m``): clods and stones stand up to 5-6 cm out of a
 tilled seedbed over its local ground (a simulated plot with clods 1-4.5 cm out of a soil with
