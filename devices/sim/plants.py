@@ -46,6 +46,15 @@ TOUCHING_LEAF_REACH = 1.8
 """Leaf length relative to the seedling model's at the ``touching`` stage: the canopy spreads
 to 1.0-1.5 m across, so leaves cross the 80 cm spacing."""
 
+GROUNDED_TIP_DEG = 176.0
+"""A grounded leaf's midrib ends this far from the vertical: it comes down to the soil nearly
+straight, as an old lower leaf arching over does."""
+GROUNDED_BEND_AT = 0.6
+"""A grounded leaf has turned fully down at this share of its length."""
+GROUNDED_REACH_M = 0.05
+"""A grounded leaf is long enough to reach this far below the ground (model units, before the
+plant is scaled; :func:`settle_on_ground` lays what would be under the soil on it)."""
+
 LEAF_RGB = np.array([0.14, 0.36, 0.06], dtype=np.float32)
 STEM_RGB = np.array([0.45, 0.55, 0.25], dtype=np.float32)
 LEAF_IR = 0.55
@@ -125,12 +134,16 @@ def make_plant(
     model: str = "distichous",
     max_lean_deg: float | None = None,
     leaf_width: float = 1.0,
+    grounded_leaves: float = 0.0,
 ) -> PlantMesh:
     """Draw the plant of ``seed`` on ``day`` at ``stage`` (one of :data:`STAGES`), standing at
     ``base_xy_m`` on ground ``ground_z_m``, from plant ``model`` (one of :data:`PLANT_MODELS`).
     ``max_lean_deg``: the model's lean range scaled to end there (same draws, so the same plant
     leaning more or less); ``None``: the model's own. ``leaf_width``: every leaf blade that many
     times as wide as the model draws it (:data:`LEAF_WIDTH_RANGE`; same draws otherwise).
+    ``grounded_leaves``: the chance (0..1) that each leaf of the plant's lower half arches over
+    and comes down to the soil (:func:`grounded_theta`; own draws, so 0 gives the plant as
+    before and a larger share grounds more of the same leaves).
 
     Leaf tips may droop below uneven soil: lift them with :func:`settle_on_ground`.
     """
@@ -139,11 +152,12 @@ def make_plant(
     if model not in PLANT_MODELS:
         raise ValueError(f"plant model must be one of {', '.join(PLANT_MODELS)}, got {model!r}")
     check_leaf_width(leaf_width)
+    grounded = grounded_draws(seed, grounded_leaves)
     if model == "irregular":
         from devices.sim.plants_irregular import make_irregular_plant
 
         return make_irregular_plant(
-            seed, day, base_xy_m, ground_z_m, stage, max_lean_deg, leaf_width
+            seed, day, base_xy_m, ground_z_m, stage, max_lean_deg, leaf_width, grounded
         )
     rng = np.random.default_rng([seed, 7])
     base_leaves = int(rng.integers(5, 8))
@@ -165,7 +179,8 @@ def make_plant(
     for k in range(MAX_LEAVES):
         params = rng.uniform(0.0, 1.0, 6)  # drawn for every leaf, so growth keeps the old ones
         if k < count:
-            parts.append(_leaf(k, count, azimuth0 + np.pi * k, params, reach, leaf_width))
+            down = bool(grounded[k]) and k <= (count - 1) / 2
+            parts.append(_leaf(k, count, azimuth0 + np.pi * k, params, reach, leaf_width, down))
     vertices = np.concatenate([p[0] for p in parts])
     triangles = np.concatenate(_offset_triangles([p[1] for p in parts])).astype(np.int32)
     albedo = np.concatenate([p[2] for p in parts])
@@ -189,6 +204,28 @@ def make_plant(
         organ_of_vertex=organ,
         leaves=count,
     )
+
+
+def grounded_draws(seed: int, share: float) -> NDArray[np.bool_]:
+    """(MAX_LEAVES,) which leaves of the plant of ``seed`` would come down to the soil at
+    ``share`` (each of the lower half's with that chance; the models keep the lower half)."""
+    if not 0.0 <= share <= 1.0:
+        raise ValueError(f"grounded leaves must be a share from 0 to 1, got {share}")
+    return np.random.default_rng([seed, 7, 2]).uniform(0.0, 1.0, MAX_LEAVES) < share
+
+
+def grounded_theta(
+    u: NDArray[np.float64], rise: float, node_z: float, length: float
+) -> tuple[NDArray[np.float64], float]:
+    """A grounded leaf's midrib: its angle from the vertical at each of the sections ``u``
+    (0..1 along it, equally spaced), rising at ``rise`` (radians) and turned down to
+    :data:`GROUNDED_TIP_DEG` by :data:`GROUNDED_BEND_AT` of its length; and its length, at least
+    ``length`` and enough to come from ``node_z`` down to :data:`GROUNDED_REACH_M` under the
+    ground."""
+    tip = np.radians(GROUNDED_TIP_DEG)
+    theta = rise + (tip - rise) * np.minimum(u / GROUNDED_BEND_AT, 1.0) ** 1.2
+    lowest = float(np.min(np.cumsum(np.diff(u, prepend=0.0) * np.cos(theta))))
+    return theta, max(length, (node_z + GROUNDED_REACH_M) / -lowest)
 
 
 def settle_on_ground(mesh: PlantMesh, ground_z_m: NDArray[np.float64]) -> PlantMesh:
@@ -238,9 +275,11 @@ def _leaf(
     p: NDArray[np.float64],
     reach: float = 1.0,
     breadth: float = 1.0,
+    grounded: bool = False,
 ) -> Part:
     """Leaf ``k`` of ``count`` (0 lowest) as a folded ribbon with three vertices per section,
-    ``reach`` times the seedling's length, ``breadth`` times its width.
+    ``reach`` times the seedling's length, ``breadth`` times its width; ``grounded``: arching
+    over down to the soil (:func:`grounded_theta`).
 
     Lower leaves are shorter, start flatter and arch over; the top ones stand up in the whorl.
     """
@@ -257,6 +296,8 @@ def _leaf(
     )
     u = np.linspace(0.0, 1.0, LEAF_SEGMENTS + 1)
     theta = rise + (tip - rise) * u**1.5
+    if grounded:
+        theta, length = grounded_theta(u, rise, node_z, length)
     heading = np.stack([np.cos(az), np.sin(az), np.zeros_like(az)], 1)
     tangent = np.sin(theta)[:, None] * heading + np.cos(theta)[:, None] * np.array([0, 0, 1.0])
     steps = np.diff(u, prepend=0.0)[:, None] * length * tangent

@@ -44,6 +44,7 @@ from devices.sim.plants import (
     _offset_triangles,
     _strip,
     check_lean,
+    grounded_theta,
     growth_factor,
     leaves_on_day,
 )
@@ -71,9 +72,11 @@ def make_irregular_plant(
     stage: str,
     max_lean_deg: float | None = None,
     leaf_width: float = 1.0,
+    grounded: NDArray[np.bool_] | None = None,
 ) -> PlantMesh:
     """The ``irregular`` plant of ``seed`` on ``day`` at ``stage`` standing at ``base_xy_m``
-    (``max_lean_deg``, ``leaf_width``: as :func:`devices.sim.plants.make_plant`'s)."""
+    (``max_lean_deg``, ``leaf_width``: as :func:`devices.sim.plants.make_plant`'s; ``grounded``:
+    which leaves of the lower half come down to the soil, by index)."""
     rng = np.random.default_rng([seed, 29])
     base_leaves = int(rng.integers(4, 8))
     count = leaves_on_day(base_leaves, day)
@@ -105,7 +108,8 @@ def make_irregular_plant(
         if k < count:
             rank = k / max(count - 1, 1)
             azimuth = azimuth0 + np.pi * k + np.radians(PHYLLOTAXY_SD_DEG) * _normal(draws[0])
-            parts.append(_leaf(rank, float(nodes[k]), azimuth, longest_m, breadth, draws))
+            down = grounded is not None and bool(grounded[k]) and rank <= 0.5
+            parts.append(_leaf(rank, float(nodes[k]), azimuth, longest_m, breadth, draws, down))
     top = float(nodes[count - 1]) + 0.04 * height_m
     parts.insert(0, _stem(top, 0.5 * stem_diameter_m, ellipse, azimuth0))
     vertices = np.concatenate([p[0] for p in parts])
@@ -169,9 +173,11 @@ def _leaf(
     longest_m: float,
     breadth: float,
     d: NDArray[np.float64],
+    grounded: bool = False,
 ) -> Part:
     """One leaf from the stem's axis at height ``node_m``; ``rank`` 0 lowest, 1 highest;
-    ``breadth`` its mean maximum width per length; ``d`` its 16 uniform draws."""
+    ``breadth`` its mean maximum width per length; ``d`` its 16 uniform draws; ``grounded``:
+    arching over down to the soil (:func:`devices.sim.plants.grounded_theta`)."""
     length = longest_m * max(0.45, 1.0 - ((rank - 0.6) / 0.85) ** 2) * np.exp(0.1 * _normal(d[1]))
     width = length * breadth * (0.8 + 0.4 * d[2]) * (0.75 if rank > 0.85 else 1.0)
     habit = _habit(rank, d[3])
@@ -182,9 +188,13 @@ def _leaf(
         ]
     )
     power = 1.3 + 1.2 * d[6]  # the angle grows as u ** power: curvature growing along the leaf
+    if grounded:  # long enough to reach the soil, then as many sections as that needs
+        length = grounded_theta(np.linspace(0.0, 1.0, 61), theta0, node_m, length)[1]
     segments = int(np.clip(round(length / SEGMENT_M), 16, 60))
     u = np.linspace(0.0, 1.0, segments + 1)
     theta = theta0 + (tip - theta0) * u**power
+    if grounded:
+        theta = grounded_theta(u, theta0, node_m, length)[0]
     drift = np.radians(25.0) * (d[7] - 0.5) * u**1.5  # the midrib sweeping sideways
     az = azimuth + drift
     heading = np.stack([np.cos(az), np.sin(az), np.zeros_like(az)], 1)

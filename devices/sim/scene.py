@@ -190,11 +190,13 @@ def add_plot(
     plant_model: str = "distichous",
     max_lean_deg: float | None = None,
     leaf_width: float = 1.0,
+    grounded_leaves: float = 0.0,
 ) -> None:
     """Sow the plot of ``seed`` (positions and plants do not depend on ``day``) at ``stage``
     (:data:`devices.sim.plants.STAGES`) with plants of ``plant_model``
     (:data:`devices.sim.plants.PLANT_MODELS`), leaning up to ``max_lean_deg`` (``None``: as the
-    model's plants do), their leaf blades ``leaf_width`` times the model's width."""
+    model's plants do), their leaf blades ``leaf_width`` times the model's width, each lower
+    leaf coming down to the soil with the chance ``grounded_leaves``."""
     if scene.soil is None:
         raise ValueError("a plot needs soil")
     rng = np.random.default_rng([seed, 11])
@@ -209,6 +211,7 @@ def add_plot(
             plant_model,
             max_lean_deg,
             leaf_width,
+            grounded_leaves,
         )
         ground = scene.soil.height_m(mesh.vertices_m[:, 0], mesh.vertices_m[:, 1])
         scene.add_plant(f"p{index + 1:02d}", settle_on_ground(mesh, ground))
@@ -246,12 +249,24 @@ def plot_scene(
     max_lean_deg: float | None = None,
     leaf_width: float = 1.0,
     clods_per_m2: float = 0.0,
+    grounded_leaves: float = 0.0,
 ) -> Scene:
     """The paper's plot: 16 maize plants at 0.8 m on uneven soil (seedlings by default; or
     ``layout``; plants of ``plant_model``, leaning up to ``max_lean_deg``, leaf blades
-    ``leaf_width`` times the model's width; ``clods_per_m2``: :func:`add_clods`)."""
+    ``leaf_width`` times the model's width; ``clods_per_m2``: :func:`add_clods`;
+    ``grounded_leaves``: :func:`add_plot`)."""
     scene = empty_scene(seed, soil)
-    add_plot(scene, seed, day, layout or PlotLayout(), stage, plant_model, max_lean_deg, leaf_width)
+    add_plot(
+        scene,
+        seed,
+        day,
+        layout or PlotLayout(),
+        stage,
+        plant_model,
+        max_lean_deg,
+        leaf_width,
+        grounded_leaves,
+    )
     if clods_per_m2 > 0.0:
         add_clods(scene, seed, clods_per_m2)
     return scene

@@ -53,6 +53,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "plant_model": ("plot",),
     "lean": ("plot",),
     "leaf_width": ("plot",),
+    "grounded_leaves": ("plot",),
     "clods": ("plot",),
     "plants": ("spheres",),
     "intrinsics_images": ("checkerboard",),
@@ -185,6 +186,14 @@ def register(subparsers: Any) -> None:
         help="plot scene: every leaf blade F times as wide as the plant model draws it, "
         "0.3..1.5 (default 1: seedling blades 5-11 cm wide in the first model, about 4.5 in "
         "the second; a maize seedling's are 1.5-4 cm, about 0.35)",
+    )
+    parser.add_argument(
+        "--grounded-leaves",
+        default=None,
+        metavar="S",
+        help="plot scene: each leaf of a plant's lower half arches over and comes down to the "
+        "soil with this chance, 0..1, its tip 8-50 cm from the stem, as older plants' lower "
+        "leaves do (default 0)",
     )
     parser.add_argument(
         "--stations", default=None, help="stations to visit, e.g. 4,5 or 1-9 (default: all)"
@@ -366,6 +375,7 @@ def run(args: argparse.Namespace) -> int:
     )
     lean = parse_degrees("--lean", args.lean, MAX_LEAN_DEG)
     leaf_width = parse_number("--leaf-width", args.leaf_width, *LEAF_WIDTH_RANGE, "times the width")
+    grounded = parse_number("--grounded-leaves", args.grounded_leaves, 0.0, 1.0, "(a chance)")
     table_error = parse_degrees("--table-error", args.table_error, MAX_TABLE_ERROR_DEG)
     color_shift = parse_color_shift(args.color_shift)
     depth_offset = parse_number(
@@ -404,6 +414,7 @@ def run(args: argparse.Namespace) -> int:
                 args.lens_distortion,
                 color_noise=color_noise,
                 clods_per_m2=clods,
+                grounded_leaves=grounded,
             )
             about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
             about |= {"stage": args.stage, "grid": rig.grid}
@@ -433,6 +444,8 @@ def run(args: argparse.Namespace) -> int:
                 about["color_noise_levels"] = color_noise
             if clods is not None:  # absent: no clods (sessions unchanged)
                 about["clods_per_m2"] = clods
+            if grounded is not None:  # absent: no leaf down to the soil (sessions unchanged)
+                about["grounded_leaves"] = grounded
             if args.depth_only:
                 about["depth_only"] = True
             if args.lens_distortion:  # absent: undistorted images (sessions unchanged)
@@ -485,6 +498,7 @@ def build_world(
     *,
     color_noise: float | None = None,
     clods_per_m2: float | None = None,
+    grounded_leaves: float | None = None,
 ) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.render import SensorModel
@@ -511,6 +525,7 @@ def build_world(
             max_lean_deg,
             leaf_width or 1.0,
             clods_per_m2 or 0.0,
+            grounded_leaves or 0.0,
         )
     elif scene_name == "spheres":
         scene = spheres_scene(seed, day, plants, layout, soil)
