@@ -24,7 +24,9 @@ from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.geodesic import (
     UNREACHED,
     Assignment,
+    VoxelGraph,
     assign_to_stems,
+    leaf_ends,
     voxel_graph,
     voxel_neighbours,
 )
@@ -53,13 +55,17 @@ NOISE = -1
 
 
 def assign_by_settings(
-    points_m: NDArray[np.float64], stems_xy_m: NDArray[np.float64], s: StemSettings
+    points_m: NDArray[np.float64],
+    stems_xy_m: NDArray[np.float64],
+    s: StemSettings,
+    graph: VoxelGraph | None = None,
 ) -> Assignment:
     """Every point of ``points_m`` (N, 3) to the stem at ``stems_xy_m`` (S, 2) it is nearest to
-    along the plant (:func:`fieldapp.recon.geodesic.assign_to_stems` over a voxel graph), with
-    the stem settings ``s``: one place for the reconstruction and manual splits alike."""
+    along the plant (:func:`fieldapp.recon.geodesic.assign_to_stems` over a voxel graph, or
+    ``graph``, the points' when the caller has built it), with the stem settings ``s``: one
+    place for the reconstruction and manual splits alike."""
     return assign_to_stems(
-        voxel_graph(points_m, s.graph_voxel_m),
+        voxel_graph(points_m, s.graph_voxel_m) if graph is None else graph,
         stems_xy_m,
         s.seed_radius_m,
         s.seed_height_m,
@@ -281,9 +287,36 @@ def _labels(
     ambiguous = np.zeros(len(points_m), dtype=bool)
     if stems:
         s = settings.stems
-        assignment = assign_by_settings(points_m, np.array([stem.xy_m for stem in stems]), s)
+        xy = np.array([stem.xy_m for stem in stems])
+        graph = voxel_graph(points_m, s.graph_voxel_m)
+        assignment = assign_by_settings(points_m, xy, s, graph)
         labels[:] = assignment.stem
         ambiguous = assignment.ambiguous
+        into = np.arange(len(stems))
+        if s.leaf_ends:
+            into = leaf_ends(
+                graph,
+                np.array([[*stem.xy_m, stem.ground_z_m] for stem in stems]),
+                assignment,
+                s.seed_radius_m,
+                s.seed_height_m,
+                s.reach_m,
+                s.leaf_end_share,
+                s.leaf_end_slack_m,
+            )
+        ended = into != np.arange(len(stems))
+        if ended.any() and assignment.runner_up is not None:
+            reached = labels >= 0
+            labels[reached] = into[labels[reached]]
+            # a doubt between a leaf's end and the plant it grows from is none once they are one
+            runner = assignment.runner_up
+            settled = reached & (runner >= 0)
+            settled[settled] = labels[settled] == into[runner[settled]]
+            ambiguous = ambiguous & ~settled
+            merges.append(
+                f"{int(ended.sum())} stems found where a leaf comes down to the soil merged into "
+                "the plant the leaf grows from"
+            )
         guessed = _join_fragments(
             points_m, labels, settings.cluster_voxel_m, s.ambiguity_margin_m, merges
         )

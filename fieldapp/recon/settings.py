@@ -175,6 +175,16 @@ class StemSettings(_Section):
     """The leaves of every plant with an ambiguous point traced as ribbons and followed across
     their contacts (``fieldapp/recon/ribbons.py``): a leaf lying on a neighbour's keeps its
     outer part."""
+    leaf_ends: bool = True
+    """A stem found where a plant's leaf comes down to the soil is merged into that plant
+    (``geodesic.leaf_ends``, by ``leaf_end_share`` and ``leaf_end_slack_m``)."""
+    leaf_end_share: float = Field(default=0.9, gt=0.0, le=1.0)
+    """A stem whose points above the soil lie, this share of them or more, on the way along the
+    plant between its foot and the stem that reaches them second is the end of that plant's
+    leaf come down to the soil, and is merged into it (``geodesic.leaf_ends``)."""
+    leaf_end_slack_m: float = Field(default=0.2, ge=0.0)
+    """A point is on that way when the two feet's paths to it are at most this much longer
+    than the shortest way between the feet."""
 
 
 class PlantSettings(_Section):
