@@ -92,6 +92,7 @@ def labels(folder: Path, session: str) -> tuple[NDArray[np.intp], list[str]]:
         plant_model=truth.get("plant_model", "distichous"),
         max_lean_deg=truth.get("max_lean_deg"),  # simulate --lean
         leaf_width=truth.get("leaf_width", 1.0),  # simulate --leaf-width
+        grounded_leaves=truth.get("grounded_leaves", 0.0),  # simulate --grounded-leaves
     )
     samples, owner, names = _surface_samples(scene, offset)
     tree = cKDTree(samples)

@@ -460,7 +460,7 @@ def leaf_ends(
     it grows from (its tip lying on the soil aside). A plant, even a seedling touching a
     neighbour, has a leaf branching off that way. Measured (share of the standing voxels within
     0.2 m of the way): 124 of 128 leaf ends on ten simulated plots with leaves down to the soil
-    0.90 or more (the other four 0.69-0.83: they took part of a neighbour too); the plants of 24
+    0.90 or more (the other four 0.69-0.83: they hold points off that way too); the plants of 25
     touching and seedling plots at most 0.46; two-leaved seedlings whose leaf a tall plant's
     runs through at most 0.80 (docs/RECONSTRUCTION.md "Leaves down to the soil")."""
     stems = len(feet_m)
