@@ -33,6 +33,12 @@ UNREACHED = -1
 LYING_M = 0.04
 """A leaf's end lying on the soil, this high above its foot's ground at most, is not weighed
 by :func:`leaf_ends`: it lies beyond the foot, off the way to the plant it grows from."""
+LEAF_END_SIZE = 0.45
+"""A leaf's end holds at most this share of the voxels the plant it grows from holds
+(:func:`leaf_ends`; measured at most 0.36 on the simulated plots with leaves down to the soil):
+a plant of one leaf whose leaf touches its neighbour's lies on the way between their feet as
+much as a leaf's end does, but is not that much smaller (0.54-0.83 in the synthetic pairs of
+``tests/fieldapp/recon/touching.py``)."""
 SHEET_THICKNESS = 0.06
 SHEET_RADIUS_M = 0.035
 SHEET_MIN_ANGLE_DEG = 35.0
@@ -453,7 +459,8 @@ def leaf_ends(
     merged into (itself when kept): a stem whose voxels more than :data:`LYING_M` above its
     ground lie, ``share`` of them or more, along the way between its foot and the foot of the
     stem that reaches them second (the two feet's plain path lengths to the voxel, no bend or
-    inward cost, at most ``slack_m`` more than the shortest way between the feet).
+    inward cost, at most ``slack_m`` more than the shortest way between the feet), and which
+    holds at most :data:`LEAF_END_SIZE` of that stem's voxels.
 
     A leaf that arches over and comes down to the soil fills the band above the ground as a
     stem does; its "plant" is the leaf's end, a strip on the way between its foot and the plant
@@ -473,6 +480,7 @@ def leaf_ends(
         return into
     runner_up = np.full(voxels, UNREACHED, dtype=np.intp)
     runner_up[graph.point_voxel] = assignment.runner_up
+    size = np.bincount(owner[owner >= 0], minlength=stems)
     tree = cKDTree(graph.centres_m[:, :2])
     distances: dict[int, NDArray[np.float64]] = {}
 
@@ -499,6 +507,8 @@ def leaf_ends(
         if len(seconds) == 0:
             continue
         other = int(np.bincount(seconds).argmax())
+        if size[stem] > LEAF_END_SIZE * size[other]:
+            continue
         total = plain(stem)[mine] + plain(other)[mine]
         standing = graph.centres_m[mine, 2] > feet_m[stem, 2] + LYING_M
         way = total[np.isfinite(total)].min(initial=np.inf)
@@ -512,9 +522,7 @@ def leaf_ends(
             stem = int(into[stem])
         return stem
 
-    # the most leaf-like first; a leaf's end whose plant took the plant's own lower stem (both
-    # sides on the way) goes into the side less on it
-    for _, stem, other in sorted(found, reverse=True):
+    for _, stem, other in sorted(found, reverse=True):  # the most leaf-like first
         if root(other) != stem:
             into[stem] = root(other)
     return np.array([root(stem) for stem in range(stems)], dtype=np.intp)
