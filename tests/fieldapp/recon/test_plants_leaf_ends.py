@@ -22,12 +22,12 @@ from fieldapp.recon import stages
 from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.plants import search_plants
 from fieldapp.recon.result import Reconstruction
-from fieldapp.recon.settings import PlantSettings, ReconstructionSettings
+from fieldapp.recon.settings import PlantSettings, ReconstructionSettings, StemSettings
 
 from .conftest import Simulated
 from .synthetic import colored, ground_patch
 from .test_end_to_end import matched_errors
-from .touching import crossing_pair, plant
+from .touching import crossing_pair, lying_pair, plant
 
 MERGED = "stems found where a leaf comes down to the soil merged into the plant the leaf grows from"
 
@@ -112,14 +112,18 @@ def test_a_seedling_touching_a_tall_plant_is_a_plant(seed: int, other_leaf_m: fl
     assert not any(MERGED in m for m in search.merges)
 
 
-def test_crossing_leaves_are_not_leaf_ends() -> None:
-    a, b = crossing_pair(np.random.default_rng(5))
+@pytest.mark.parametrize("pair", [crossing_pair, lying_pair])
+@pytest.mark.parametrize("seed", range(4))
+def test_plants_whose_leaves_touch_are_not_leaf_ends(pair: Any, seed: int) -> None:
+    """Two one-leaved plants whose leaves cross, or lie one on the other: the lying pair's
+    first plant is 0.92-0.94 on the way between the feet, as a leaf's end is, but 0.54-0.83 of
+    the other's size (``geodesic.LEAF_END_SIZE``)."""
+    a, b = pair(np.random.default_rng(seed))
     soil = ground_patch(np.random.default_rng(6), 1.2, 30000)
-    search = search_plants(
-        colored(np.concatenate([a, b]), (50, 110, 25)), soil, PlantSettings(), 0.3
-    )
-    assert len(search.plants) == 2
-    assert not any(MERGED in m for m in search.merges)
+    for settings in (PlantSettings(), PlantSettings(stems=StemSettings(follow_leaves=False))):
+        search = search_plants(colored(np.concatenate([a, b]), (50, 110, 25)), soil, settings, 0.3)
+        assert len(search.plants) == 2
+        assert not any(MERGED in m for m in search.merges)
 
 
 @pytest.fixture(scope="module")
