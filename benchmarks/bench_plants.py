@@ -6,13 +6,15 @@ soil sample of 2 cm spacing. Prints the CPU and wall time of ``search_plants`` p
 per plant; run by hand on a quiet machine:
 
     .venv/bin/python benchmarks/bench_plants.py [--sizes 4,6,8,10,12] [--repeats 3] \
-        [--no-ribbons] [--no-sheets] [--collar 0.02]
+        [--no-ribbons] [--no-sheets] [--collar 0.02] [--no-leaf-ends]
 
 ``--no-ribbons``: without following the leaves of plants with ambiguous points across
 contacts (``plants.stems.follow_leaves``), to see what the ribbons cost; ``--no-sheets``:
 without the sheet-aware bend cost at crossings (``plants.stems.sheet_aware``), to see what it
 costs; ``--collar R``: with the per-source collar of that radius
-(``plants.stems.collar_radius_m``, up to 5 cm above the foot), to see what it costs.
+(``plants.stems.collar_radius_m``, up to 5 cm above the foot), to see what it costs;
+``--no-leaf-ends``: without looking for stems that are a leaf's end come down to the soil
+(``plants.stems.leaf_ends``), to see what that costs.
 """
 
 from __future__ import annotations
@@ -71,6 +73,9 @@ def main() -> None:
         "--no-sheets", action="store_true", help="without the sheet-aware bend cost"
     )
     parser.add_argument("--collar", type=float, default=0.0, help="collar radius (m)")
+    parser.add_argument(
+        "--no-leaf-ends", action="store_true", help="stems at leaves' ends not looked for"
+    )
     args = parser.parse_args()
     settings = PlantSettings()
     settings.stems = settings.stems.model_copy(
@@ -79,6 +84,7 @@ def main() -> None:
             "sheet_aware": not args.no_sheets,
             "collar_radius_m": args.collar,
             "collar_height_m": 0.05,
+            "leaf_ends": not args.no_leaf_ends,
         }
     )
     print("plants  points    found  cpu_s (min)  wall_s (min)  cpu ms per plant")
