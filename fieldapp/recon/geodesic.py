@@ -68,15 +68,12 @@ class VoxelGraph:
 @dataclass(frozen=True)
 class Assignment:
     """Per point: ``stem`` (N,) index of its stem (or :data:`UNREACHED`), ``ambiguous`` (N,)
-    whether a second stem reaches it almost as soon; ``distance_m`` (N,) its stem's path
-    length to it, ``runner_up`` (N,) the stem that reaches it second (or :data:`UNREACHED`)
-    and ``second_m`` (N,) that stem's path length (inf where none)."""
+    whether a second stem reaches it almost as soon, ``runner_up`` (N,) the stem that reaches
+    it second (or :data:`UNREACHED`)."""
 
     stem: NDArray[np.intp]
     ambiguous: NDArray[np.bool_]
-    distance_m: NDArray[np.float64] | None = None
     runner_up: NDArray[np.intp] | None = None
-    second_m: NDArray[np.float64] | None = None
 
 
 def _pack(cells: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -442,7 +439,7 @@ def assign_to_stems(
     ambiguous = np.zeros(voxels, dtype=bool)
     ambiguous[reached_twice] = second[reached_twice] - best[reached_twice] < ambiguity_margin_m
     of = graph.point_voxel
-    return Assignment(owner[of], ambiguous[of], best[of], runner_up[of], second[of])
+    return Assignment(owner[of], ambiguous[of], runner_up[of])
 
 
 def leaf_ends(

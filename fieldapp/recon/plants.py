@@ -292,31 +292,8 @@ def _labels(
         assignment = assign_by_settings(points_m, xy, s, graph)
         labels[:] = assignment.stem
         ambiguous = assignment.ambiguous
-        into = np.arange(len(stems))
         if s.leaf_ends:
-            into = leaf_ends(
-                graph,
-                np.array([[*stem.xy_m, stem.ground_z_m] for stem in stems]),
-                assignment,
-                s.seed_radius_m,
-                s.seed_height_m,
-                s.reach_m,
-                s.leaf_end_share,
-                s.leaf_end_slack_m,
-            )
-        ended = into != np.arange(len(stems))
-        if ended.any() and assignment.runner_up is not None:
-            reached = labels >= 0
-            labels[reached] = into[labels[reached]]
-            # a doubt between a leaf's end and the plant it grows from is none once they are one
-            runner = assignment.runner_up
-            settled = reached & (runner >= 0)
-            settled[settled] = labels[settled] == into[runner[settled]]
-            ambiguous = ambiguous & ~settled
-            merges.append(
-                f"{int(ended.sum())} stems found where a leaf comes down to the soil merged into "
-                "the plant the leaf grows from"
-            )
+            ambiguous = _merge_leaf_ends(graph, stems, assignment, labels, ambiguous, s, merges)
         guessed = _join_fragments(
             points_m, labels, settings.cluster_voxel_m, s.ambiguity_margin_m, merges
         )
@@ -336,6 +313,44 @@ def _labels(
         )
         labels[rest] = np.where(clusters >= 0, clusters + len(stems), NOISE)
     return labels, ambiguous
+
+
+def _merge_leaf_ends(
+    graph: VoxelGraph,
+    stems: list[Stem],
+    assignment: Assignment,
+    labels: NDArray[np.intp],
+    ambiguous: NDArray[np.bool_],
+    s: StemSettings,
+    merges: list[str],
+) -> NDArray[np.bool_]:
+    """Stems that are the end of another plant's leaf come down to the soil
+    (:func:`fieldapp.recon.geodesic.leaf_ends`) relabelled as that plant in ``labels`` (in
+    place, stem labels only); returns ``ambiguous`` without the doubts they settle."""
+    into = leaf_ends(
+        graph,
+        np.array([[*stem.xy_m, stem.ground_z_m] for stem in stems]),
+        assignment,
+        s.seed_radius_m,
+        s.seed_height_m,
+        s.reach_m,
+        s.leaf_end_share,
+        s.leaf_end_slack_m,
+    )
+    ended = into != np.arange(len(stems))
+    if not ended.any() or assignment.runner_up is None:
+        return ambiguous
+    reached = labels >= 0
+    labels[reached] = into[labels[reached]]
+    # a doubt between a leaf's end and the plant it grows from is none once they are one
+    runner = assignment.runner_up
+    settled = reached & (runner >= 0)
+    settled[settled] = labels[settled] == into[runner[settled]]
+    merges.append(
+        f"{int(ended.sum())} stems found where a leaf comes down to the soil merged into the "
+        "plant the leaf grows from"
+    )
+    return ambiguous & ~settled
 
 
 def _join_fragments(
