@@ -78,6 +78,9 @@ def reconstruct(
     for index, station in enumerate(filtered):
         yield progress("filtering", (index + 1) / len(filtered), f"station {station} filtered")
     scanned = stages.summarise(local, filtered)
+    plant_settings = stages.plant_settings(
+        settings.plants, settings.filters, local.value.scans.values()
+    )
     del local  # the station clouds are no longer needed
     # 5. Stations joined: one pose graph of every overlap, the levelled poses as its prior.
     joined = yield from _registration(
@@ -96,7 +99,7 @@ def reconstruct(
         placed = stages.on_map(fused, joined.value, station_map_poses(session), view_step)
         grid = stages.planting_grid(session, placed.T_map_field)
         ground_radius_m = settings.ground.local_ground_radius_m
-        found = stages.find_plants(placed, settings.plants, ground_radius_m, grid.value.nodes)
+        found = stages.find_plants(placed, plant_settings, ground_radius_m, grid.value.nodes)
         crop = rig_crop(settings.crop, session.calibration)
         seen = (session.calibration, reference.value, scanned.value, crop)
         covered = stages.coverage(

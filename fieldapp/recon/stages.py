@@ -586,6 +586,22 @@ def _mid_height_m(plant: Plant) -> float:
     return float(z.min() + z.max()) / 2.0
 
 
+def plant_settings(
+    plants: PlantSettings, filters: FilterSettings, scans: Iterable[StationScan]
+) -> PlantSettings:
+    """The plants step's settings for these stations: where every station's plants were told
+    from the soil by geometry (no colour), no plant is shorter than the geometry split's bar
+    (``filters.geometry_plant_min_m``). The split keeps a clod that touches a low leaf (it is
+    connected to something tall); the plants step may then cut it from the leaf, and without
+    colour a clod standing alone is what the split drops (a simulated 3 x 3 plot, 40 clods a
+    square metre, depth-only: a 3.9 cm "plant" of 404 points off the planting grid)."""
+    scans = list(scans)
+    if not scans or not all(scan.separation.by_geometry for scan in scans):
+        return plants
+    lowest = max(plants.min_height_m, filters.geometry_plant_min_m)
+    return plants.model_copy(update={"min_height_m": lowest})
+
+
 def find_plants(
     placed: Placed,
     settings: PlantSettings,
