@@ -142,8 +142,8 @@ def make_plant(
     leaning more or less); ``None``: the model's own. ``leaf_width``: every leaf blade that many
     times as wide as the model draws it (:data:`LEAF_WIDTH_RANGE`; same draws otherwise).
     ``grounded_leaves``: the chance (0..1) that each leaf of the plant's lower half arches over
-    and comes down to the soil (:func:`grounded_theta`; own draws, so 0 gives the plant as
-    before and a larger share grounds more of the same leaves).
+    and comes down to the soil (:func:`grounded_theta`, :func:`grounded_length`; own draws, so
+    0 gives the plant as before and a larger share grounds more of the same leaves).
 
     Leaf tips may droop below uneven soil: lift them with :func:`settle_on_ground`.
     """
@@ -214,18 +214,23 @@ def grounded_draws(seed: int, share: float) -> NDArray[np.bool_]:
     return np.random.default_rng([seed, 7, 2]).uniform(0.0, 1.0, MAX_LEAVES) < share
 
 
-def grounded_theta(
-    u: NDArray[np.float64], rise: float, node_z: float, length: float
-) -> tuple[NDArray[np.float64], float]:
-    """A grounded leaf's midrib: its angle from the vertical at each of the sections ``u``
-    (0..1 along it, equally spaced), rising at ``rise`` (radians) and turned down to
-    :data:`GROUNDED_TIP_DEG` by :data:`GROUNDED_BEND_AT` of its length; and its length, at least
-    ``length`` and enough to come from ``node_z`` down to :data:`GROUNDED_REACH_M` under the
-    ground."""
+def grounded_theta(u: NDArray[np.float64], rise: float) -> NDArray[np.float64]:
+    """A grounded leaf's midrib: its angle from the vertical at each of the sections ``u`` (0..1
+    along it, equally spaced), rising at ``rise`` (radians) and turned down to
+    :data:`GROUNDED_TIP_DEG` by :data:`GROUNDED_BEND_AT` of its length."""
     tip = np.radians(GROUNDED_TIP_DEG)
-    theta = rise + (tip - rise) * np.minimum(u / GROUNDED_BEND_AT, 1.0) ** 1.2
+    turned: NDArray[np.float64] = rise + (tip - rise) * np.minimum(u / GROUNDED_BEND_AT, 1.0) ** 1.2
+    return turned
+
+
+def grounded_length(
+    u: NDArray[np.float64], theta: NDArray[np.float64], node_z: float, length: float
+) -> float:
+    """A grounded leaf's length: at least ``length``, and enough for the midrib of angles
+    ``theta`` at the sections ``u`` to come from ``node_z`` down to :data:`GROUNDED_REACH_M`
+    under the ground."""
     lowest = float(np.min(np.cumsum(np.diff(u, prepend=0.0) * np.cos(theta))))
-    return theta, max(length, (node_z + GROUNDED_REACH_M) / -lowest)
+    return max(length, (node_z + GROUNDED_REACH_M) / -lowest)
 
 
 def settle_on_ground(mesh: PlantMesh, ground_z_m: NDArray[np.float64]) -> PlantMesh:
@@ -297,7 +302,8 @@ def _leaf(
     u = np.linspace(0.0, 1.0, LEAF_SEGMENTS + 1)
     theta = rise + (tip - rise) * u**1.5
     if grounded:
-        theta, length = grounded_theta(u, rise, node_z, length)
+        theta = grounded_theta(u, rise)
+        length = grounded_length(u, theta, node_z, length)
     heading = np.stack([np.cos(az), np.sin(az), np.zeros_like(az)], 1)
     tangent = np.sin(theta)[:, None] * heading + np.cos(theta)[:, None] * np.array([0, 0, 1.0])
     steps = np.diff(u, prepend=0.0)[:, None] * length * tangent

@@ -44,6 +44,7 @@ from devices.sim.plants import (
     _offset_triangles,
     _strip,
     check_lean,
+    grounded_length,
     grounded_theta,
     growth_factor,
     leaves_on_day,
@@ -189,12 +190,13 @@ def _leaf(
     )
     power = 1.3 + 1.2 * d[6]  # the angle grows as u ** power: curvature growing along the leaf
     if grounded:  # long enough to reach the soil, then as many sections as that needs
-        length = grounded_theta(np.linspace(0.0, 1.0, 61), theta0, node_m, length)[1]
+        fine = np.linspace(0.0, 1.0, 61)
+        length = grounded_length(fine, grounded_theta(fine, theta0), node_m, length)
     segments = int(np.clip(round(length / SEGMENT_M), 16, 60))
     u = np.linspace(0.0, 1.0, segments + 1)
     theta = theta0 + (tip - theta0) * u**power
     if grounded:
-        theta = grounded_theta(u, theta0, node_m, length)[0]
+        theta = grounded_theta(u, theta0)
     drift = np.radians(25.0) * (d[7] - 0.5) * u**1.5  # the midrib sweeping sideways
     az = azimuth + drift
     heading = np.stack([np.cos(az), np.sin(az), np.zeros_like(az)], 1)

@@ -192,7 +192,7 @@ def register(subparsers: Any) -> None:
         default=None,
         metavar="S",
         help="plot scene: each leaf of a plant's lower half arches over and comes down to the "
-        "soil with this chance, 0..1, its tip 8-50 cm from the stem, as older plants' lower "
+        "soil with this chance, 0..1, its tip 8-55 cm from the stem, as older plants' lower "
         "leaves do (default 0)",
     )
     parser.add_argument(

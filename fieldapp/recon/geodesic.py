@@ -73,7 +73,7 @@ class Assignment:
 
     stem: NDArray[np.intp]
     ambiguous: NDArray[np.bool_]
-    runner_up: NDArray[np.intp] | None = None
+    runner_up: NDArray[np.intp]
 
 
 def _pack(cells: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -471,10 +471,10 @@ def leaf_ends(
     stems_xy_m = feet_m[:, :2]
     into = np.arange(stems, dtype=np.intp)
     voxels = len(graph.centres_m)
+    if stems < 2:
+        return into
     owner = np.full(voxels, UNREACHED, dtype=np.intp)
     owner[graph.point_voxel] = assignment.stem
-    if assignment.runner_up is None or stems < 2:
-        return into
     runner_up = np.full(voxels, UNREACHED, dtype=np.intp)
     runner_up[graph.point_voxel] = assignment.runner_up
     size = np.bincount(owner[owner >= 0], minlength=stems)

@@ -338,7 +338,7 @@ def _merge_leaf_ends(
         s.leaf_end_slack_m,
     )
     ended = into != np.arange(len(stems))
-    if not ended.any() or assignment.runner_up is None:
+    if not ended.any():
         return ambiguous
     reached = labels >= 0
     labels[reached] = into[labels[reached]]
