@@ -191,23 +191,27 @@ def add_plot(
     max_lean_deg: float | None = None,
     leaf_width: float = 1.0,
     grounded_leaves: float = 0.0,
+    late_plants: float = 0.0,
 ) -> None:
     """Sow the plot of ``seed`` (positions and plants do not depend on ``day``) at ``stage``
     (:data:`devices.sim.plants.STAGES`) with plants of ``plant_model``
     (:data:`devices.sim.plants.PLANT_MODELS`), leaning up to ``max_lean_deg`` (``None``: as the
     model's plants do), their leaf blades ``leaf_width`` times the model's width, each lower
-    leaf coming down to the soil with the chance ``grounded_leaves``."""
+    leaf coming down to the soil with the chance ``grounded_leaves``. Each plant emerged late
+    with the chance ``late_plants`` (:func:`late_draws`) and is a seedling among the others."""
     if scene.soil is None:
         raise ValueError("a plot needs soil")
     rng = np.random.default_rng([seed, 11])
-    for index, (x, y) in enumerate(layout.positions(rng)):
+    positions = layout.positions(rng)
+    late = late_draws(seed, len(positions), late_plants)
+    for index, (x, y) in enumerate(positions):
         ground_z = scene.soil.height_at(x, y)
         mesh = make_plant(
             seed * 1000 + index,
             day,
             (x, y),
             ground_z,
-            stage,
+            "seedling" if late[index] else stage,
             plant_model,
             max_lean_deg,
             leaf_width,
@@ -215,6 +219,18 @@ def add_plot(
         )
         ground = scene.soil.height_m(mesh.vertices_m[:, 0], mesh.vertices_m[:, 1])
         scene.add_plant(f"p{index + 1:02d}", settle_on_ground(mesh, ground))
+
+
+def late_draws(seed: int, count: int, chance: float) -> NDArray[np.bool_]:
+    """(count,) which of a plot's plants emerged late, each with ``chance`` (0..1): a plant
+    sown with the others that came up days after them (a cold spell, a dry seedbed, a seed
+    too deep) is a seedling still when its neighbours' canopies touch. Own draws: 0 gives the
+    plot as before, a larger chance makes more of the same plants late."""
+    if not 0.0 <= chance <= 1.0:
+        raise ValueError(f"late plants: a chance in 0..1, got {chance}")
+    draws = np.random.default_rng([seed, 29]).random(count)
+    late: NDArray[np.bool_] = draws < chance
+    return late
 
 
 SPHERE_SPOTS_M = ((-0.8, -0.8), (0.8, -0.8), (-0.8, 0.8), (0.8, 0.8), (0.0, -0.8), (0.0, 0.8))
@@ -250,11 +266,12 @@ def plot_scene(
     leaf_width: float = 1.0,
     clods_per_m2: float = 0.0,
     grounded_leaves: float = 0.0,
+    late_plants: float = 0.0,
 ) -> Scene:
     """The paper's plot: 16 maize plants at 0.8 m on uneven soil (seedlings by default; or
     ``layout``; plants of ``plant_model``, leaning up to ``max_lean_deg``, leaf blades
     ``leaf_width`` times the model's width; ``clods_per_m2``: :func:`add_clods`;
-    ``grounded_leaves``: :func:`add_plot`)."""
+    ``grounded_leaves``, ``late_plants``: :func:`add_plot`)."""
     scene = empty_scene(seed, soil)
     add_plot(
         scene,
@@ -266,6 +283,7 @@ def plot_scene(
         max_lean_deg,
         leaf_width,
         grounded_leaves,
+        late_plants,
     )
     if clods_per_m2 > 0.0:
         add_clods(scene, seed, clods_per_m2)

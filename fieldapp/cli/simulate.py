@@ -54,6 +54,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "lean": ("plot",),
     "leaf_width": ("plot",),
     "grounded_leaves": ("plot",),
+    "late_plants": ("plot",),
     "clods": ("plot",),
     "plants": ("spheres",),
     "intrinsics_images": ("checkerboard",),
@@ -194,6 +195,14 @@ def register(subparsers: Any) -> None:
         help="plot scene: each leaf of a plant's lower half arches over and comes down to the "
         "soil with this chance, 0..1, its tip 8-55 cm from the stem, as older plants' lower "
         "leaves do (default 0)",
+    )
+    parser.add_argument(
+        "--late-plants",
+        default=None,
+        metavar="F",
+        help="plot scene at the touching stage: each plant came up late with this chance, "
+        "0..1, and is a seedling among grown plants whose leaves may reach it, as uneven "
+        "emergence leaves a field (default 0)",
     )
     parser.add_argument(
         "--stations", default=None, help="stations to visit, e.g. 4,5 or 1-9 (default: all)"
@@ -376,6 +385,9 @@ def run(args: argparse.Namespace) -> int:
     lean = parse_degrees("--lean", args.lean, MAX_LEAN_DEG)
     leaf_width = parse_number("--leaf-width", args.leaf_width, *LEAF_WIDTH_RANGE, "times the width")
     grounded = parse_number("--grounded-leaves", args.grounded_leaves, 0.0, 1.0, "(a chance)")
+    late = parse_number("--late-plants", args.late_plants, 0.0, 1.0, "(a chance)")
+    if late is not None and args.stage != "touching":
+        raise FieldappError("--late-plants: only at --stage touching (late plants are seedlings)")
     table_error = parse_degrees("--table-error", args.table_error, MAX_TABLE_ERROR_DEG)
     color_shift = parse_color_shift(args.color_shift)
     depth_offset = parse_number(
@@ -415,6 +427,7 @@ def run(args: argparse.Namespace) -> int:
                 color_noise=color_noise,
                 clods_per_m2=clods,
                 grounded_leaves=grounded,
+                late_plants=late,
             )
             about: dict[str, Any] = {"scene": args.scene, "seed": seed, "day": day}
             about |= {"stage": args.stage, "grid": rig.grid}
@@ -446,6 +459,8 @@ def run(args: argparse.Namespace) -> int:
                 about["clods_per_m2"] = clods
             if grounded is not None:  # absent: no leaf down to the soil (sessions unchanged)
                 about["grounded_leaves"] = grounded
+            if late is not None:  # absent: every plant came up with the others (unchanged)
+                about["late_plants"] = late
             if args.depth_only:
                 about["depth_only"] = True
             if args.lens_distortion:  # absent: undistorted images (sessions unchanged)
@@ -499,6 +514,7 @@ def build_world(
     color_noise: float | None = None,
     clods_per_m2: float | None = None,
     grounded_leaves: float | None = None,
+    late_plants: float | None = None,
 ) -> SimWorld:
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.render import SensorModel
@@ -526,6 +542,7 @@ def build_world(
             leaf_width or 1.0,
             clods_per_m2 or 0.0,
             grounded_leaves or 0.0,
+            late_plants or 0.0,
         )
     elif scene_name == "spheres":
         scene = spheres_scene(seed, day, plants, layout, soil)
