@@ -93,6 +93,7 @@ def labels(folder: Path, session: str) -> tuple[NDArray[np.intp], list[str]]:
         max_lean_deg=truth.get("max_lean_deg"),  # simulate --lean
         leaf_width=truth.get("leaf_width", 1.0),  # simulate --leaf-width
         grounded_leaves=truth.get("grounded_leaves", 0.0),  # simulate --grounded-leaves
+        late_plants=truth.get("late_plants", 0.0),  # simulate --late-plants
     )
     samples, owner, names = _surface_samples(scene, offset)
     tree = cKDTree(samples)

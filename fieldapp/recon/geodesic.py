@@ -451,13 +451,17 @@ def leaf_ends(
     reach_m: float,
     share: float,
     slack_m: float,
+    off_grid: NDArray[np.bool_] | None = None,
+    share_off_grid: float = 1.0,
 ) -> NDArray[np.intp]:
     """(S,) for each stem (``feet_m`` (S, 3): its foot's xy and local ground) the stem it is
     merged into (itself when kept): a stem whose voxels more than :data:`LYING_M` above its
     ground lie, ``share`` of them or more, along the way between its foot and the foot of the
     stem that reaches them second (the two feet's plain path lengths to the voxel, no bend or
     inward cost, at most ``slack_m`` more than the shortest way between the feet), and which
-    holds at most :data:`LEAF_END_SIZE` of that stem's voxels.
+    holds at most :data:`LEAF_END_SIZE` of that stem's voxels. A stem ``off_grid`` (S,) (a
+    planting grid has no node for it) needs ``share_off_grid`` of them on the way, and only to
+    be no larger than that stem: the plan says no plant stands there.
 
     A leaf that arches over and comes down to the soil fills the band above the ground as a
     stem does; its "plant" is the leaf's end, a strip on the way between its foot and the plant
@@ -504,14 +508,15 @@ def leaf_ends(
         if len(seconds) == 0:
             continue
         other = int(np.bincount(seconds).argmax())
-        if size[stem] > LEAF_END_SIZE * size[other]:
+        off = off_grid is not None and bool(off_grid[stem])
+        if size[stem] > (1.0 if off else LEAF_END_SIZE) * size[other]:
             continue
         total = plain(stem)[mine] + plain(other)[mine]
         standing = graph.centres_m[mine, 2] > feet_m[stem, 2] + LYING_M
         way = total[np.isfinite(total)].min(initial=np.inf)
         total = total[standing & np.isfinite(total)]
         on_the_way = float(np.mean(total <= way + slack_m)) if len(total) else 0.0
-        if on_the_way >= share:
+        if on_the_way >= (share_off_grid if off else share):
             found.append((on_the_way, stem, other))
 
     def root(stem: int) -> int:

@@ -126,6 +126,15 @@ def fitted_to_stems(
     return (replace(grid, xy_m=moved) if applied else grid), fit
 
 
+def off_the_grid(grid: GridNodes, stems_xy_m: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """(S,) the stems ``stems_xy_m`` (S, 2) that stand at no node: not the nearest stem within
+    the snap radius of any (the rule plants are placed on the grid by)."""
+    off = np.ones(len(stems_xy_m), dtype=bool)
+    if len(stems_xy_m) and len(grid.xy_m):
+        off[_paired(grid.xy_m, stems_xy_m, grid.snap_radius_m)[1]] = False
+    return off
+
+
 def _moved(T: Matrix4, xy_m: NDArray[np.float64]) -> NDArray[np.float64]:
     return transform_points(T, np.column_stack([xy_m, np.zeros(len(xy_m))]))[:, :2]
 

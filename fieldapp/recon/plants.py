@@ -35,6 +35,7 @@ from fieldapp.recon.grid import (
     GridNodes,
     apply_grid_prior_nodes,
     fitted_to_stems,
+    off_the_grid,
     prior_nodes,
     stems_at_empty_nodes,
 )
@@ -225,6 +226,7 @@ def search_plants(
     # ground, the plants' soil and the grid's seen nodes all ask it
     soil_tree = cKDTree(soil_m[:, :2]) if len(soil_m) else None
     grid_fit: GridFit | None = None
+    off_grid: NDArray[np.bool_] | None = None
     if settings.stems.enabled and len(cloud):
         stems, merged = find_stems(cloud.points, soil_m, settings.stems, soil_tree)
         if merged:
@@ -234,7 +236,8 @@ def search_plants(
             stems = stems + stems_at_empty_nodes(
                 cloud.points, soil_m, stems, grid, settings.stems, soil_tree
             )
-    labels, ambiguous = _labels(cloud.points, stems, settings, merges)
+            off_grid = off_the_grid(grid, np.array([stem.xy_m for stem in stems]).reshape(-1, 2))
+    labels, ambiguous = _labels(cloud.points, stems, settings, merges, off_grid)
     if not stems and grid is not None:
         labels = apply_grid_prior_nodes(
             cloud.points, labels, grid, 2 * settings.base_slice_m, merges
@@ -279,10 +282,15 @@ def _merge_shared_bases(
 
 
 def _labels(
-    points_m: NDArray[np.float64], stems: list[Stem], settings: PlantSettings, merges: list[str]
+    points_m: NDArray[np.float64],
+    stems: list[Stem],
+    settings: PlantSettings,
+    merges: list[str],
+    off_grid: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
     """Per point: its stem (0..S-1), a density cluster (S..) where no stem reaches, or
-    :data:`NOISE`; and whether it is ambiguous between two stems."""
+    :data:`NOISE`; and whether it is ambiguous between two stems. ``off_grid`` (S,): the
+    stems a planting grid has no node for (:func:`fieldapp.recon.grid.off_the_grid`)."""
     labels = np.full(len(points_m), NOISE, dtype=np.intp)
     ambiguous = np.zeros(len(points_m), dtype=bool)
     if stems:
@@ -293,7 +301,9 @@ def _labels(
         labels[:] = assignment.stem
         ambiguous = assignment.ambiguous
         if s.leaf_ends:
-            ambiguous = _merge_leaf_ends(graph, stems, assignment, labels, ambiguous, s, merges)
+            ambiguous = _merge_leaf_ends(
+                graph, stems, assignment, labels, ambiguous, s, merges, off_grid
+            )
         guessed = _join_fragments(
             points_m, labels, settings.cluster_voxel_m, s.ambiguity_margin_m, merges
         )
@@ -323,10 +333,12 @@ def _merge_leaf_ends(
     ambiguous: NDArray[np.bool_],
     s: StemSettings,
     merges: list[str],
+    off_grid: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.bool_]:
     """Stems that are the end of another plant's leaf come down to the soil
-    (:func:`fieldapp.recon.geodesic.leaf_ends`) relabelled as that plant in ``labels`` (in
-    place, stem labels only); returns ``ambiguous`` without the doubts they settle."""
+    (:func:`fieldapp.recon.geodesic.leaf_ends`; those ``off_grid`` by the lower share)
+    relabelled as that plant in ``labels`` (in place, stem labels only); returns
+    ``ambiguous`` without the doubts they settle."""
     into = leaf_ends(
         graph,
         np.array([[*stem.xy_m, stem.ground_z_m] for stem in stems]),
@@ -336,6 +348,8 @@ def _merge_leaf_ends(
         s.reach_m,
         s.leaf_end_share,
         s.leaf_end_slack_m,
+        off_grid,
+        s.leaf_end_share_off_grid,
     )
     ended = into != np.arange(len(stems))
     if not ended.any():

@@ -185,6 +185,10 @@ class StemSettings(_Section):
     leaf_end_slack_m: float = Field(default=0.2, ge=0.0)
     """A point is on that way when the two feet's paths to it are at most this much longer
     than the shortest way between the feet."""
+    leaf_end_share_off_grid: float = Field(default=0.6, gt=0.0, le=1.0)
+    """With a planting grid, the share for a stem standing at no node of it (no plant is sown
+    there), which is then merged even when it is not much smaller than the plant it would join
+    (only never a larger stem into a smaller)."""
 
 
 class PlantSettings(_Section):
