@@ -32,6 +32,9 @@ FIT_REACH_SHARE = 0.45
 while the grid is fitted: under half the spacing, so a stem pairs with its own node when the
 grid is off by less than half a spacing (40 cm on the 80 cm grid), never with the next."""
 FIT_ROUNDS = 20
+TRUSTED_SHARE = 0.5
+"""A grid is a prior on where plants stand only when this share of its nodes or more have a
+stem at them (:func:`off_the_grid`); a field's gaps leave 5-20 % of them empty."""
 FIT_MIN_MOVE_SHARE = 1 / 3
 """A fit moving no node farther than this share of the snap radius (5 cm of 15) is not
 applied: the grid stands on its plants as well as plants stand on their nodes, and moving it
@@ -126,12 +129,18 @@ def fitted_to_stems(
     return (replace(grid, xy_m=moved) if applied else grid), fit
 
 
-def off_the_grid(grid: GridNodes, stems_xy_m: NDArray[np.float64]) -> NDArray[np.bool_]:
+def off_the_grid(grid: GridNodes, stems_xy_m: NDArray[np.float64]) -> NDArray[np.bool_] | None:
     """(S,) the stems ``stems_xy_m`` (S, 2) that stand at no node: not the nearest stem within
-    the snap radius of any (the rule plants are placed on the grid by)."""
+    the snap radius of any (the rule plants are placed on the grid by). ``None`` when fewer than
+    :data:`TRUSTED_SHARE` of the nodes have a stem: a grid that far from the stems (a plan for
+    another plot, a base lost beyond what the fit mends) says nothing about where plants are."""
+    if len(stems_xy_m) == 0 or len(grid.xy_m) == 0:
+        return None
+    nodes, stems = _paired(grid.xy_m, stems_xy_m, grid.snap_radius_m)
+    if len(nodes) < TRUSTED_SHARE * len(grid.xy_m):
+        return None
     off = np.ones(len(stems_xy_m), dtype=bool)
-    if len(stems_xy_m) and len(grid.xy_m):
-        off[_paired(grid.xy_m, stems_xy_m, grid.snap_radius_m)[1]] = False
+    off[stems] = False
     return off
 
 
