@@ -71,7 +71,8 @@ class RegistrationSettings(_Section):
     ``arrival_sigma_m``/``_deg``: the base's arrival uncertainty (one standard deviation per
     horizontal axis, and in yaw); ``level_sigma_*``: what levelling leaves of tilt and height.
     A correction beyond ``guard_sigmas`` of this expected error is rejected. Pairs sharing
-    ``min_overlap_m2`` of ground (cells of ``overlap_cell_m``) are registered (GICP, coarse to
+    ``min_overlap_m2`` of ground (cells of ``overlap_cell_m``; or ``min_overlap_share`` of the
+    stations' largest overlaps) are registered (GICP, coarse to
     fine over ``voxel_sizes_m``, the sizes at or below ``shared_cloud_m`` on the finest
     size's points, each with its own reach); an edge disagreeing with the solution by more than
     ``edge_tolerance_m``/``_deg`` is dropped. A station whose estimated uncertainty exceeds
@@ -108,6 +109,11 @@ class RegistrationSettings(_Section):
     overlap_cell_m: float = Field(default=0.2, gt=0.0)
     overlap_voxel_m: float = Field(default=0.01, gt=0.0)
     min_overlap_m2: float = Field(default=4.0, gt=0.0)
+    min_overlap_share: float = Field(default=0.6, gt=0.0, le=1.0)
+    """A pair sharing less than ``min_overlap_m2`` is registered still when it shares this share
+    of the larger of its two stations' largest overlaps (and ``min_overlap_floor_m2``): a rig
+    seeing less ground (a higher, shallower camera) shares less with every neighbour."""
+    min_overlap_floor_m2: float = Field(default=1.0, gt=0.0)
     edge_effective_points: float = Field(default=2000.0, gt=0.0)
     edge_noise_m: float = Field(default=0.002, gt=0.0)
     edge_tolerance_m: float = Field(default=0.02, gt=0.0)
