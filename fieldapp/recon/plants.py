@@ -21,6 +21,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.exg import excess_green
 from fieldapp.recon.geodesic import (
     UNREACHED,
     Assignment,
@@ -243,7 +244,7 @@ def search_plants(
             cloud.points, labels, grid, 2 * settings.base_slice_m, merges
         )
     plants, plant_labels = _measured(
-        cloud, soil_m, soil_tree, labels, ambiguous, len(stems), settings, ground_radius_m
+        cloud, soil_m, soil_tree, labels, ambiguous, len(stems), settings, ground_radius_m, merges
     )
     if _merge_shared_bases(labels, plants, plant_labels, settings.stems.min_separation_m, merges):
         plants, plant_labels = _measured(
@@ -443,11 +444,14 @@ def _measured(
     stem_count: int,
     settings: PlantSettings,
     ground_radius_m: float,
+    notes: list[str] | None = None,
 ) -> tuple[list[Plant], dict[int, int]]:
     """The labelled groups large and tall enough to be plants, measured, ids in reading order;
-    and the label each plant id came from."""
+    and the label each plant id came from. A group no stem reaches that floats above the soil
+    and is not green (:func:`_foreign`) is not a plant; ``notes`` is told of each."""
     measured: list[tuple[PlantTraits, Cloud, bool, float]] = []
     measured_labels: list[int] = []
+    coloured = _coloured(cloud)
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(labels.max(initial=-1) + 2))
     for label in range(labels.max(initial=-1) + 1):
@@ -463,6 +467,16 @@ def _measured(
             settings.top_support_points,
             settings.top_support_radius_m,
         )
+        if label >= stem_count and coloured and _foreign(plant, traits):
+            if notes is not None:
+                low = float(plant.points[:, 2].min()) - traits.ground_z_m
+                x, y = plant.points[:, :2].mean(axis=0)
+                notes.append(
+                    f"{len(members)} points no stem reaches, {100 * low:.0f} cm above the soil "
+                    f"around ({x:.2f}, {y:.2f}) m and not green, not counted as a plant (a "
+                    "reference sphere or its stand, an object among the plants)"
+                )
+            continue
         if traits.height_m >= settings.min_height_m:
             share = float(np.mean(ambiguous[members]))
             measured.append((traits, plant, label < stem_count, share))
@@ -471,6 +485,34 @@ def _measured(
     reading = order_by_position(positions, settings.row_gap_m)
     plants = [Plant(i + 1, *measured[index]) for i, index in enumerate(reading)]
     return plants, {i + 1: measured_labels[index] for i, index in enumerate(reading)}
+
+
+FLOATING_M = 0.15
+"""A group of points no stem reaches whose lowest point stands this far above its ground does
+not grow from the soil where it is seen (:func:`_foreign`)."""
+NOT_GREEN_EXG = 0.05
+"""Median excess green under which such a group is not plant matter: leaves' is 0.2-0.5, the
+colour steps' thresholds 0.1-0.25; an independent renderer's white sphere among leaves, its
+cap kept by the weak green grown from the leaves touching it, 0.05."""
+
+
+def _coloured(cloud: Cloud) -> bool:
+    """Whether the plot's points carry colour that tells plant from not (some clearly green):
+    not so for depth-only captures, separated by geometry."""
+    sample = cloud.colors[:: max(1, len(cloud) // 20000)]
+    return bool(len(sample)) and float(np.quantile(excess_green(sample), 0.9)) > 2 * NOT_GREEN_EXG
+
+
+def _foreign(plant: Cloud, traits: PlantTraits) -> bool:
+    """A group of points no stem reaches is not a plant when its lowest point floats more than
+    :data:`FLOATING_M` above its ground *and* its median colour is not green: the cap of a
+    reference sphere on its stand among tall plants (an independent renderer's: 399 points
+    67-77 cm up, a 77 cm "plant" off the grid), a label, a hand. A green group up there is a
+    plant's top whose lower part was not seen, and stays one."""
+    low = float(plant.points[:, 2].min()) - traits.ground_z_m
+    if low <= FLOATING_M:
+        return False
+    return float(np.median(excess_green(plant.colors))) < NOT_GREEN_EXG
 
 
 def _soil_near(

@@ -1,0 +1,61 @@
+"""What floats above the soil and is not green is not a plant (``plants._foreign``).
+
+An independent renderer's touching plot had white reference spheres on dark 16 mm stands among
+the plants; the cap of one, 67-77 cm up and touching leaves (the weak green grown from them
+kept it), became a 77 cm tall "plant" off the grid.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.plants import search_plants
+from fieldapp.recon.settings import PlantSettings
+
+from .synthetic import LEAF_RGB, colored, ground_patch
+from .touching import plant
+
+
+def _cap(rng: np.random.Generator, centre: tuple[float, float, float], n: int = 1500) -> NDArray:
+    """(n, 3) the upper half of a 12 cm sphere: what the cameras see of it above the leaves."""
+    v = rng.normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    v[:, 2] = np.abs(v[:, 2])
+    return np.asarray(centre) + 0.062 * v
+
+
+def _plot(rng: np.random.Generator, cap_rgb: tuple[int, int, int], z_m: float) -> Cloud:
+    a = colored(plant(rng, (0.0, 0.0), [(0.0, 0.2, 0.4, 0.12), (180.0, 0.3, 0.4, 0.1)]), LEAF_RGB)
+    cap = colored(_cap(rng, (0.7, 0.3, z_m)), cap_rgb)
+    return Cloud(np.concatenate([a.points, cap.points]), np.concatenate([a.colors, cap.colors]))
+
+
+def test_a_sphere_cap_above_the_plants_is_not_a_plant() -> None:
+    rng = np.random.default_rng(0)
+    soil = ground_patch(rng, 1.2, 30000)
+    search = search_plants(_plot(rng, (139, 149, 138), 0.66), soil, PlantSettings(), 0.3)
+    assert len(search.plants) == 1
+    assert np.hypot(search.plants[0].traits.x_m, search.plants[0].traits.y_m) < 0.03
+    assert any("not counted as a plant" in m and "(0.70, 0.30)" in m for m in search.merges)
+
+
+def test_a_green_group_up_there_is_a_plant_and_so_is_one_near_the_soil() -> None:
+    """A green group floating there is a plant's top whose lower part was not seen; a grey one
+    near the soil (its lowest point under 15 cm) is left to the other rules."""
+    rng = np.random.default_rng(1)
+    soil = ground_patch(rng, 1.2, 30000)
+    for rgb, z in ((LEAF_RGB, 0.66), ((139, 149, 138), 0.1)):
+        search = search_plants(_plot(rng, rgb, z), soil, PlantSettings(), 0.3)
+        assert len(search.plants) == 2
+        assert not any("not counted as a plant" in m for m in search.merges)
+
+
+def test_without_colour_nothing_is_dropped_for_its_colour() -> None:
+    """Depth-only captures (every point grey, separated by geometry): the colour says nothing."""
+    rng = np.random.default_rng(2)
+    soil = ground_patch(rng, 1.2, 30000)
+    cloud = _plot(rng, (139, 149, 138), 0.66)
+    grey = Cloud(cloud.points, np.full_like(cloud.colors, 128))
+    assert len(search_plants(grey, soil, PlantSettings(), 0.3).plants) == 2
