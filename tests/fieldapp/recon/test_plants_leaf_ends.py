@@ -162,13 +162,9 @@ def test_plants_whose_leaves_touch_are_not_leaf_ends(pair: Any, seed: int) -> No
         assert not any(MERGED in m for m in search.merges)
 
 
-@pytest.fixture(scope="module")
-def grounded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Simulated, Reconstruction, Any]:
-    """The second plant model's touching plot (seed 3), half of the lower leaves down to the
-    soil, reconstructed once; with the plants step's inputs kept for the control."""
-    folder = tmp_path_factory.mktemp("sim") / "grounded"
-    options = ["--stage", "touching", "--plant-model", "irregular", "--grounded-leaves", "0.5"]
-    assert main(["simulate", "--out", str(folder), "--seed", "3", *options]) == 0
+def _reconstructed(folder: Path) -> tuple[Reconstruction, dict[str, Any]]:
+    """The session ``folder`` reconstructed, with the plants step's inputs kept (``placed``,
+    ``ground_radius_m``) for a control run of that step alone."""
     kept: dict[str, Any] = {}
     original = stages.find_plants
 
@@ -181,6 +177,17 @@ def grounded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Simulated, Recon
         result = run_reconstruction(load_session(folder), ReconstructionSettings())
     finally:
         stages.find_plants = original
+    return result, kept
+
+
+@pytest.fixture(scope="module")
+def grounded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Simulated, Reconstruction, Any]:
+    """The second plant model's touching plot (seed 3), half of the lower leaves down to the
+    soil, reconstructed once; with the plants step's inputs kept for the control."""
+    folder = tmp_path_factory.mktemp("sim") / "grounded"
+    options = ["--stage", "touching", "--plant-model", "irregular", "--grounded-leaves", "0.5"]
+    assert main(["simulate", "--out", str(folder), "--seed", "3", *options]) == 0
+    result, kept = _reconstructed(folder)
     truth = json.loads((folder / "truth.json").read_text())
     return Simulated(folder, truth), result, kept
 
@@ -215,18 +222,7 @@ def test_a_plot_with_late_plants_and_leaves_down_to_the_soil_off_the_grid(tmp_pa
     options = ["--stage", "touching", "--grounded-leaves", "0.5", "--late-plants", "0.4"]
     assert main(["simulate", "--out", str(folder), "--seed", "3", *options]) == 0
     truth = json.loads((folder / "truth.json").read_text())
-    kept: dict[str, Any] = {}
-    original = stages.find_plants
-
-    def keep(placed: Any, settings: Any, ground_radius_m: float, grid: Any) -> Any:
-        kept.update(placed=placed, ground_radius_m=ground_radius_m)
-        return original(placed, settings, ground_radius_m, grid)
-
-    stages.find_plants = keep
-    try:
-        result = run_reconstruction(load_session(folder), ReconstructionSettings())
-    finally:
-        stages.find_plants = original
+    result, kept = _reconstructed(folder)
     e = matched_errors(result, truth)
     assert len(result.plants) == len(truth["plants"]) == 16
     assert np.sqrt(np.mean(e["dh_cm"] ** 2)) <= 1.0
