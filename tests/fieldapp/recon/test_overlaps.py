@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fieldapp.recon.pairwise import find_overlaps, overlapping
+from fieldapp.recon.pairwise import find_overlaps, largest_overlaps, overlapping
 from fieldapp.recon.settings import RegistrationSettings
 
 SIDE, DIAGONAL, TWO_APART, OPPOSITE = 3.6, 3.1, 1.6, 0.0
@@ -34,8 +34,8 @@ def _plan_areas(side: float, diagonal: float, two_apart: float) -> dict[tuple[in
 
 
 def _registered(areas: dict[tuple[int, int], float]) -> set[tuple[int, int]]:
-    settings = RegistrationSettings()
-    return {pair for pair in areas if overlapping(*pair, areas, settings)}
+    settings, largest = RegistrationSettings(), largest_overlaps(areas)
+    return {pair for pair in areas if overlapping(*pair, areas, largest, settings)}
 
 
 def test_a_rig_that_sees_little_ground_registers_its_neighbours_and_no_more() -> None:
