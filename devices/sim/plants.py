@@ -300,10 +300,11 @@ def _leaf(
         + np.radians(20 * (p[5] - 0.5)) * np.linspace(0, 1, LEAF_SEGMENTS + 1)
     )
     u = np.linspace(0.0, 1.0, LEAF_SEGMENTS + 1)
-    theta = rise + (tip - rise) * u**1.5
     if grounded:
         theta = grounded_theta(u, rise)
         length = grounded_length(u, theta, node_z, length)
+    else:
+        theta = rise + (tip - rise) * u**1.5
     heading = np.stack([np.cos(az), np.sin(az), np.zeros_like(az)], 1)
     tangent = np.sin(theta)[:, None] * heading + np.cos(theta)[:, None] * np.array([0, 0, 1.0])
     steps = np.diff(u, prepend=0.0)[:, None] * length * tangent

@@ -194,9 +194,7 @@ def _leaf(
         length = grounded_length(fine, grounded_theta(fine, theta0), node_m, length)
     segments = int(np.clip(round(length / SEGMENT_M), 16, 60))
     u = np.linspace(0.0, 1.0, segments + 1)
-    theta = theta0 + (tip - theta0) * u**power
-    if grounded:
-        theta = grounded_theta(u, theta0)
+    theta = grounded_theta(u, theta0) if grounded else theta0 + (tip - theta0) * u**power
     drift = np.radians(25.0) * (d[7] - 0.5) * u**1.5  # the midrib sweeping sideways
     az = azimuth + drift
     heading = np.stack([np.cos(az), np.sin(az), np.zeros_like(az)], 1)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -63,6 +64,12 @@ class VoxelGraph:
     centres_m: NDArray[np.float64]
     point_voxel: NDArray[np.intp]
     edges: csr_matrix
+
+    @cached_property
+    def plan_tree(self) -> cKDTree:
+        """The plan-view k-d tree of the voxel centres, built once for every step that asks it
+        (the assignment, the crossing sheets, the leaf ends)."""
+        return cKDTree(self.centres_m[:, :2])
 
 
 @dataclass(frozen=True)
@@ -382,7 +389,7 @@ def assign_to_stems(
     onto its own leaf; every other stem's paths still pay there. Off by default: measured on
     both plant models in ``docs/notes/touching-canopies.md`` ("The collar, per source")."""
     voxels = len(graph.centres_m)
-    tree = cKDTree(graph.centres_m[:, :2])
+    tree = graph.plan_tree
     shared = _shared(graph, tree, stems_xy_m, seed_radius_m) if sheet_aware else None
     bend: csr_matrix | None = None  # each edge's bend part, when a collar is free of it
     collar = collar_radius_m > 0.0
@@ -482,7 +489,7 @@ def leaf_ends(
     runner_up = np.full(voxels, UNREACHED, dtype=np.intp)
     runner_up[graph.point_voxel] = assignment.runner_up
     size = np.bincount(owner[owner >= 0], minlength=stems)
-    tree = cKDTree(graph.centres_m[:, :2])
+    tree = graph.plan_tree
     distances: dict[int, NDArray[np.float64]] = {}
 
     def plain(stem: int) -> NDArray[np.float64]:

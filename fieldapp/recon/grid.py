@@ -129,14 +129,25 @@ def fitted_to_stems(
     return (replace(grid, xy_m=moved) if applied else grid), fit
 
 
+def at_nodes(
+    grid: GridNodes, xy_m: NDArray[np.float64]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """(node, index) pairs of the positions ``xy_m`` (K, 2) standing at a node: each with its
+    nearest node within the snap radius, one a node (the nearest); the rule plants are placed
+    on the grid by, and stems judged off it."""
+    if len(xy_m) == 0:
+        return np.empty(0, dtype=np.intp), np.empty(0, dtype=np.intp)
+    return _paired(grid.xy_m, xy_m, grid.snap_radius_m)
+
+
 def off_the_grid(grid: GridNodes, stems_xy_m: NDArray[np.float64]) -> NDArray[np.bool_] | None:
-    """(S,) the stems ``stems_xy_m`` (S, 2) that stand at no node: not the nearest stem within
-    the snap radius of any (the rule plants are placed on the grid by). ``None`` when fewer than
-    :data:`TRUSTED_SHARE` of the nodes have a stem: a grid that far from the stems (a plan for
-    another plot, a base lost beyond what the fit mends) says nothing about where plants are."""
+    """(S,) the stems ``stems_xy_m`` (S, 2) that stand at no node (:func:`at_nodes`). ``None``
+    when fewer than :data:`TRUSTED_SHARE` of the nodes have a stem: a grid that far from the
+    stems (a plan for another plot, a base lost beyond what the fit mends) says nothing about
+    where plants are."""
     if len(stems_xy_m) == 0 or len(grid.xy_m) == 0:
         return None
-    nodes, stems = _paired(grid.xy_m, stems_xy_m, grid.snap_radius_m)
+    nodes, stems = at_nodes(grid, stems_xy_m)
     if len(nodes) < TRUSTED_SHARE * len(grid.xy_m):
         return None
     off = np.ones(len(stems_xy_m), dtype=bool)

@@ -35,6 +35,7 @@ from fieldapp.recon.grid import (
     GridFit,
     GridNodes,
     apply_grid_prior_nodes,
+    at_nodes,
     fitted_to_stems,
     off_the_grid,
     prior_nodes,
@@ -243,12 +244,30 @@ def search_plants(
         labels = apply_grid_prior_nodes(
             cloud.points, labels, grid, 2 * settings.base_slice_m, merges
         )
+    coloured = _coloured(cloud)
     plants, plant_labels = _measured(
-        cloud, soil_m, soil_tree, labels, ambiguous, len(stems), settings, ground_radius_m, merges
+        cloud,
+        soil_m,
+        soil_tree,
+        labels,
+        ambiguous,
+        len(stems),
+        settings,
+        ground_radius_m,
+        coloured,
+        merges,
     )
     if _merge_shared_bases(labels, plants, plant_labels, settings.stems.min_separation_m, merges):
         plants, plant_labels = _measured(
-            cloud, soil_m, soil_tree, labels, ambiguous, len(stems), settings, ground_radius_m
+            cloud,
+            soil_m,
+            soil_tree,
+            labels,
+            ambiguous,
+            len(stems),
+            settings,
+            ground_radius_m,
+            coloured,
         )
     search = PlantSearch(plants, merges=merges, grid_fit=grid_fit)
     if grid is not None:
@@ -444,14 +463,15 @@ def _measured(
     stem_count: int,
     settings: PlantSettings,
     ground_radius_m: float,
+    coloured: bool = False,
     notes: list[str] | None = None,
 ) -> tuple[list[Plant], dict[int, int]]:
     """The labelled groups large and tall enough to be plants, measured, ids in reading order;
-    and the label each plant id came from. A group no stem reaches that floats above the soil
-    and is not green (:func:`_foreign`) is not a plant; ``notes`` is told of each."""
+    and the label each plant id came from. Where the points are ``coloured``
+    (:func:`_coloured`), a group no stem reaches that floats above the soil and is not green
+    (:func:`_foreign`) is not a plant; ``notes`` is told of each."""
     measured: list[tuple[PlantTraits, Cloud, bool, float]] = []
     measured_labels: list[int] = []
-    coloured = _coloured(cloud)
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(labels.max(initial=-1) + 2))
     for label in range(labels.max(initial=-1) + 1):
@@ -467,9 +487,9 @@ def _measured(
             settings.top_support_points,
             settings.top_support_radius_m,
         )
-        if label >= stem_count and coloured and _foreign(plant, traits):
+        low = _foreign(plant, traits) if label >= stem_count and coloured else None
+        if low is not None:
             if notes is not None:
-                low = float(plant.points[:, 2].min()) - traits.ground_z_m
                 x, y = plant.points[:, :2].mean(axis=0)
                 notes.append(
                     f"{len(members)} points no stem reaches, {100 * low:.0f} cm above the soil "
@@ -503,16 +523,17 @@ def _coloured(cloud: Cloud) -> bool:
     return bool(len(sample)) and float(np.quantile(excess_green(sample), 0.9)) > 2 * NOT_GREEN_EXG
 
 
-def _foreign(plant: Cloud, traits: PlantTraits) -> bool:
-    """A group of points no stem reaches is not a plant when its lowest point floats more than
-    :data:`FLOATING_M` above its ground *and* its median colour is not green: the cap of a
-    reference sphere on its stand among tall plants (an independent renderer's: 399 points
-    67-77 cm up, a 77 cm "plant" off the grid), a label, a hand. A green group up there is a
-    plant's top whose lower part was not seen, and stays one."""
+def _foreign(plant: Cloud, traits: PlantTraits) -> float | None:
+    """How high a group of points no stem reaches floats above its ground when it is not a
+    plant (else ``None``): its lowest point more than :data:`FLOATING_M` up *and* its median
+    colour not green: the cap of a reference sphere on its stand among tall plants (an
+    independent renderer's: 399 points 67-77 cm up, a 77 cm "plant" off the grid), a label, a
+    hand. A green group up there is a plant's top whose lower part was not seen, and stays
+    one."""
     low = float(plant.points[:, 2].min()) - traits.ground_z_m
-    if low <= FLOATING_M:
-        return False
-    return float(np.median(excess_green(plant.colors))) < NOT_GREEN_EXG
+    if low <= FLOATING_M or float(np.median(excess_green(plant.colors))) >= NOT_GREEN_EXG:
+        return None
+    return low
 
 
 def _soil_near(
@@ -538,15 +559,9 @@ def _place_on_grid(
     node (the nearest); the others are extra; the nodes left are missing where the soil sample
     (M, 3) has ground within the snap radius, unseen elsewhere (every node counts as seen
     without a soil sample)."""
-    taken: dict[int, tuple[float, int]] = {}
-    for index, plant in enumerate(search.plants):
-        distance = np.hypot(*(grid.xy_m - [plant.traits.x_m, plant.traits.y_m]).T)
-        node = int(np.argmin(distance))
-        if distance[node] <= grid.snap_radius_m and (
-            node not in taken or distance[node] < taken[node][0]
-        ):
-            taken[node] = (float(distance[node]), index)
-    owner = {index: node for node, (_, index) in taken.items()}
+    bases = np.array([[p.traits.x_m, p.traits.y_m] for p in search.plants]).reshape(-1, 2)
+    nodes, placed = at_nodes(grid, bases)
+    owner = {int(index): int(node) for node, index in zip(nodes, placed, strict=True)}
     for index, plant in enumerate(search.plants):
         if index not in owner:
             search.extra_plants.append(plant.id)
@@ -557,6 +572,7 @@ def _place_on_grid(
     if soil_tree is not None:
         distance, _ = soil_tree.query(grid.xy_m)
         seen = distance <= grid.snap_radius_m
+    taken = set(owner.values())
     for node in range(len(grid.xy_m)):
         if node not in taken:
             cells = search.missing_cells if seen[node] else search.unseen_cells
