@@ -245,20 +245,9 @@ def search_plants(
             cloud.points, labels, grid, 2 * settings.base_slice_m, merges
         )
     coloured = _coloured(cloud)
-    plants, plant_labels = _measured(
-        cloud,
-        soil_m,
-        soil_tree,
-        labels,
-        ambiguous,
-        len(stems),
-        settings,
-        ground_radius_m,
-        coloured,
-        merges,
-    )
-    if _merge_shared_bases(labels, plants, plant_labels, settings.stems.min_separation_m, merges):
-        plants, plant_labels = _measured(
+
+    def measured(notes: list[str] | None = None) -> tuple[list[Plant], dict[int, int]]:
+        return _measured(
             cloud,
             soil_m,
             soil_tree,
@@ -268,7 +257,12 @@ def search_plants(
             settings,
             ground_radius_m,
             coloured,
+            notes,
         )
+
+    plants, plant_labels = measured(merges)
+    if _merge_shared_bases(labels, plants, plant_labels, settings.stems.min_separation_m, merges):
+        plants, plant_labels = measured()  # the labels merged in place
     search = PlantSearch(plants, merges=merges, grid_fit=grid_fit)
     if grid is not None:
         _place_on_grid(search, grid, soil_m, soil_tree)
