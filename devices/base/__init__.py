@@ -14,6 +14,7 @@ from devices.base.errors import (
     BaseStopped,
     InsecureEndpoint,
     KeyFileError,
+    LinkClosed,
     NavigationFailed,
 )
 from devices.base.keys import ClientKeys, ServerKeys, generate_key_pair
@@ -35,6 +36,7 @@ __all__ = [
     "ClientTiming",
     "InsecureEndpoint",
     "KeyFileError",
+    "LinkClosed",
     "NavigationFailed",
     "Pose",
     "ServerKeys",

@@ -2,7 +2,9 @@
 
 The request side of :class:`~devices.base.transport.ZmqTransport`. Each attempt waits the
 policy's ``timeout_s`` for the reply; on silence the socket is closed and reopened and the SAME
-request (same id) is sent again, at most ``retries`` more times, then :class:`BaseOffline`. A
+request (same id) is sent again, at most ``retries`` more times, then :class:`BaseOffline`.
+:meth:`RequestChannel.close` ends a request still waiting (:class:`LinkClosed`, within a poll
+slice: the application never waits out a retry budget to close) and refuses later ones. A
 send never blocks: with no peer to queue for (an in-process base whose socket is gone:
 ``inproc://`` keeps no pipe, unlike TCP) the try fails at once. A reply whose id is not the
 request's is discarded as no reply. The socket's monitor reports the CURVE handshake: a refused
@@ -23,7 +25,7 @@ from dataclasses import dataclass
 import zmq
 from zmq.utils.monitor import parse_monitor_message
 
-from devices.base.errors import BaseAuthRejected, BaseError, BaseOffline
+from devices.base.errors import BaseAuthRejected, BaseError, BaseOffline, LinkClosed
 from devices.base.keys import ClientKeys, require_loopback_without_keys
 from devices.base.protocol import ProtocolError, Reply, decode_reply
 
@@ -69,6 +71,7 @@ class RequestChannel:
         self._socket: zmq.Socket[bytes] | None = None
         self._monitor: zmq.Socket[bytes] | None = None
         self._failures = 0
+        self._closed = threading.Event()
         self._last_failure: BaseError | None = None
         self.routing_id = b"fieldapp-" + secrets.token_hex(8).encode()
         """Kept across reconnections: the base knows this client (its goal, its replies)."""
@@ -77,6 +80,8 @@ class RequestChannel:
         """Send ``data`` and return the reply with id ``request_id`` (Lazy Pirate)."""
         failures_seen = self._failures
         with self._lock:
+            if self._closed.is_set():
+                raise self._closed_error(request_id)
             if self._failures != failures_seen and self._last_failure is not None:
                 raise type(self._last_failure)(str(self._last_failure))
             try:
@@ -118,6 +123,8 @@ class RequestChannel:
         poller.register(monitor, zmq.POLLIN)
         deadline_s = self._clock() + timeout_s
         while (remaining_s := deadline_s - self._clock()) > 0:
+            if self._closed.is_set():
+                raise self._closed_error(request_id)
             wait_s = min(remaining_s, POLL_SLICE_S)
             events = dict(poller.poll(timeout=max(1, round(wait_s * 1000))))
             if monitor in events:
@@ -174,6 +181,14 @@ class RequestChannel:
             self._monitor.close(linger=0)
         self._socket = self._monitor = None
 
+    def _closed_error(self, request_id: str) -> LinkClosed:
+        return LinkClosed(
+            f"the link to the base at {self.endpoint} was closed: {request_id} has no reply"
+        )
+
     def close(self) -> None:
+        """End a request still waiting for its reply (it raises :class:`LinkClosed`), release
+        the sockets, refuse every later request. Idempotent."""
+        self._closed.set()
         with self._lock:
             self._close_socket()

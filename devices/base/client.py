@@ -28,6 +28,7 @@ from devices.base.errors import (
     BaseError,
     BaseRequestRejected,
     BaseStopped,
+    LinkClosed,
     NavigationFailed,
 )
 from devices.base.keys import ClientKeys
@@ -241,6 +242,8 @@ class BaseClient:
             goal = self._active_goal
             try:
                 self.heartbeat()
+            except LinkClosed:
+                return  # closed during the beat: nothing failed
             except BaseError as error:
                 self._heartbeat_failed(goal, error)
             self._closed.wait(self.timing.heartbeat_period_s)
@@ -259,12 +262,13 @@ class BaseClient:
             self._goal_event.clear()
 
     def close(self) -> None:
-        """Stop heartbeats, then close the transport (the base is not told)."""
+        """Stop heartbeats and close the transport (the base is not told): a request still
+        waiting for its reply, a beat's or a caller's, ends at once with :class:`LinkClosed`."""
         self._closed.set()
         self._goal_event.set()  # wakes the heartbeat thread, which sees it is closed
+        self._transport.close()
         self._heartbeat.join(timeout=5.0)
         self._end_goal()
-        self._transport.close()
 
     def __enter__(self) -> BaseClient:
         return self

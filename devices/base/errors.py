@@ -19,6 +19,11 @@ class BaseOffline(BaseError):
     """No reply within the retry budget: the base, its bridge or the link is down."""
 
 
+class LinkClosed(BaseError):
+    """This client's link was closed (by the application): a request still waiting for its
+    reply ends with this, and no later one is sent."""
+
+
 class BaseAuthRejected(BaseError):
     """The base refused this client's CURVE key (or the security handshake failed)."""
 

@@ -238,6 +238,8 @@ class ProtocolServer:
                     time.sleep(self.timing.poll_period_s)
                     continue
                 events = dict(poller.poll(timeout=round(self.timing.poll_period_s * 1000)))
+                if self._frozen.is_set() or self._crashed.is_set():
+                    continue  # a fault injected during the poll: not one more reply
                 now_s = self._clock()
                 if self._reload_asked.is_set() or now_s >= next_reload_s:
                     self._reload_asked.clear()

@@ -67,7 +67,8 @@ class BaseTransport(Protocol):
         ...
 
     def close(self) -> None:
-        """Release the sockets (the base is not told)."""
+        """Release the sockets (the base is not told); a request still waiting for its reply
+        raises :class:`LinkClosed` at once, later ones too. Thread-safe, idempotent."""
         ...
 
 

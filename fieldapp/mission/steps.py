@@ -22,6 +22,7 @@ from devices.base import (
     BaseError,
     BaseOffline,
     BaseStopped,
+    LinkClosed,
     NavigationFailed,
 )
 from devices.base.protocol import BaseState, Pose, Status
@@ -76,6 +77,10 @@ def drive_to(
             kind, problem = IncidentKind.LOST_LINK, f"link lost: {error}"
             advice = "the base stops itself within a second (watchdog); check the Wi-Fi link "
             advice += "and the base's bridge"
+        except LinkClosed as error:  # the application closed the base's link (it is quitting)
+            raise _fault(
+                gate, "base", str(error), f"open the base's link again, {RESUME_ADVICE}"
+            ) from error
         except BaseError as error:
             raise _fault(gate, "base", str(error), "check the plan's station poses against "
                          "the base's map") from error  # fmt: skip

@@ -21,6 +21,7 @@ from devices.base import (
     BaseState,
     BaseStopped,
     ClientTiming,
+    LinkClosed,
     NavigationFailed,
     Pose,
     SimFault,
@@ -403,6 +404,44 @@ def test_frozen_or_crashed_base_is_reported_offline_after_the_retries(
     assert len(failed) == 1
     assert isinstance(failed[0], BaseOffline)
     assert "offline" in str(failed[0])
+
+
+@pytest.mark.parametrize("fault", [SimFault.FREEZE, SimFault.CRASH])
+def test_closing_the_client_ends_a_request_still_waiting_for_its_reply(
+    make_sim: MakeSim, make_client: MakeClient, fault: SimFault
+) -> None:
+    """A status (or a heartbeat) in flight when the link is closed: on a clock that never moves
+    its try would wait for ever and ``close`` with it (the CI's crashed worker: a heartbeat begun
+    after ``follow_goal`` had seen the base offline). ``close`` ends it, and nothing reopens."""
+    sim = make_sim()
+    clock = FakeClock()  # never advanced: no try of this client ever times out
+    client = make_client(sim.command_endpoint, clock=clock)
+    client.hello()
+    sim.inject_fault(fault)
+    failed: list[BaseException] = []
+
+    def ask() -> None:
+        try:
+            client.status()
+        except BaseException as error:
+            failed.append(error)
+
+    asking = threading.Thread(target=ask)
+    asking.start()
+    reads = clock.reads
+    assert wait_real(lambda: clock.reads > reads + 2)  # it is waiting for the reply
+    closing = threading.Thread(target=client.close)
+    closing.start()
+    closing.join(timeout=30.0)
+    asking.join(timeout=30.0)
+    assert not closing.is_alive()
+    assert not asking.is_alive()
+    assert len(failed) == 1
+    assert isinstance(failed[0], LinkClosed)
+    assert "closed" in str(failed[0])
+    with pytest.raises(LinkClosed, match="closed"):
+        client.heartbeat()  # no socket is opened again on the closed link
+    client.close()  # twice is harmless
 
 
 def test_offline_when_nothing_listens(make_client: MakeClient) -> None:
