@@ -39,6 +39,8 @@ class AuthorizedKeys:
         self._lock = threading.Lock()
         self._keys: frozenset[bytes] = frozenset()
         self._signature: tuple[tuple[str, int, int], ...] | None = None
+        self.revocations = 0
+        """How many times keys were removed: the server then drops every connection."""
         self.refresh()
 
     def _read_signature(self) -> tuple[tuple[str, int, int], ...]:
@@ -63,6 +65,7 @@ class AuthorizedKeys:
         with self._lock:
             removed, added = self._keys - keys, keys - self._keys
             self._keys, self._signature = frozenset(keys), signature
+            self.revocations += bool(removed)
         for key in sorted(removed):
             log.warning("client key %s removed from %s: revoked", key.decode(), self.folder)
         for key in sorted(added):

@@ -39,9 +39,13 @@ STOP_REQUESTED = "stop requested"
 ClientId = tuple[bytes, bytes]
 """Who sent a request: (the client's CURVE public key in Z85, or b"" without keys; the
 connection's routing id, which fieldapp's client keeps across its reconnections). The
-watchdog is fed by the connection that sent the goal (another process with the same key, a
-``fieldapp base status`` beside the app, does not keep a dead app's goal going); the reply
-cache is keyed by the key alone where there is one (the server's)."""
+watchdog is fed by any request on the connection that sent the goal, and by a ``heartbeat``
+with the goal's key on any connection: a client that opens a new socket for each retry (the
+Lazy Pirate of the ZeroMQ guide; the spec's identity is the key) keeps its goal across a lost
+reply, while another process with the same key polling ``status`` (a ``fieldapp base
+status`` beside the app) does not keep a dead app's goal going. Without keys a connection is
+the only identity there is. The reply cache is keyed by the key alone where there is one
+(the server's)."""
 ANONYMOUS: ClientId = (b"", b"")
 
 
@@ -97,7 +101,7 @@ class BaseController:
         if refusal is not None:
             log.warning("%s %s refused: %s", request.cmd, request.id, refusal.error_message)
             return Reply(request.id, False, None, refusal.error_code, refusal.error_message)
-        if client == self._owner:
+        if self._feeds_watchdog(client, request.cmd):
             self._last_heard_s = now_s
         self.executed[request.cmd] += 1
         outcome = self._handlers[request.cmd](request.args)
@@ -108,6 +112,13 @@ class BaseController:
                 request.id, outcome.ok, outcome.result, outcome.error_code, outcome.error_message
             )
         return Reply.success(request.id, outcome)
+
+    def _feeds_watchdog(self, client: ClientId, cmd: Command) -> bool:
+        """Whether a request from ``client`` is heard from the goal's owner (see ``ClientId``)."""
+        owner = self._owner
+        if owner is None or client == owner:
+            return owner is not None
+        return cmd is Command.HEARTBEAT and bool(owner[0]) and client[0] == owner[0]
 
     def _session_problem(self, request: Request) -> Reply | None:
         if request.cmd is Command.STOP:

@@ -7,7 +7,9 @@ requests, ticks the :class:`BaseController` (watchdog, stop latch) and publishes
 Security (``shared/spec/base-protocol.md``): the sockets enforce ZAP, so with no handler no
 CURVE client gets in, and the loop serves nothing while the handler thread is dead (fail
 closed); the authorised-keys folder is re-read every ``keys_reload_s`` (or at once after
-:meth:`ProtocolServer.reload_keys`) and a request whose key was removed is dropped. Replies are
+:meth:`ProtocolServer.reload_keys`); when a key was removed both sockets are bound again, so
+every client shakes hands again and the removed one is refused (its requests, its telemetry),
+and a request from a removed key still in flight is dropped. Replies are
 cached per client (its CURVE key with keys, its routing id without) and request id: a
 byte-identical retry gets the cached reply, another request with a used id is refused (``id
 reused``), a ``stop`` always runs.
@@ -50,6 +52,11 @@ from devices.base.protocol import (
 )
 
 log = logging.getLogger(__name__)
+
+REBIND_TRIES = 50
+REBIND_WAIT_S = 0.02
+"""Binding a socket's endpoint again after a key was removed: tries, and the wait between
+them while ZeroMQ's I/O thread releases the closed socket's listener."""
 
 
 @dataclass(frozen=True)
@@ -232,6 +239,7 @@ class ProtocolServer:
         poller = zmq.Poller()
         poller.register(router, zmq.POLLIN)
         next_reload_s = self._clock() + self.timing.keys_reload_s
+        revocations = 0 if self._authorized is None else self._authorized.revocations
         try:
             while not self._stopping.is_set() and not self._crashed.is_set():
                 if self._frozen.is_set():
@@ -246,6 +254,11 @@ class ProtocolServer:
                     next_reload_s = now_s + self.timing.keys_reload_s
                     if self._authorized is not None:
                         self._authorized.refresh()
+                        if self._authorized.revocations != revocations:
+                            revocations = self._authorized.revocations
+                            router, publisher = self._reconnect_everyone(router, publisher)
+                            poller = zmq.Poller()
+                            poller.register(router, zmq.POLLIN)
                 serving = self._authenticator_alive()
                 if router in events:
                     self._drain(router, serving)
@@ -258,6 +271,39 @@ class ProtocolServer:
                 self.controller.backend.halt()
             router.close(linger=0)
             publisher.close(linger=0)
+
+    def _reconnect_everyone(
+        self, router: zmq.Socket[bytes], publisher: zmq.Socket[bytes]
+    ) -> tuple[zmq.Socket[bytes], zmq.Socket[bytes]]:
+        """A key was removed: both sockets are closed and bound again, so that every client
+        connects and shakes hands again. The removed key's are refused (its client reports
+        "authentication rejected", its telemetry ends, as the spec says of connections already
+        made); the others' ZeroMQ sockets reconnect by themselves, and a request lost meanwhile
+        is retried and answered from the reply cache. ZeroMQ cannot drop one peer alone."""
+        log.warning("a client key was removed: every client must connect again")
+        sockets: list[zmq.Socket[bytes]] = []
+        for old, kind, endpoint in (
+            (router, zmq.ROUTER, self.command_endpoint),
+            (publisher, zmq.PUB, self.telemetry_endpoint),
+        ):
+            old.close(linger=0)
+            assert self._context is not None
+            sockets.append(self._bound_again(self._socket(self._context, kind), endpoint))
+        return sockets[0], sockets[1]
+
+    def _bound_again(self, sock: zmq.Socket[bytes], endpoint: str) -> zmq.Socket[bytes]:
+        """``sock`` bound to ``endpoint``, which the socket just closed held: its listener is
+        released by ZeroMQ's I/O thread, a moment later."""
+        for attempt in range(REBIND_TRIES):
+            try:
+                sock.bind(endpoint)
+                return sock
+            except zmq.ZMQError as error:
+                if error.errno != zmq.EADDRINUSE or attempt == REBIND_TRIES - 1:
+                    sock.close(linger=0)
+                    raise
+                time.sleep(REBIND_WAIT_S)
+        raise AssertionError("unreachable")  # pragma: no cover
 
     def _authenticator_alive(self) -> bool:
         """False when keys are in use but the ZAP handler is gone: then nothing is served."""
@@ -304,28 +350,42 @@ class ProtocolServer:
             log.warning("a message of %d body frames: answered bad_request", len(body))
             reply = Reply.failure(None, ErrorCode.BAD_REQUEST, "a request is exactly one frame")
             return envelope, encode_reply(reply)
+        # the spec keys the replies by the client's CURVE key where there is one: a retry after a
+        # lost reply comes on a new connection (a REQ client must reconnect) and is not run again
+        replier: ClientId = (client[0], b"") if client[0] else client
         try:
             request = decode_request(body[0])
         except ProtocolError as error:
             log.warning("bad request (id %r): %s", error.request_id, error.message)
-            reply = Reply.failure(error.request_id, error.code, error.message)
-            return envelope, encode_reply(reply)
-        # the spec keys the replies by the client's CURVE key where there is one: a retry after a
-        # lost reply comes on a new connection (a REQ client must reconnect) and is not run again
-        replier: ClientId = (client[0], b"") if client[0] else client
-        answered = self._cache.get(replier, request.id)
-        if answered is not None and request.cmd is not Command.STOP:
-            if answered.request == body[0]:
-                log.info("repeated request %s (%s): the cached reply", request.id, request.cmd)
-                return envelope, answered.reply
-            log.warning("id %s reused for another request: refused", request.id)
-            reply = Reply.failure(request.id, ErrorCode.BAD_REQUEST, "id reused")
-            return envelope, encode_reply(reply)
+            if error.request_id is None:
+                return envelope, encode_reply(Reply.failure(None, error.code, error.message))
+            repeated = self._repeated(replier, error.request_id, body[0])
+            if repeated is not None:
+                return envelope, repeated
+            data = encode_reply(Reply.failure(error.request_id, error.code, error.message))
+            self._cache.put(replier, error.request_id, body[0], data)  # its id is used
+            return envelope, data
+        if request.cmd is not Command.STOP:
+            repeated = self._repeated(replier, request.id, body[0])
+            if repeated is not None:
+                return envelope, repeated
         data = encode_reply(self.controller.handle(request, self._clock(), client))
         with self._lock:  # status() reflects every command whose reply has been sent
             self._status = self.controller.status()
         self._cache.put(replier, request.id, body[0], data)
         return envelope, data
+
+    def _repeated(self, replier: ClientId, request_id: str, body: bytes) -> bytes | None:
+        """The reply to a request whose id ``replier`` used before: the cached one for the
+        same bytes (a retry), ``id reused`` for others; None for a new id."""
+        answered = self._cache.get(replier, request_id)
+        if answered is None:
+            return None
+        if answered.request == body:
+            log.info("repeated request %s: the cached reply", request_id)
+            return answered.reply
+        log.warning("id %s reused for another request: refused", request_id)
+        return encode_reply(Reply.failure(request_id, ErrorCode.BAD_REQUEST, "id reused"))
 
     def _tick(self, publisher: zmq.Socket[bytes], telemetry: TelemetrySchedule) -> None:
         now_s = self._clock()

@@ -84,11 +84,43 @@ def test_a_revoked_key_is_refused_on_new_and_old_connections(
     (key_folders.base / AUTHORIZED_CLIENTS_DIR / "ws.key").unlink()
     clock.advance(1.0)  # the folder is checked every second of the base's clock
     assert wait_real(lambda: "revoked" in caplog.text)
-    with pytest.raises((BaseOffline, BaseAuthRejected)):  # no reply on the old connection,
-        old.goto("g", Pose(1.0, 0.0, 0.0))  # and its reconnection is refused
+    with pytest.raises(BaseAuthRejected):  # the old connection was cut: its handshake again
+        old.goto("g", Pose(1.0, 0.0, 0.0))  # is refused, not "offline"
     with pytest.raises(BaseAuthRejected):
         make_client(sim.command_endpoint, keys=key_folders.client_keys(), timing=QUICK).hello()
     assert sim.executed[Command.GOTO] == 0
+
+
+def test_a_revoked_key_s_telemetry_ends_and_the_other_clients_go_on(
+    key_folders: Any, make_sim: MakeSim, make_client: MakeClient
+) -> None:
+    """ZeroMQ cannot drop one peer: the base binds its sockets again when a key is removed.
+    The removed key's telemetry stops; a client still authorised reconnects by itself and is
+    answered, its telemetry flows again."""
+    friend_key = key_folders.stranger / "client.key"
+    (key_folders.base / AUTHORIZED_CLIENTS_DIR / "friend.key").write_text(friend_key.read_text())
+    clock = FakeClock()
+    timing = ServerTiming(keys_reload_s=1.0)
+    sim = make_sim(keys=key_folders.server_keys(), clock=clock, timing=timing)
+    revoked = make_client(sim.command_endpoint, sim.telemetry_endpoint,
+                          keys=key_folders.client_keys(), timing=QUICK)  # fmt: skip
+    friend = make_client(sim.command_endpoint, sim.telemetry_endpoint,
+                         keys=key_folders.stranger_keys())  # fmt: skip
+    heard: dict[str, list[float]] = {"revoked": [], "friend": []}
+    revoked.pose_received.connect(lambda t, _pose: heard["revoked"].append(t))
+    friend.pose_received.connect(lambda t, _pose: heard["friend"].append(t))
+
+    def hear_after(t_s: float, who: tuple[str, ...]) -> bool:
+        clock.advance(0.5)  # a pose every second at rest, on the base's clock
+        return all(any(t > t_s for t in heard[name]) for name in who)
+
+    assert wait_real(lambda: hear_after(0.0, ("revoked", "friend")))
+    (key_folders.base / AUTHORIZED_CLIENTS_DIR / "ws.key").unlink()
+    clock.advance(1.0)  # the folder is read again: both sockets are bound again
+    assert wait_real(lambda: _answers(friend))
+    cut_s = clock()  # every pose from now on is stamped later
+    assert wait_real(lambda: hear_after(cut_s + 3.0, ("friend",)))
+    assert not any(t > cut_s for t in heard["revoked"])
 
 
 def test_reload_keys_takes_a_new_key_at_once(
@@ -128,6 +160,22 @@ def test_a_stop_reusing_a_goto_id_is_executed(
     reply = _ask(sock, {"v": 1, "id": "x-1", "cmd": "stop", "session": session})
     assert reply == {"v": 1, "id": "x-1", "ok": True, "result": {}}
     assert sim.latched and sim.status().state is BaseState.STOPPED
+
+
+def test_the_id_of_a_refused_request_is_used_too(
+    tcp_sim: SimulatedBase, raw_dealer: RawDealer
+) -> None:
+    """The base keeps its replies to requests it could not run as well (the spec's "last 256
+    replies"): the same bytes again get the same error, another request with that id is
+    ``id reused`` and not run."""
+    sock = raw_dealer(tcp_sim.command_endpoint)
+    wrong_version = {"v": 2, "id": "r-1", "cmd": "reset"}
+    first = _ask(sock, wrong_version)
+    assert first is not None and first["error"]["code"] == "version"
+    assert _ask(sock, wrong_version) == first
+    reused = _ask(sock, {"v": 1, "id": "r-1", "cmd": "reset"})
+    assert reused is not None and reused["error"] == {"code": "bad_request", "message": "id reused"}
+    assert tcp_sim.executed[Command.RESET] == 0
 
 
 def test_a_stop_carrying_another_session_s_value_is_executed(
@@ -271,6 +319,27 @@ def test_another_process_with_the_same_key_does_not_keep_a_dead_app_s_goal_alive
         assert watcher.status().state is BaseState.MOVING or sim.latched
     assert wait_real(lambda: sim.latched)
     assert sim.status().error == "link lost"
+
+
+def test_heartbeats_with_the_goal_s_key_on_a_new_connection_keep_it_alive(
+    key_folders: Any, make_sim: MakeSim, make_client: MakeClient
+) -> None:
+    """The spec's identity is the CURVE key: a client that opens a new socket (a new routing
+    id) for each retry, as the ZeroMQ guide's Lazy Pirate does, goes on feeding its goal's
+    watchdog with heartbeats; the same key's ``status`` polls do not (the test above)."""
+    clock = FakeClock()
+    sim = make_sim(keys=key_folders.server_keys(), time_scale=0.1, clock=clock)
+    owner = make_client(sim.command_endpoint, keys=key_folders.client_keys())
+    owner.goto("g", Pose(3.0, 0.0, 0.0), wait=False)
+    owner.close()  # its socket is gone; the same workstation goes on from a new one
+    reopened = make_client(sim.command_endpoint, keys=key_folders.client_keys())
+    for _ in range(6):
+        clock.advance(0.3)
+        ticks = clock.reads
+        assert wait_real(lambda ticks=ticks: clock.reads > ticks + 2)  # the base saw the time
+        reopened.heartbeat()
+    assert not sim.latched
+    assert sim.status().state is BaseState.MOVING
 
 
 def test_the_owner_s_heartbeats_keep_its_goal_alive_across_a_reconnection(
