@@ -51,12 +51,13 @@ ALARM_MEANINGS: dict[int, str] = {
     7: "homing fail: safety door was opened during the homing cycle",
     8: "homing fail: pull-off travel failed to clear the limit switch",
     9: "homing fail: could not find the limit switch within the search distance",
+    10: "homing fail: dual-axis homing could not find the second limit switch",
 }
 
 CRITICAL_ALARMS = frozenset({1, 2})
 """Alarms after which Grbl ignores every line until a reset (Ctrl-X): hard and soft limits."""
 
-POSITION_LOST_ALARMS = frozenset({1, 3, 6, 7, 8, 9})
+POSITION_LOST_ALARMS = frozenset({1, 3, 6, 7, 8, 9, 10})
 """Alarms after which the machine position cannot be trusted any more."""
 
 

@@ -1,7 +1,7 @@
 """The rotary table driver: Grbl 1.1 over a serial port (``spec/turntable-grbl.md``).
 
 The driver is handed an open pyserial-like port and never opens one itself; :func:`open_table`
-is the small factory that opens a device path or pyserial URL. A move is ``G90 G0 X<deg>``
+is the small factory that opens a device path or pyserial URL. A move is ``G21 G90 G0 X<deg>``
 (``ok`` = queued), then ``G4 P0`` (``ok`` = motion buffer empty), then ``?`` and the read-back
 position must be within ``tolerance_deg`` of the target. In Alarm the driver refuses to move;
 it never sends ``$X`` or ``$H`` unless the operator calls :meth:`GrblTable.unlock` or
@@ -26,8 +26,10 @@ from devices.table.errors import (
     TableError,
     TableException,
     TableHeld,
+    TableMisconfigured,
     TableMissedTarget,
     TablePositionUnknown,
+    TableReset,
     TableTimeout,
 )
 from devices.table.link import READ_POLL_S, GrblLink, SerialPort
@@ -35,6 +37,10 @@ from devices.table.link import READ_POLL_S, GrblLink, SerialPort
 log = logging.getLogger(__name__)
 
 BAUD_RATE = 115200
+SUSPENDED_STATES = ("Hold", "Door", "Sleep")
+"""States in which Grbl runs no line until a resume (``~``) or a reset."""
+REPORT_INCHES_SETTING = 13
+"""``$13=1``: Grbl reports positions in inches (the table's degrees divided by 25.4)."""
 TOLERANCE_DEG = 0.2
 
 
@@ -100,6 +106,7 @@ class GrblTable:
         )
         self._holds = 0
         self._position_known = False
+        self._last_position_deg = 0.0
 
     # --- connection -----------------------------------------------------------------------
 
@@ -145,6 +152,13 @@ class GrblTable:
     # --- queries --------------------------------------------------------------------------
 
     def status(self) -> TableStatus:
+        """The controller's state and the table angle. After a hard or soft limit (a critical
+        alarm) Grbl 1.1 answers nothing, not even ``?``, until a reset: the alarm is reported
+        at the last angle the controller sent, without asking (grblHAL would answer)."""
+        with self._link.cond:
+            if self._link.state.critical:
+                code = self._link.state.alarm_code
+                return TableStatus("Alarm", None, self._last_position_deg, False, code)
         report = self._link.query_status(self.timeouts.status_s)
         with self._link.cond:
             position_deg = report.machine_x_deg(self._link.state.wco_x_deg)
@@ -225,6 +239,11 @@ class GrblTable:
     def home(self) -> float:
         """Operator-requested homing cycle (``$H``); the position is known afterwards."""
         with self._link.cond:
+            critical = self._link.state.critical
+        if critical:  # Grbl ignores every line until a reset
+            raise self._alarm_error()
+        self._refuse_while_suspended("home ($H)")
+        with self._link.cond:
             alarms = self._link.state.alarms
 
         def new_alarm() -> TableException | None:
@@ -244,6 +263,7 @@ class GrblTable:
             critical = self._link.state.critical
         if critical:
             raise self._alarm_error()
+        self._refuse_while_suspended("unlock ($X)")
         self._run(p.UNLOCK_LINE, self.timeouts.reply_s, lambda: None)
         return self.status()
 
@@ -267,6 +287,15 @@ class GrblTable:
         reply = self._link.send_line(line, timeout_s, interrupted, poll_s=poll_s)
         if isinstance(reply, p.ErrorReply):
             raise TableError(reply.code, reply.meaning, line)
+
+    def _refuse_while_suspended(self, what: str) -> None:
+        """Grbl runs no line while a feed hold, an open door or sleep suspends it: the line
+        would wait in its buffer (a timeout here) and run later, after a resume."""
+        status = self.status()
+        if status.state in SUSPENDED_STATES:
+            raise TableHeld(
+                f"table is in {status.state}: resume (~) or reset it before asking to {what}"
+            )
 
     def _refuse_if_not_ready(self, status: TableStatus) -> None:
         if status.state == "Alarm":
@@ -327,8 +356,15 @@ class GrblTable:
     def _read_settings(self) -> None:
         try:
             self._run(p.SETTINGS_LINE, self.timeouts.reply_s, lambda: None)
-        except (TableError, TableTimeout) as error:
+        except (TableError, TableTimeout, TableReset) as error:
             log.warning("could not read the controller settings ($$): %s", error)
+            return
+        if self.settings.get(REPORT_INCHES_SETTING):
+            raise TableMisconfigured(
+                f"the controller reports positions in inches (${REPORT_INCHES_SETTING}=1): the "
+                f"table's angles would read 25.4 times too small; send "
+                f"${REPORT_INCHES_SETTING}=0 (e.g. from a serial terminal) and connect again"
+            )
 
     def _on_line(self, reply: p.Reply) -> None:
         if isinstance(reply, p.AlarmReply):
@@ -341,7 +377,8 @@ class GrblTable:
             self.message_received.emit(reply.text)
         elif isinstance(reply, p.StatusReport):
             wco_x_deg = reply.wco[0] if reply.wco else self._link.state.wco_x_deg
-            self.position_deg_changed.emit(reply.machine_x_deg(wco_x_deg) - wco_x_deg)
+            self._last_position_deg = reply.machine_x_deg(wco_x_deg) - wco_x_deg
+            self.position_deg_changed.emit(self._last_position_deg)
 
 
 def open_table(

@@ -59,5 +59,10 @@ class TableMissedTarget(TableException):
         )
 
 
+class TableMisconfigured(TableException):
+    """The controller's settings do not suit the table (e.g. ``$13=1``, inches): nothing is
+    moved until they are changed."""
+
+
 class TableReset(TableException):
     """The controller was reset while a command was waiting for its answer."""

@@ -27,7 +27,9 @@ HOME_LINE = "$H"
 SETTINGS_LINE = "$$"
 PARSER_STATE_LINE = "$G"
 
-STATES = ("Idle", "Run", "Hold", "Jog", "Alarm", "Door", "Check", "Home", "Sleep")
+STATES = ("Idle", "Run", "Hold", "Jog", "Alarm", "Door", "Check", "Home", "Sleep", "Tool")
+"""Grbl 1.1's states, and grblHAL's ``Tool`` (a tool change waiting: the driver moves only
+from Idle)."""
 
 
 class ProtocolError(ValueError):
@@ -139,7 +141,9 @@ Reply = (
     | Garbled
 )
 
-_BANNER = re.compile(r"Grbl (\d+\.\d+[a-z]?) \['\$' for help\]")
+_BANNER = re.compile(r"Grbl(?:HAL)? (\d+\.\d+[a-z]?) \['\$' (?:or '\$HELP' )?for help\]")
+"""Grbl 1.1's ``Grbl 1.1h ['$' for help]``, and grblHAL's ``GrblHAL 1.1f ['$' or '$HELP' for
+help]`` (the 32-bit successor, same protocol)."""
 _CODE = re.compile(r"(error|ALARM):(\d{1,3})")
 _SETTING = re.compile(r"\$(\d{1,3})=(-?\d+(?:\.\d*)?)")
 _STARTUP = re.compile(r"(\$N\d=.*|>.*:(ok|error:\d+))")
@@ -193,7 +197,7 @@ def parse_status(raw: bytes) -> StatusReport | Garbled:
     other: dict[str, str] = {}
     for item in fields:
         name, sep, body = item.partition(":")
-        if not sep:
+        if not sep and not name.isalpha():  # grblHAL sends a flag or two without a value
             return Garbled(raw)
         if name in ("MPos", "WPos", "WCO", "FS", "F"):
             numbers = _numbers(body)
@@ -261,10 +265,11 @@ def encode_line(text: str) -> bytes:
 
 
 def goto_line(target_deg: float) -> str:
-    """The absolute rapid move to ``target_deg`` on the X (table) axis."""
+    """The absolute rapid move to ``target_deg`` on the X (table) axis, in millimetre mode
+    (degrees here): a ``G20`` left by a startup block (``$N0``) would read X45 as 45 inches."""
     if target_deg != target_deg or abs(target_deg) > 1e6:
         raise ProtocolError(f"target angle {target_deg!r} deg is not a usable number")
-    return f"G90 G0 X{target_deg:.4f}"
+    return f"G21 G90 G0 X{target_deg:.4f}"
 
 
 # --- what a controller sends (used by the simulator, and by tests as ground truth) ----------

@@ -62,7 +62,7 @@ def clean_line(raw: bytes) -> tuple[str, bool]:
             break
         elif byte > 0x20 and ch != "/" and byte < 0x7F:
             out.append(ch.upper())
-    return "".join(out[:LINE_BUFFER_CHARS]), len(out) >= LINE_BUFFER_CHARS
+    return "".join(out[:LINE_BUFFER_CHARS]), len(out) > LINE_BUFFER_CHARS  # protocol.c: the 80th
 
 
 def parse_block(text: str) -> GBlock | int:

@@ -69,8 +69,12 @@ class GrblSimulator:
         off_target_deg: float = 0.0,
         seed: int = 0,
         on_angle: Callable[[float], None] | None = None,
+        status_in_critical_alarm: bool = False,
     ) -> None:
+        """``status_in_critical_alarm``: answer ``?`` after a hard or soft limit, as grblHAL
+        does; Grbl 1.1h (protocol.c) answers nothing but Ctrl-X there, the default."""
         self._lock = threading.RLock()
+        self.status_in_critical_alarm = status_in_critical_alarm
         self.settings = merged_settings(settings)
         self.on_angle = on_angle
         self._rng = random.Random(seed)
@@ -152,7 +156,8 @@ class GrblSimulator:
                     # report, sent when the cycle ends (limits.c)
                     self._report_after_homing = True
                 elif byte == p.STATUS_QUERY[0]:
-                    self._emit(self._status_line())
+                    if not self._critical or self.status_in_critical_alarm:
+                        self._emit(self._status_line())
                 elif self._asleep:
                     continue  # asleep, the firmware reads no line and no hold, only ? and Ctrl-X
                 elif byte == p.FEED_HOLD[0]:

@@ -74,7 +74,7 @@ def test_goto_reaches_each_target(
         assert server.simulator.angle_deg == pytest.approx(target_deg, abs=1e-6)
         assert table.position_deg() == pytest.approx(target_deg, abs=5e-4)
     lines = list(server.simulator.executed_lines)
-    assert lines[-2:] == [f"G90G0X{targets[-1]:.4f}", "G4P0"]
+    assert lines[-2:] == [f"G21G90G0X{targets[-1]:.4f}", "G4P0"]
 
 
 def test_goto_in_real_time_waits_for_the_move(

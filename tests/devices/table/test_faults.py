@@ -15,9 +15,13 @@ from devices.table import (
     PtyGrblServer,
     TableAlarm,
     TableDisconnected,
+    TableHeld,
+    TableMisconfigured,
     TablePositionUnknown,
+    TableStatus,
     TableTimeout,
     TableTimeouts,
+    open_table,
 )
 from devices.table.link import GrblLink
 from devices.table.protocol import BARRIER_LINE
@@ -323,3 +327,51 @@ def test_a_resync_whose_own_answer_was_lost_does_not_leave_the_link_out_of_step(
         table.goto_deg(20.0)
     for target_deg in (30.0, 40.0):  # the next resync flushes both; back in step for good
         assert table.goto_deg(target_deg) == pytest.approx(target_deg)
+
+
+# --- what the real firmware does that a simulator might not (gnea/grbl 1.1h's sources) ------
+
+
+def test_a_critical_alarm_is_reported_without_asking_the_silent_controller(
+    server: PtyGrblServer, make_table: MakeTable
+) -> None:
+    """After a hard or soft limit Grbl 1.1h answers nothing, not even ``?``, until Ctrl-X
+    (protocol.c): the alarm is reported at once (the clock never moves here, so a query would
+    wait for ever), and an unlock or a homing is refused as the alarm, not timed out."""
+    clock = FakeClock()
+    table = make_table(server, clock=clock)
+    said: list[str] = []
+    table.message_received.connect(said.append)
+    server.simulator.inject_alarm(1)
+    assert wait_real(lambda: "Reset to continue" in said)  # after the ALARM:1 line
+    outcome_status: list[TableStatus] = []
+    asked, outcome = _in_background(lambda: outcome_status.append(table.status()))
+    asked.join(timeout=20.0)
+    assert outcome == [] and len(outcome_status) == 1
+    status = outcome_status[0]
+    assert (status.state, status.alarm_code, status.position_known) == ("Alarm", 1, False)
+    for operator_action in (table.unlock, table.home):
+        with pytest.raises(TableAlarm, match="reset it"):
+            operator_action()
+    assert not any(line in ("$X", "$H") for line in server.simulator.executed_lines)
+
+
+def test_unlock_and_home_are_refused_while_a_hold_suspends_the_controller(
+    server: PtyGrblServer, make_table: MakeTable
+) -> None:
+    """Grbl runs no line while held: a ``$H`` sent then would wait in its buffer and home the
+    table later, after a resume."""
+    table = make_table(server)
+    assert table.hold().state == "Hold"
+    for operator_action in (table.unlock, table.home):
+        with pytest.raises(TableHeld, match="resume"):
+            operator_action()
+    assert not any(line in ("$X", "$H") for line in server.simulator.executed_lines)
+
+
+def test_a_controller_reporting_in_inches_is_refused_at_connect(
+    make_server: Callable[..., PtyGrblServer],
+) -> None:
+    server = make_server(GrblSimulator(settings={13: 1}))
+    with pytest.raises(TableMisconfigured, match=r"\$13=0"):
+        open_table(server.device_path, timeouts=FAST)

@@ -21,6 +21,7 @@ RECEIVED = [
     (b"ALARM:3", p.AlarmReply(3, ALARM_MEANINGS[3])),
     (b"Grbl 1.1h ['$' for help]", p.Banner("1.1h")),
     (b"Grbl 1.1f ['$' for help]", p.Banner("1.1f")),
+    (b"GrblHAL 1.1f ['$' or '$HELP' for help]", p.Banner("1.1f")),  # grblHAL's default
     (b"[MSG:Reset to continue]", p.Message("Reset to continue")),
     (b"[MSG:'$H'|'$X' to unlock]", p.Message("'$H'|'$X' to unlock")),
     (b"[MSG:Caution: Unlocked]", p.Message("Caution: Unlocked")),
@@ -114,7 +115,7 @@ def test_wpos_report_is_shifted_by_the_work_offset() -> None:
 
 
 SENT = [
-    ("G90 G0 X45.0000", b"G90 G0 X45.0000\n"),
+    ("G21 G90 G0 X45.0000", b"G21 G90 G0 X45.0000\n"),
     ("G4 P0", b"G4 P0\n"),
     ("$X", b"$X\n"),
     ("$H", b"$H\n"),
@@ -135,7 +136,11 @@ def test_encode_refuses_what_grbl_would_mangle(command: str) -> None:
 
 @pytest.mark.parametrize(
     ("target_deg", "line"),
-    [(45.0, "G90 G0 X45.0000"), (-0.5, "G90 G0 X-0.5000"), (359.99995, "G90 G0 X360.0000")],
+    [
+        (45.0, "G21 G90 G0 X45.0000"),
+        (-0.5, "G21 G90 G0 X-0.5000"),
+        (359.99995, "G21 G90 G0 X360.0000"),
+    ],
 )
 def test_goto_line(target_deg: float, line: str) -> None:
     assert p.goto_line(target_deg) == line
@@ -184,7 +189,16 @@ def test_line_splitter_drops_blank_lines_and_bounds_noise() -> None:
 
 def test_code_tables_cover_grbl_1_1() -> None:
     assert sorted(ERROR_MEANINGS) == [*range(1, 18), *range(20, 39)]
-    assert sorted(ALARM_MEANINGS) == list(range(1, 10))
+    assert sorted(ALARM_MEANINGS) == list(range(1, 11))  # 10: dual-axis homing (1.1f on)
     assert "lock" in error_meaning(9)
     assert "hard limit" in alarm_meaning(1)
     assert alarm_meaning(42) == "unknown alarm code 42"
+
+
+def test_grblhal_status_lines_are_read() -> None:
+    """grblHAL (the 32-bit successor) adds a ``Tool`` state (a tool change waiting) and flags
+    without a value (``|AR``): read, not taken for line noise."""
+    report = p.parse_status(b"<Tool|MPos:1.000,0.000,0.000|FS:0,0|AR>")
+    assert isinstance(report, p.StatusReport)
+    assert (report.state, report.mpos) == ("Tool", (1.0, 0.0, 0.0))
+    assert isinstance(p.parse_status(b"<Idle|MPos:1.000,0.000,0.000|F#S>"), p.Garbled)

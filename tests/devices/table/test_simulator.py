@@ -46,6 +46,8 @@ LINES = [
     (b"G4 P-1\n", b"error:4\r\n"),
     (b"P1\n", b"error:36\r\n"),
     (b"G0 X" + b"1" * 80 + b"\n", b"error:11\r\n"),
+    (b"G0 X" + b"0" * 76 + b"\n", b"ok\r\n"),  # 79 characters fit (protocol.c), 80 do not:
+    (b"G0 X" + b"0" * 77 + b"\n", b"error:11\r\n"),
     (b"$Q\n", b"error:2\r\n"),
     (b"$$x\n", b"error:3\r\n"),
     (b"$100\n", b"error:3\r\n"),
@@ -159,7 +161,9 @@ def test_stall_is_a_hard_limit_alarm_that_locks_until_reset() -> None:
     out = exchange(sim, b"G0 X45\nG4 P0\n")
     assert out == b"ok\r\nALARM:1\r\n[MSG:Reset to continue]\r\n"
     assert sim.angle_deg == pytest.approx(7.0)
-    assert exchange(sim, b"$X\nG0 X1\n") == b""  # everything but ? and Ctrl-X is ignored
+    assert exchange(sim, b"$X\nG0 X1\n") == b""  # everything but Ctrl-X is ignored,
+    assert exchange(sim, b"?") == b""  # ? too in Grbl 1.1h (protocol.c's critical loop)
+    sim.status_in_critical_alarm = True  # grblHAL answers it
     assert exchange(sim, b"?").startswith(b"<Alarm|MPos:7.000,0.000,0.000|FS:0,0|Pn:X")
     out = exchange(sim, b"\x18")
     assert out == b"ok\r\n" + BANNER + b"[MSG:'$H'|'$X' to unlock]\r\n"
