@@ -20,6 +20,9 @@ class VerifyReport:
     session: Session | None = None
     views_by_station: dict[int, list[int]] = field(default_factory=dict)
     missing: list[tuple[int, int]] = field(default_factory=list)
+    uncalibrated: list[int] = field(default_factory=list)
+    """Captured stations without ``stations.to_reference`` in calibration.json: the session is
+    valid, but a reconstruction leaves them out."""
 
     @property
     def usable(self) -> bool:
@@ -39,6 +42,12 @@ class VerifyReport:
             lines.append(f"missing captures ({len(self.missing)}): {listed}")
         else:
             lines.append("no missing captures")
+        if self.uncalibrated:
+            listed = ", ".join(map(str, self.uncalibrated))
+            lines.append(
+                f"warning: calibration.json: stations.to_reference has no entry for station(s) "
+                f"{listed}: a reconstruction leaves them out"
+            )
         return lines
 
 
@@ -70,4 +79,7 @@ def verify_session(folder: Path) -> VerifyReport:
         report.problems += capture_file_problems(session, capture)
     report.views_by_station = {s: sorted(v) for s, v in views.items()}
     report.missing = session.missing()
+    stations = session.calibration.stations
+    if stations is not None:  # without any, the session is for other uses than a plot
+        report.uncalibrated = sorted(set(views) - set(stations.to_reference))
     return report

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime
@@ -30,13 +31,18 @@ SESSION_FORMAT = "fieldapp-session/1"
 SESSION_FILE = "session.json"
 
 
+_DRIVE = re.compile(r"[A-Za-z]:")
+"""A Windows drive (``C:``, ``C:frames``): absolute, or relative to another folder. A colon
+elsewhere is a name's (``2026-12-06T02:22:04/``)."""
+
+
 def _relative_path(value: str) -> str:
     path = PurePosixPath(value.replace("\\", "/"))
     if not value.strip():
         raise ValueError("path is empty")
     if any(ord(c) < 32 for c in value):
         raise ValueError(f"path {value!r} has control characters")
-    if path.is_absolute() or value.startswith(("/", "\\")) or ":" in path.parts[0]:
+    if path.is_absolute() or value.startswith(("/", "\\")) or _DRIVE.match(path.parts[0]):
         raise ValueError(f"path {value!r} must be relative to the session folder")
     if ".." in path.parts:
         raise ValueError(f"path {value!r} escapes the session folder")
@@ -157,7 +163,7 @@ class Session:
     def expected(self, capture: Capture, name: str) -> Expected:
         """What file ``name`` of ``capture`` must be: the calibration's size, its checksum."""
         camera = self.calibration.depth_camera
-        hw_from = "the calibration's" if name == "depth" else "the depth image's"
+        hw_from = "the calibration's" if name == "depth" else "the depth camera's (calibration)"
         return Expected((camera.height, camera.width), hw_from, capture.checksum(name))
 
     def read_capture(self, capture: Capture, with_ir: bool = False) -> CaptureImages:

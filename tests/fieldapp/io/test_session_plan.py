@@ -45,3 +45,38 @@ def test_the_mission_plan_carries_the_grid_into_the_session_plan() -> None:
     assert document["planting_grid"]["origin"] == {"x": 0.4, "y": 0.4}
     assert [s["number"] for s in document["stations"]] == [1, 2, 3, 6, 5, 4, 7, 8, 9]
     assert "planting_grid" not in default_plan().session_plan()
+
+
+@pytest.mark.parametrize(
+    "stations",
+    [
+        [{"id": 1, "map_pose": {"x": 0.5, "y": -1.0, "yaw_deg": 90.0}}],  # nested pose
+        {"1": {"x": 0.5, "y": -1.0, "yaw_deg": 90.0}},  # keyed by station number
+        [{"station": 1, "x": 0.5, "y": -1.0, "yaw_deg": 90.0}],  # the base pose's names
+    ],
+)
+def test_plan_stations_in_the_common_shapes_are_read(make_spec_session, stations) -> None:
+    """The spec names no fields for the plan's stations; another tool's common shapes are read."""
+    folder = make_spec_session()
+    document = json.loads((folder / "session.json").read_text())
+    document["plan"] = {"stations": stations, "planting_grid": dict(GRID)}
+    (folder / "session.json").write_text(json.dumps(document))
+    plan = load_session(folder).document.plan
+    assert plan is not None
+    assert [(s.number, s.x_m, s.y_m, s.yaw_deg) for s in plan.stations] == [(1, 0.5, -1.0, 90.0)]
+
+
+def test_a_plan_whose_stations_cannot_be_read_is_left_out_not_the_session(
+    make_spec_session, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The plan only informs a reconstruction: stations in a shape no reader could guess are
+    left out with a warning naming the field; the session and its grid are read."""
+    folder = make_spec_session()
+    document = json.loads((folder / "session.json").read_text())
+    document["plan"] = {"stations": [{"where": "north"}], "planting_grid": dict(GRID)}
+    (folder / "session.json").write_text(json.dumps(document))
+    session = load_session(folder)
+    assert session.document.plan is not None
+    assert session.document.plan.stations == []
+    assert session.document.plan.planting_grid is not None
+    assert "plan.stations not read (stations.0.number" in caplog.text

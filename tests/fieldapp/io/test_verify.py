@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
@@ -32,6 +33,28 @@ def test_reports_missing_captures_but_stays_usable(make_spec_session, capsys):
     code, out, _ = run_verify(folder, capsys)
     assert code == 0
     assert "missing captures (2): s1 v0, s2 v3" in out
+
+
+def test_a_frame_folder_named_by_its_time_is_a_relative_path(make_spec_session, capsys):
+    """A colon makes a Windows drive only as the second character (``C:``): a folder named
+    ``2026-12-06T02:22:04`` is one of the spec's free paths."""
+    folder = make_spec_session()
+    (folder / "data").rename(folder / "2026-12-06T02:22:04")
+    path = _session_json(folder)
+    path.write_text(path.read_text().replace('"data/', '"2026-12-06T02:22:04/'))
+    code, out, err = run_verify(folder, capsys)
+    assert code == 0, err
+    assert "8 captures, 2 stations" in out
+
+
+def test_a_captured_station_without_its_calibration_is_named(make_spec_session, edit_json, capsys):
+    folder = make_spec_session()
+    reference = json.loads(_calibration_json(folder).read_text())["stations"]["reference"]
+    other = 1 if reference == 2 else 2
+    edit_json(_calibration_json(folder), lambda d: d["stations"]["to_reference"].pop(str(other)))
+    code, out, _ = run_verify(folder, capsys)
+    assert code == 0  # valid; only a reconstruction needs it
+    assert f"calibration.json: stations.to_reference has no entry for station(s) {other}" in out
 
 
 def _session_json(folder: Path) -> Path:
@@ -137,7 +160,7 @@ BROKEN = [
     (_break_truncated_png, "st2_v0_d.png: depth", "not a decodable image"),
     (_break_8bit_depth, "st1_v3_d.png: depth", "must be 16-bit"),
     (_break_rgb_depth, "st1_v3_d.png: depth", "single-channel"),
-    (_break_color_size, "st2_v2_c.png: color", "differs from the depth image"),
+    (_break_color_size, "st2_v2_c.png: color", "differs from the depth camera"),
     (_break_depth_size, "st2_v2_d.png: depth", "differs from the calibration"),
     (_break_nan_matrix, "calibration.json", "NaN is not a JSON number"),
     (_break_non_rigid, "calibration.json: stations.to_reference.1", "not orthonormal"),
