@@ -6,7 +6,7 @@ the plant's points (N, 3) in the field frame and its stem's foot.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,6 +62,7 @@ def measure_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -
     leaves = (
         measure_leaves(points_m, organs.leaves, axis, organs.stem_radius_m) if organs.leaves else []
     )
+    organs, leaves = numbered_from_the_bottom(organs, leaves)
     lowest = min((leaf.insertion_height_m for leaf in leaves), default=None)
     along, _ = axis.split(points_m)
     top = lowest if lowest is not None else float(along.max())
@@ -78,6 +79,25 @@ def measure_organs(points_m: NDArray[np.float64], foot_m: NDArray[np.float64]) -
         height_p99_m=float(np.percentile(height, 99.0)),
         height_whorl_m=float(height[stem].max()) if stem.any() else None,
     )
+
+
+def numbered_from_the_bottom(
+    organs: Organs, leaves: list[LeafTraits]
+) -> tuple[Organs, list[LeafTraits]]:
+    """``organs`` and their ``leaves``' traits numbered again by the insertion heights the
+    traits report (``leaves.csv``'s ``leaf_id``, "from the bottom", must agree with its own
+    ``insertion_height_cm``): the segmentation orders leaves by where their innermost point
+    meets the stem, the traits measure the insertion at the collar, and two leaves inserted
+    a few millimetres apart can swap between the two. The points' ``leaf_id`` labels follow."""
+    order = np.argsort([leaf.insertion_height_m for leaf in leaves], kind="stable")
+    if np.array_equal(order, np.arange(len(leaves))):
+        return organs, leaves
+    indices = [organs.leaves[k] for k in order]
+    leaf_id = np.zeros_like(organs.leaf_id)
+    for number, points in enumerate(indices, start=1):
+        leaf_id[points] = min(number, 255)
+    traits = [replace(leaves[k], leaf_id=number) for number, k in enumerate(order, start=1)]
+    return replace(organs, leaf_id=leaf_id, leaves=indices), traits
 
 
 def projected_area_m2(points_m: NDArray[np.float64], cell_m: float = CANOPY_CELL_M) -> float:

@@ -392,3 +392,34 @@ def test_the_stem_axis_follows_a_leaning_stem(stage: str, model: str) -> None:
         errors.append(np.degrees(np.arccos(min(1.0, float(axis.direction @ truth)))))
     assert np.mean(errors) <= 1.5
     assert max(errors) <= 5.0
+
+
+def test_leaves_are_numbered_by_the_insertion_heights_their_traits_report() -> None:
+    """The segmentation orders leaves where their innermost point meets the stem, the traits
+    measure insertion at the collar: two leaves a few millimetres apart can swap, and
+    ``leaves.csv``'s ``leaf_id`` ("from the bottom") would contradict its own heights."""
+    from dataclasses import replace
+
+    from fieldapp.recon.organ_traits import numbered_from_the_bottom
+    from fieldapp.recon.organs import Organs
+
+    lower, upper = np.array([0, 1]), np.array([2, 3, 4])
+    organs = Organs(
+        organ=np.full(6, ORGAN_LEAF, np.uint8),
+        leaf_id=np.array([1, 1, 2, 2, 2, 0], np.uint8),
+        axis=StemAxis(np.zeros(3), np.array([0.0, 0.0, 1.0])),
+        stem_radius_m=0.004,
+        cut_radius_m=0.008,
+        leaves=[lower, upper],
+    )
+    points = np.random.default_rng(0).normal(size=(6, 3))
+    base = measure_leaf(points[:2], organs.axis, 0.004, leaf_id=1)
+    traits = [replace(base, leaf_id=1, insertion_height_m=0.052),
+              replace(base, leaf_id=2, insertion_height_m=0.049)]  # fmt: skip
+    renumbered, measured = numbered_from_the_bottom(organs, traits)
+    assert [(t.leaf_id, t.insertion_height_m) for t in measured] == [(1, 0.049), (2, 0.052)]
+    assert renumbered.leaf_id.tolist() == [2, 2, 1, 1, 1, 0]
+    assert [len(leaf) for leaf in renumbered.leaves] == [3, 2]
+    in_order = [replace(traits[1], leaf_id=1), replace(traits[0], leaf_id=2)]
+    same, kept = numbered_from_the_bottom(organs, in_order)
+    assert same is organs and kept == in_order

@@ -72,6 +72,15 @@ def test_the_files_carry_the_organs(reconstruction: Reconstruction, tmp_path: Pa
     lines = (tmp_path / "leaves.csv").read_text().splitlines()
     assert lines[0] == ",".join(LEAF_COLUMNS)
     assert len(lines) - 1 == sum(o.leaf_count for o in reconstruction.organs.values())
+    heights: dict[str, list[tuple[int, float]]] = {}
+    for line in lines[1:]:
+        row = dict(zip(LEAF_COLUMNS, line.split(","), strict=True))
+        leaf = (int(row["leaf_id"]), float(row["insertion_height_cm"]))
+        heights.setdefault(row["plant_id"], []).append(leaf)
+    for leaves in heights.values():  # the spec's leaf_id "from the bottom", by the file's heights
+        assert [k for k, _ in sorted(leaves, key=lambda leaf: leaf[1])] == sorted(
+            k for k, _ in leaves
+        )
     cloud, labels = read_labelled_ply(tmp_path / "cloud.ply")
     assert labels is not None and len(cloud) == len(reconstruction.cloud)
     assert set(np.unique(labels.plant_id)) <= {0, *plant_clouds}
