@@ -35,6 +35,8 @@ class VerifyReport:
             f"session {self.session.id}: {len(self.session.captures)} captures, "
             f"{len(self.views_by_station)} stations"
         ]
+        if not self.session.captures:
+            lines.append("no captures yet (an interrupted mission?): nothing to reconstruct")
         for station, views in sorted(self.views_by_station.items()):
             lines.append(f"  station {station}: views {', '.join(map(str, views))}")
         if self.missing:
@@ -68,7 +70,7 @@ def verify_session(folder: Path) -> VerifyReport:
     """Check ``folder`` completely: documents, calibration, every referenced image."""
     report = VerifyReport(folder)
     try:
-        session = load_session(folder)
+        session = load_session(folder, allow_empty=True)  # the spec: may lack captures
     except FormatError as error:
         report.problems = error.problems
         return report

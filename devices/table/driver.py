@@ -202,6 +202,15 @@ class GrblTable:
         log.info("table at %.3f deg (target %.3f deg)", end.position_deg, target_deg)
         return end.position_deg
 
+    def park(self) -> float:
+        """Turn to machine zero (MPos 0: the work angle minus the work offset) and return the
+        work angle reached. Opening the port resets most boards through DTR, and Grbl starts
+        a power-up with its machine position at 0 where the table stands (a Ctrl-X keeps it):
+        a table parked there keeps its angles across closing and opening the port."""
+        with self._link.cond:
+            wco_x_deg = self._link.state.wco_x_deg
+        return self.goto_deg(-wco_x_deg)
+
     def hold(self) -> TableStatus:
         """Feed hold (``!``): controlled stop; returns once stopped (``Hold:0``)."""
         with self._link.cond:

@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, field
 
 from devices.base.protocol import Pose
 from devices.camera import Frame
+from devices.table import GrblTable, TableException
 from fieldapp.io.session import BasePose
 from fieldapp.io.writer import SessionWriter
 from fieldapp.mission.battery import BatteryWatch, check_before_start
@@ -110,6 +111,22 @@ def run_mission(context: MissionContext, todo: list[tuple[int, int]]) -> Iterato
             clock.left.captured()
             yield clock.progress(f"station {station.number} view {view}", captured=True)
             yield from _some(battery.check(station.number, view))
+    yield from _some(park_table(rig.table))
+
+
+def park_table(table: GrblTable) -> MissionWarning | None:
+    """After the last view: the table back to its machine zero, where a controller reset by
+    the next opening of its port (DTR: a power-up, machine position 0 where the table stands)
+    counts its angles from. A table left at 315 degrees would turn every view of the next
+    mission 45 degrees off. Everything is captured by then: a failure is a warning."""
+    try:
+        table.park()
+    except TableException as error:
+        return MissionWarning(
+            f"table: not turned back to its zero after the last view ({error}); turn it there "
+            "before the controller is next reset, or its angles count from where it stands"
+        )
+    return None
 
 
 def _some(warning: MissionWarning | None) -> Iterator[MissionWarning]:

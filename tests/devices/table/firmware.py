@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import select
+import shutil
 import signal
 import subprocess
 import threading
@@ -42,8 +43,11 @@ class FirmwarePty:
         tty.setraw(slave)
         self.device_path = os.ttyname(slave)
         self._slave = slave  # kept open so the pty stays up between the driver's opens
+        # grbl-sim writes with stdio and never flushes: on a pipe its answers would wait in a
+        # 4 KiB buffer (its own unbuffering line is commented out in main.c)
+        unbuffered = ["stdbuf", "-o0"] if shutil.which("stdbuf") else []
         self._process = subprocess.Popen(
-            [str(executable), "-n", "-t", "1", "-s", os.devnull, "-b", os.devnull],
+            [*unbuffered, str(executable), "-n", "-t", "1", "-s", os.devnull, "-b", os.devnull],
             cwd=folder,
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 from fieldapp.cli import main
+from fieldapp.errors import FormatError
+from fieldapp.io.session import load_session
 from fieldapp.verify import verify_session
 
 
@@ -142,6 +144,18 @@ def _break_empty(folder, edit_json):
     edit_json(_session_json(folder), lambda d: d.update(captures=[]))
 
 
+def test_a_session_without_captures_yet_is_valid_and_says_so(make_spec_session, edit_json, capsys):
+    """The spec: "A session may lack captures (an interrupted mission)"; only a reconstruction
+    needs some."""
+    folder = make_spec_session()
+    _break_empty(folder, edit_json)
+    code, out, err = run_verify(folder, capsys)
+    assert code == 0, err
+    assert "no captures yet (an interrupted mission?): nothing to reconstruct" in out
+    with pytest.raises(FormatError, match="session has no captures"):
+        load_session(folder)  # what a reconstruction reads
+
+
 def _break_station_type(folder, edit_json):
     edit_json(_session_json(folder), lambda d: d["captures"][4].update(station="one"))
 
@@ -167,7 +181,6 @@ BROKEN = [
     (_break_reflection, "calibration.json: ground.matrix", "determinant"),
     (_break_last_row, "calibration.json: view_step.matrix", "last row"),
     (_break_duplicate, "session.json: captures[8]", "already captured by captures[1]"),
-    (_break_empty, "session.json: captures", "no captures"),
     (_break_station_type, "session.json: captures[4].station", "integer"),
     (_break_calibration_missing, "calibration.json", "file is missing"),
 ]

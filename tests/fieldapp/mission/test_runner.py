@@ -183,3 +183,19 @@ def test_resume_of_a_folder_captures_only_what_is_missing(open_mission: Opener) 
     assert [(e.station, e.view) for e in views] == [(4, 0)]
     after = {(c.station, c.view): c.captured_at for c in load_session(setup.folder).captures}
     assert len(after) == 4 and all(after[key] == value for key, value in before.items())
+
+
+def test_the_table_is_parked_at_its_machine_zero_after_the_last_view(
+    open_mission: Opener,
+) -> None:
+    """A board reset by the next opening of its port (DTR) starts with its machine position
+    at 0 where the table stands (gnea/grbl main.c): left at 90 degrees, the next mission's
+    views would all be 90 degrees off. The table is turned back after the last view."""
+    setup = open_mission(small_plan(stations=(5,), views=3))
+    runner = setup.runner()
+    events = record(runner)
+    result = runner.start().wait(HANG_S)
+    assert result is not None and result.outcome is Outcome.COMPLETE, result
+    assert [e.angle_deg for e in events["views"]] == pytest.approx([0.0, 45.0, 90.0], abs=0.2)
+    assert setup.rig.sim_table.angle_deg == pytest.approx(0.0, abs=0.2)
+    assert events["warnings"] == []
