@@ -123,6 +123,8 @@ class BaseController:
     def _session_problem(self, request: Request) -> Reply | None:
         if request.cmd is Command.STOP:
             return None  # a stop is always executed: halting never does harm
+        if request.cmd is Command.HELLO:
+            return None  # a greeting learns the new session; replayed, it changes nothing
         if request.session is not None and request.session != self.session:
             return Reply.failure(
                 None, ErrorCode.STALE_SESSION, "the base restarted since hello: send hello again"

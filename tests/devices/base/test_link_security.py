@@ -194,6 +194,19 @@ def test_a_stop_carrying_another_session_s_value_is_executed(
     assert refused is not None and refused["error"]["code"] == "stale_session"
 
 
+def test_a_hello_carrying_another_session_s_value_learns_the_new_one(
+    tcp_sim: SimulatedBase, raw_dealer: RawDealer
+) -> None:
+    """A client that puts the session "in every later request" greets a restarted base with
+    the old value: the greeting is how it learns the new one (it changes nothing, replayed)."""
+    sock = raw_dealer(tcp_sim.command_endpoint)
+    hello = {"v": 1, "id": "h-1", "cmd": "hello", "args": {"client": "another tool"},
+             "session": "an-older-base"}  # fmt: skip
+    reply = _ask(sock, hello)
+    assert reply is not None and reply["ok"], reply
+    assert reply["result"]["session"] == tcp_sim.server.session
+
+
 def test_a_retry_on_a_new_connection_with_the_same_key_is_not_executed_again(
     key_folders: Any, make_sim: MakeSim
 ) -> None:
