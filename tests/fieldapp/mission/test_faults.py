@@ -217,3 +217,14 @@ def test_a_base_offline_from_the_start_says_link_lost(open_mission: Opener) -> N
     result, _ = run(setup)
     assert_stopped_cleanly(setup, result, "base")
     assert result.fault is not None and "link lost" in result.fault.what
+
+
+def test_a_base_link_closed_by_the_application_is_named_as_such(open_mission: Opener) -> None:
+    """The application closing the base's link under a running mission (it is quitting) ends
+    the waiting request at once: the fault says the link was closed, not that the plan's
+    poses are wrong or the Wi-Fi is down."""
+    setup = open_mission(small_plan(stations=(5,), views=1))
+    result, _ = run(setup, on_start=setup.rig.base.close)
+    assert_stopped_cleanly(setup, result, "base")
+    assert result.fault is not None and "was closed" in result.fault.what
+    assert "open the base's link again" in result.fault.advice
