@@ -24,6 +24,7 @@ import logging
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING
 
@@ -35,7 +36,7 @@ if TYPE_CHECKING:
     from devices.base.protocol import Pose
     from devices.camera import DepthCamera
     from devices.sim.world import SimWorld
-    from devices.table import GrblSimulator, GrblTable, PtyGrblServer
+    from devices.table import GrblSimulator, GrblTable, ParkFile, PtyGrblServer
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +45,8 @@ INSTANT_BASE_TIME_SCALE = 1000.0
 """Simulated seconds per real second of the simulated base when not in real time."""
 SIM_TABLE_OFF_TARGET_DEG = 0.05
 """How far the simulated table may stop from its target (a worm gear's backlash)."""
+TABLE_PARK_FILE = "table-park.json"
+"""In the user's state folder: where each real table's port was left (:func:`table_park_file`)."""
 
 
 class RigError(FieldappError):
@@ -189,7 +192,7 @@ def _open_table(
         stack.callback(server.close)
         port = server.device_path
     try:
-        table = open_table(port)
+        table = open_table(port, park_file=table_park_file(port) if server is None else None)
     except TableException as error:
         raise RigError(
             f"table on {port}: {error}. Check that the controller is powered and plugged in, "
@@ -198,6 +201,19 @@ def _open_table(
     stack.callback(table.close)
     where = f"Grbl on {port}" if server is None else f"simulated Grbl on {port}"
     return server, table, where
+
+
+def table_park_file(port: str) -> ParkFile | None:
+    """Where a real table's port was left (parked at machine zero or moved), kept in the
+    user's state folder: a board reset by opening its port counts its angles from where the
+    table stands (``devices.table.park``). None for a pseudo-terminal (a simulator: no DTR)."""
+    import platformdirs
+
+    from devices.table import ParkFile
+
+    if port.startswith("/dev/pts/"):
+        return None
+    return ParkFile(Path(platformdirs.user_state_dir("fieldapp")) / TABLE_PARK_FILE)
 
 
 def _open_base(

@@ -33,6 +33,7 @@ from devices.table.errors import (
     TableTimeout,
 )
 from devices.table.link import READ_POLL_S, GrblLink, SerialPort
+from devices.table.park import ParkFile, ParkState
 
 log = logging.getLogger(__name__)
 
@@ -96,8 +97,12 @@ class GrblTable:
         timeouts: TableTimeouts | None = None,
         tolerance_deg: float = TOLERANCE_DEG,
         clock: Callable[[], float] = time.monotonic,
+        park_file: ParkFile | None = None,
+        port_name: str = "",
     ) -> None:
-        """``clock`` times every bound in :class:`TableTimeouts` (a fake one in tests)."""
+        """``clock`` times every bound in :class:`TableTimeouts` (a fake one in tests).
+        ``park_file``: where this port's table was left (:mod:`devices.table.park`), under
+        ``port_name``; without one a power-up is trusted, as before."""
         self.timeouts = timeouts or TableTimeouts()
         self.tolerance_deg = tolerance_deg
         self._clock = clock
@@ -107,6 +112,11 @@ class GrblTable:
         self._holds = 0
         self._position_known = False
         self._last_position_deg = 0.0
+        self._park_file = park_file
+        self._port_name = port_name
+        self.restarted_on_open = False
+        """True when the controller announced itself as the port opened, before any Ctrl-X
+        of the driver's: a power-up (DTR), machine position 0 where the table stands."""
 
     # --- connection -----------------------------------------------------------------------
 
@@ -114,7 +124,10 @@ class GrblTable:
         """Wait for the banner (Ctrl-X if none comes), read status and settings."""
         self._link.start()
         state = self._link.state
-        if not self._link.wait_until(lambda: state.banners > 0, self.timeouts.banner_s):
+        self.restarted_on_open = self._link.wait_until(
+            lambda: state.banners > 0, self.timeouts.banner_s
+        )
+        if not self.restarted_on_open:
             log.info("no Grbl banner within %.1f s: sending Ctrl-X", self.timeouts.banner_s)
             self._link.send_reset()
             if not self._link.wait_until(lambda: state.banners > 0, self.timeouts.banner_s):
@@ -126,6 +139,12 @@ class GrblTable:
         with self._link.cond:
             self._position_known = status.state != "Alarm" and not state.position_lost
         self._read_settings()
+        if self.restarted_on_open and self._last_left() == "moved":
+            self._forget_position(
+                "the controller restarted as its port opened (DTR) and counts angles from "
+                "where the table stands, which was not its zero when the port last closed: "
+                "turn the table to its zero mark and confirm it, or home it"
+            )
         return self.status()
 
     def close(self) -> None:
@@ -188,6 +207,7 @@ class GrblTable:
             )
         interrupted = self._interruption_since()
         timeout_s = self._move_timeout_s(abs(target_deg - start.position_deg))
+        self._leave("moved")
         self._run(move_line, self.timeouts.reply_s, interrupted)
         self._run(p.BARRIER_LINE, timeout_s, interrupted, poll=True)
         stop = interrupted()
@@ -209,7 +229,9 @@ class GrblTable:
         a table parked there keeps its angles across closing and opening the port."""
         with self._link.cond:
             wco_x_deg = self._link.state.wco_x_deg
-        return self.goto_deg(-wco_x_deg)
+        reached_deg = self.goto_deg(-wco_x_deg)
+        self._leave("parked")
+        return reached_deg
 
     def hold(self) -> TableStatus:
         """Feed hold (``!``): controlled stop; returns once stopped (``Hold:0``)."""
@@ -281,6 +303,22 @@ class GrblTable:
         with self._link.cond:
             self._position_known = True
             self._link.state.position_lost = False
+            machine_deg = self._last_position_deg + self._link.state.wco_x_deg
+        if abs(machine_deg) <= self.tolerance_deg:
+            self._leave("parked")  # at machine zero: a power-up there keeps the angles
+
+    def _last_left(self) -> str | None:
+        return None if self._park_file is None else self._park_file.state(self._port_name)
+
+    def _leave(self, state: ParkState) -> None:
+        if self._park_file is not None:
+            self._park_file.record(self._port_name, state)
+
+    def _forget_position(self, reason: str) -> None:
+        log.warning("table position unknown: %s", reason)
+        with self._link.cond:
+            self._position_known = False
+        self.position_unknown.emit(reason)
 
     # --- helpers --------------------------------------------------------------------------
 
@@ -391,17 +429,22 @@ class GrblTable:
 
 
 def open_table(
-    url_or_path: str, *, timeouts: TableTimeouts | None = None, connect: bool = True
+    url_or_path: str,
+    *,
+    timeouts: TableTimeouts | None = None,
+    connect: bool = True,
+    park_file: ParkFile | None = None,
 ) -> GrblTable:
     """Open ``url_or_path`` (``/dev/ttyUSB0``, ``socket://host:port``...) at 115200 baud and
-    return the driver, connected unless ``connect`` is False."""
+    return the driver, connected unless ``connect`` is False; ``park_file`` remembers where
+    this port's table was left (:mod:`devices.table.park`)."""
     import serial
 
     try:
         port = serial.serial_for_url(url_or_path, baudrate=BAUD_RATE, timeout=READ_POLL_S)
     except (serial.SerialException, OSError, ValueError) as error:
         raise TableDisconnected(f"cannot open serial port {url_or_path!r}: {error}") from error
-    table = GrblTable(port, timeouts=timeouts)
+    table = GrblTable(port, timeouts=timeouts, park_file=park_file, port_name=url_or_path)
     if connect:
         try:
             table.connect()

@@ -14,6 +14,8 @@ ACTIONS = {
     "reset": "soft reset (Ctrl-X): immediate stop; the position is unknown afterwards",
     "home": "run the homing cycle ($H), only when the operator asks",
     "unlock": "clear an alarm lock ($X), only when the operator has checked the table",
+    "park": "turn to machine zero, where a controller reset by opening its port keeps the angles",
+    "confirm": "the table stands at its zero mark (turned there by hand): trust its position",
 }
 
 
@@ -43,10 +45,11 @@ def register(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from devices.table import TableException, TableTimeouts, open_table
     from devices.table.protocol import ProtocolError
+    from fieldapp.rig import table_park_file
 
     timeouts = TableTimeouts(reply_s=args.timeout, banner_s=min(2.0, args.timeout))
     try:
-        table = open_table(args.port, timeouts=timeouts)
+        table = open_table(args.port, timeouts=timeouts, park_file=table_park_file(args.port))
         try:
             print(_act(table, args.action, getattr(args, "deg", 0.0)))
         finally:
@@ -71,4 +74,9 @@ def _act(table: Any, action: str, deg: float) -> str:
         return f"homed: table at {table.home():.3f} deg"
     if action == "unlock":
         return f"unlocked: {table.unlock()}"
+    if action == "park":
+        return f"parked: table at {table.park():.3f} deg"
+    if action == "confirm":
+        table.confirm_position_known()
+        return f"confirmed: {table.status()}"
     return str(table.status())

@@ -34,6 +34,20 @@ def test_goto_and_status_print_the_angle(
     assert server.simulator.angle_deg == pytest.approx(45.0)
 
 
+def test_park_turns_back_to_machine_zero_and_confirm_trusts_the_position(
+    server: PtyGrblServer, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run_cli(capsys, "table", "--port", server.device_path, "goto", "90")
+    assert run_cli(capsys, "table", "--port", server.device_path, "park") == (
+        0,
+        "parked: table at 0.000 deg\n",
+        "",
+    )
+    assert server.simulator.angle_deg == pytest.approx(0.0, abs=0.2)
+    code, out, _ = run_cli(capsys, "table", "--port", server.device_path, "confirm")
+    assert (code, out) == (0, "confirmed: Idle at 0.000 deg\n")
+
+
 @pytest.mark.parametrize(
     ("action", "expected"),
     [("hold", "held: Hold:0 at 0.000 deg"), ("reset", "reset: Idle at 0.000 deg")],
