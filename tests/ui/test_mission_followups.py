@@ -136,3 +136,29 @@ def test_a_double_clicked_thumbnail_shows_its_depth_large(
     assert page.open_view(6, 99) is None  # type: ignore[attr-defined]
     assert len(window.context.notifier.history) == errors_before + 1
     assert "not captured" in window.context.notifier.history[-1].message
+
+
+def test_the_set_up_tab_parks_the_table_and_takes_the_operator_s_zero(
+    make_window: Callable[..., MainWindow], wait_until: Callable[..., bool]
+) -> None:
+    """docs/TABLE.md: a controller reset by opening its port counts from where the table
+    stands; the operator parks it at machine zero, or says it stands at its zero mark."""
+    window = make_window()
+    setup = window.pages["mission"].setup  # type: ignore[attr-defined]
+    window.toggle_connection()
+    assert wait_until(lambda: window.context.hub.connected)
+    setup.angle.setValue(90.0)
+    setup.turn_to()
+    assert wait_until(lambda: setup.last_result.startswith("Table: at "))
+    assert _degrees(setup.last_result) == pytest.approx(90.0, abs=0.2)
+    setup.park_table()
+    assert wait_until(lambda: setup.last_result.startswith("Table park: at "))
+    assert _degrees(setup.last_result) == pytest.approx(0.0, abs=0.2)
+    assert "machine zero" in setup.last_result
+    setup.confirm_table_zero()
+    assert wait_until(lambda: setup.last_result.startswith("Table zero: confirmed: Idle"))
+
+
+def _degrees(result: str) -> float:
+    """The angle in a set-up result such as ``Table: at 89.970 deg``."""
+    return float(result.split(" at ", 1)[1].split(" deg", 1)[0])

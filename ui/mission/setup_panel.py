@@ -85,6 +85,10 @@ class SetupPanel(QtWidgets.QWidget):
                              ("Continue", "resume")):  # fmt: skip
             recover.addWidget(self._button(text, self._table_call(method)))
         grid.addLayout(recover, 2, 0, 1, 3)
+        zero = QtWidgets.QHBoxLayout()  # docs/TABLE.md: a power-up counts from where it stands
+        zero.addWidget(self._button("Park at zero", self.park_table))
+        zero.addWidget(self._button("It is at its zero mark", self.confirm_table_zero))
+        grid.addLayout(zero, 3, 0, 1, 3)
         group = QtWidgets.QGroupBox("Rotary table")
         group.setLayout(grid)
         return group
@@ -153,6 +157,19 @@ class SetupPanel(QtWidgets.QWidget):
             return f"at {reached:.3f} deg"
 
         self._run("Table jog", move)
+
+    def park_table(self) -> None:
+        """Back to machine zero, where a controller reset by opening its port keeps angles."""
+        self._run("Table park", lambda rig: f"at {rig.table.park():.3f} deg (machine zero)")
+
+    def confirm_table_zero(self) -> None:
+        """The operator turned the table to its zero mark by hand: its position is trusted."""
+
+        def confirm(rig: Rig) -> str:
+            rig.table.confirm_position_known()
+            return f"confirmed: {rig.table.status()}"
+
+        self._run("Table zero", confirm)
 
     def _table_call(self, method: str) -> Callable[[], None]:
         return lambda: self._run(f"Table {method}", lambda rig: getattr(rig.table, method)())
