@@ -229,7 +229,7 @@ class GrblTable:
         a table parked there keeps its angles across closing and opening the port."""
         with self._link.cond:
             wco_x_deg = self._link.state.wco_x_deg
-        reached_deg = self.goto_deg(0.0 - wco_x_deg + 0.0)  # never "-0.000" in the log
+        reached_deg = self.goto_deg(0.0 - wco_x_deg)  # 0.0, not -0.0, with no offset
         self._leave("parked")
         return reached_deg
 
