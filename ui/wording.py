@@ -19,6 +19,7 @@ REWRITES: list[tuple[str, str]] = [
      "choose another folder, or press Start for a new mission"),
     (r"\(`fieldapp table --port \S+ unlock` or `home`\)", "(Unlock or Home in Mission > Set-up)"),
     (r"\(`fieldapp table --port \S+ home`\)", "(Home in Mission > Set-up)"),
+    (r"\(`fieldapp table --port \S+ confirm`\)", "(It is at its zero mark, in Mission > Set-up)"),
     (r"\(try `fieldapp table --port \S+ status`\)", "(Devices... > Test)"),
     (r"\(try `fieldapp base --endpoint \S+ hello`\)", "(Devices... > Test)"),
     (r"\(try `fieldapp camera info`\)", "(Devices... > Test)"),

@@ -194,9 +194,9 @@ def prepare_table(table: GrblTable, gate: Gate, timeout_s: float = 60.0) -> Miss
             raise TableAlarm(status.alarm_code, "controller locked in Alarm")
         if not table.position_known:
             raise MissionFault(Fault("table", f"position unknown ({status})",
-                               "turn the table to its zero mark and confirm it (the setup "
-                               "panel's 'It is at its zero mark', or `fieldapp table --port "
-                               "PORT confirm`), or home it (with homing switches)"))  # fmt: skip
+                               "turn the table to its zero mark by hand and confirm it "
+                               "(`fieldapp table --port PORT confirm`); with homing switches, "
+                               "home it (`fieldapp table --port PORT home`)"))  # fmt: skip
         if status.state not in ("Hold", "Door"):
             return None
         gate.raise_if_stopped()

@@ -91,3 +91,25 @@ def test_a_missing_driver_is_told_in_gui_words() -> None:
         assert "packaging/README.md" in notice.advice
     assert "install fieldapp's RealSense support" in notifier.history[1].message
     notifier.deleteLater()
+
+
+def test_a_table_of_unknown_position_is_mended_in_the_set_up_tab_not_a_terminal() -> None:
+    """After a power-up that made the table's position unknown (docs/TABLE.md), the mission's
+    advice names the commands; the window says which Set-up buttons do the same."""
+    from devices.table import TableStatus
+    from fieldapp.mission.control import Gate, MissionFault
+    from fieldapp.mission.steps import prepare_table
+    from ui.wording import gui_text
+
+    class UnknownTable:
+        position_known = False
+
+        def status(self) -> TableStatus:
+            return TableStatus("Idle", None, 0.0, False, None)
+
+    with pytest.raises(MissionFault) as refused:
+        prepare_table(UnknownTable(), Gate())  # type: ignore[arg-type]
+    words = gui_text(refused.value.fault.advice)
+    assert "It is at its zero mark, in Mission > Set-up" in words
+    assert "Home in Mission > Set-up" in words
+    assert "fieldapp" not in words
