@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import fcntl
+import logging
 import os
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -33,6 +34,20 @@ def shared_data() -> Path:
         pytest.skip(message)
     return folder
 
+
+@pytest.fixture(autouse=True)
+def _logger_levels_as_found() -> Iterator[None]:
+    """A command run in process (``main([...])``) may quiet the application's loggers for its
+    run (``fieldapp mission run`` sets ``devices`` to ERROR): each test leaves the levels as
+    it found them, so a later test's ``caplog`` sees the warnings it checks for."""
+    names = [name for name in logging.root.manager.loggerDict if name.split(".")[0] in _OURS]
+    levels = {name: logging.getLogger(name).level for name in [*_OURS, *names]}
+    yield
+    for name, level in levels.items():
+        logging.getLogger(name).setLevel(level)
+
+
+_OURS = ("fieldapp", "devices", "ui")
 
 OnceBuilder = Callable[[str, Callable[[Path], None]], Path]
 

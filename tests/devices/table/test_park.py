@@ -47,7 +47,7 @@ def test_the_park_file_keeps_each_port_s_state(tmp_path: Path, caplog) -> None:
     assert (park.state(PORT), park.state("/dev/ttyACM0")) == ("moved", "parked")
     assert ParkFile(park.path).state(PORT) == "moved"  # on disk
     park.path.write_text("{not json")
-    caplog.set_level(logging.WARNING)
+    caplog.set_level(logging.WARNING, logger="devices.table.park")  # whatever a CLI run set
     assert park.state(PORT) is None
     assert "unreadable" in caplog.text and str(park.path) in caplog.text
 
