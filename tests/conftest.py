@@ -35,19 +35,20 @@ def shared_data() -> Path:
     return folder
 
 
+_OURS = ("fieldapp", "devices", "ui")
+
+
 @pytest.fixture(autouse=True)
 def _logger_levels_as_found() -> Iterator[None]:
     """A command run in process (``main([...])``) may quiet the application's loggers for its
     run (``fieldapp mission run`` sets ``devices`` to ERROR): each test leaves the levels as
     it found them, so a later test's ``caplog`` sees the warnings it checks for."""
-    names = [name for name in logging.root.manager.loggerDict if name.split(".")[0] in _OURS]
-    levels = {name: logging.getLogger(name).level for name in [*_OURS, *names]}
+    names = {*_OURS, *(n for n in logging.root.manager.loggerDict if n.split(".")[0] in _OURS)}
+    levels = {name: logging.getLogger(name).level for name in names}
     yield
     for name, level in levels.items():
         logging.getLogger(name).setLevel(level)
 
-
-_OURS = ("fieldapp", "devices", "ui")
 
 OnceBuilder = Callable[[str, Callable[[Path], None]], Path]
 

@@ -281,29 +281,29 @@ class ProtocolServer:
         made); the others' ZeroMQ sockets reconnect by themselves, and a request lost meanwhile
         is retried and answered from the reply cache. ZeroMQ cannot drop one peer alone."""
         log.warning("a client key was removed: every client must connect again")
-        sockets: list[zmq.Socket[bytes]] = []
-        for old, kind, endpoint in (
-            (router, zmq.ROUTER, self.command_endpoint),
-            (publisher, zmq.PUB, self.telemetry_endpoint),
-        ):
-            old.close(linger=0)
-            assert self._context is not None
-            sockets.append(self._bound_again(self._socket(self._context, kind), endpoint))
-        return sockets[0], sockets[1]
+        context = self._context
+        assert context is not None  # the loop runs between start() and close()
+        router.close(linger=0)
+        publisher.close(linger=0)
+        return (
+            self._bound_again(self._socket(context, zmq.ROUTER), self.command_endpoint),
+            self._bound_again(self._socket(context, zmq.PUB), self.telemetry_endpoint),
+        )
 
     def _bound_again(self, sock: zmq.Socket[bytes], endpoint: str) -> zmq.Socket[bytes]:
         """``sock`` bound to ``endpoint``, which the socket just closed held: its listener is
         released by ZeroMQ's I/O thread, a moment later."""
-        for attempt in range(REBIND_TRIES):
+        tries = 1
+        while True:
             try:
                 sock.bind(endpoint)
                 return sock
             except zmq.ZMQError as error:
-                if error.errno != zmq.EADDRINUSE or attempt == REBIND_TRIES - 1:
+                if error.errno != zmq.EADDRINUSE or tries == REBIND_TRIES:
                     sock.close(linger=0)
                     raise
-                time.sleep(REBIND_WAIT_S)
-        raise AssertionError("unreachable")  # pragma: no cover
+            tries += 1
+            time.sleep(REBIND_WAIT_S)
 
     def _authenticator_alive(self) -> bool:
         """False when keys are in use but the ZAP handler is gone: then nothing is served."""

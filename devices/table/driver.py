@@ -114,6 +114,8 @@ class GrblTable:
         self._last_position_deg = 0.0
         self._park_file = park_file
         self._port_name = port_name
+        self._left: ParkState | None = None
+        """What this driver last wrote to ``park_file`` (a move does no file I/O to repeat it)."""
         self.restarted_on_open = False
         """True when the controller announced itself as the port opened, before any Ctrl-X
         of the driver's: a power-up (DTR), machine position 0 where the table stands."""
@@ -175,9 +177,9 @@ class GrblTable:
         alarm) Grbl 1.1 answers nothing, not even ``?``, until a reset: the alarm is reported
         at the last angle the controller sent, without asking (grblHAL would answer)."""
         with self._link.cond:
-            if self._link.state.critical:
-                code = self._link.state.alarm_code
-                return TableStatus("Alarm", None, self._last_position_deg, False, code)
+            if self._link.state.critical:  # the condition's lock is re-entrant
+                code, known = self._link.state.alarm_code, self.position_known
+                return TableStatus("Alarm", None, self._last_position_deg, known, code)
         report = self._link.query_status(self.timeouts.status_s)
         with self._link.cond:
             position_deg = report.machine_x_deg(self._link.state.wco_x_deg)
@@ -311,8 +313,9 @@ class GrblTable:
         return None if self._park_file is None else self._park_file.state(self._port_name)
 
     def _leave(self, state: ParkState) -> None:
-        if self._park_file is not None:
+        if self._park_file is not None and state != self._left:
             self._park_file.record(self._port_name, state)
+            self._left = state
 
     def _forget_position(self, reason: str) -> None:
         log.warning("table position unknown: %s", reason)
