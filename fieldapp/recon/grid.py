@@ -209,9 +209,15 @@ def stems_at_empty_nodes(
     settings: StemSettings,
     soil_tree: cKDTree | None = None,
 ) -> list[Stem]:
-    """Stems found with the weaker test (``prior_layer_fraction``) at nodes that have none.
-    ``soil_tree``: the plan-view tree over ``soil_m[:, :2]`` when the caller has one."""
+    """Stems found with the weaker test (``prior_layer_fraction``) at nodes that have none,
+    where the column may start up to ``search_height_m - band_m`` above the soil (its band
+    raised by ``max_foot_gap_m`` at a time): a plant at a plot's edge, seen only from inside
+    the plot, or whose foot the neighbours' lower leaves hide, shows its stem from 10 cm up
+    (an independent renderer's 80 cm grid: one such plant of 33, 86 cm tall, was taken whole
+    by its neighbour along their touching leaves). ``soil_tree``: the plan-view tree over
+    ``soil_m[:, :2]`` when the caller has one."""
     weak = settings.model_copy(update={"min_layer_fraction": settings.prior_layer_fraction})
+    step = max(settings.max_foot_gap_m, settings.cell_m)
     found: list[Stem] = []
     if len(points_m) == 0:
         return found
@@ -226,7 +232,12 @@ def stems_at_empty_nodes(
         if len(local) == 0:
             continue
         heights = local[:, 2] - local_ground_z_m(soil_m, local[:, :2], soil_tree=soil_tree)
-        origin, cells, fractions = stem_columns(local, heights, weak)
+        # the foot may be hidden (a plot's edge, the neighbours' lower leaves): the band is
+        # raised step by step, up to where a stem is still looked for
+        for raised in np.arange(0.0, settings.search_height_m - settings.band_m + 1e-9, step):
+            origin, cells, fractions = stem_columns(local, heights - raised, weak)
+            if len(cells):
+                break
         if len(cells) == 0:
             continue
         best = int(np.argmax(fractions))

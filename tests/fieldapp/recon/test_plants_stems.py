@@ -199,3 +199,45 @@ def test_the_plants_step_indexes_the_soil_once(monkeypatch) -> None:
     assert [p.grid_cell for p in search.plants] == [(1, 1)]
     assert search.missing_cells == [(1, 2)] and search.unseen_cells == [(1, 3), (1, 4)]
     assert built.count(len(soil)) == 1
+
+
+def _row_with_a_hidden_foot(rng: np.random.Generator, third: bool) -> tuple[np.ndarray, ...]:
+    """Three plants 80 cm apart along x whose long leaves reach into each other's space and
+    touch; the third (at x = 1.6, the plot's edge) seen only from 12 cm up, or absent with the
+    second's leaf reaching over its node 12-20 cm up."""
+    leaves = [(0.0, 0.2, 0.75, 0.15), (180.0, 0.25, 0.75, 0.12)]
+    a = plant(rng, (0.0, 0.0), leaves)
+    b = plant(rng, (0.8, 0.0), [(0.0, 0.2, 0.85, 0.15), (180.0, 0.25, 0.75, 0.12)])
+    c = plant(rng, (1.6, 0.0), leaves)
+    c = c[c[:, 2] > 0.12]
+    return (a, b, c) if third else (a, b)
+
+
+def test_a_plant_whose_foot_is_hidden_is_found_at_its_grid_node() -> None:
+    """At an empty planting-grid node the stem is looked for with its band raised: the third
+    plant, seen from 12 cm up, is no longer taken whole by its neighbour along their leaves."""
+    rng = np.random.default_rng(12)
+    own = _row_with_a_hidden_foot(rng, third=True)
+    points = colored(np.concatenate(own), LEAF_RGB)
+    soil = ground_patch(rng, 1.5, 20000)
+    soil[:, 0] += 0.8
+    nodes = grid_nodes(1, 3, 0.8, 0.8, (0.0, 0.0), 0.0, np.eye(4))
+    search = search_plants(points, soil, PlantSettings(), 0.3, nodes)
+    assert len(search.plants) == 3
+    assert not search.missing_cells
+    third = min(search.plants, key=lambda p: abs(p.traits.x_m - 1.6))
+    assert own_share(third.cloud, own[2]) > 0.9
+    assert third.traits.width_m == pytest.approx(width_m(own[2]), abs=0.05)
+    without_grid = search_plants(points, soil, PlantSettings(), 0.3)
+    assert len(without_grid.plants) == 2  # no stem: the neighbour takes it (the old behaviour)
+
+
+def test_an_empty_node_under_a_neighbours_leaf_stays_missing() -> None:
+    rng = np.random.default_rng(13)
+    points = colored(np.concatenate(_row_with_a_hidden_foot(rng, third=False)), LEAF_RGB)
+    soil = ground_patch(rng, 1.5, 20000)
+    soil[:, 0] += 0.8
+    nodes = grid_nodes(1, 3, 0.8, 0.8, (0.0, 0.0), 0.0, np.eye(4))
+    search = search_plants(points, soil, PlantSettings(), 0.3, nodes)
+    assert len(search.plants) == 2
+    assert search.missing_cells == [(1, 3)]
