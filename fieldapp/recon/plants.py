@@ -337,11 +337,11 @@ def _parts_seen_apart(
         return
     counts = np.bincount(labels[labels >= 0], minlength=int(labels.max()) + 1)
     small = PART_SHARE * float(np.median(counts[:stem_count]))
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(len(counts) + 1))
     parts = [lab for lab in range(stem_count, len(counts)) if 0 < counts[lab] < small]
     if not parts:
         return
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(len(counts) + 1))
     # the plants a part may belong to: the stems that kept their points (a leaf's end merged
     # into its plant has none) and the groups too large to be parts, each at its foot
     feet = np.full((len(counts), 2), np.inf)
