@@ -18,7 +18,7 @@ import pytest
 
 from fieldapp.cli import main
 from fieldapp.io.session import load_session
-from fieldapp.recon import exg, scans
+from fieldapp.recon import exg, plants, scans
 from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
 
@@ -49,11 +49,19 @@ def test_without_the_noise_floors_the_soil_makes_plants(
     noisy_cloddy: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The control: the same plot judged by the station's threshold alone (as before
-    2026-12-05) gets soil "plants" (8 of 12 when measured)."""
+    2026-12-05) gets soil "plants" (8 of 12 when measured), and the plants step's second
+    defence (small groups no stem reaches, not green near the soil, are not plants:
+    ``plants._parts_seen_apart``, 2026-12-06) keeps them out of the plant list but not out
+    of the plants step's input."""
 
     def no_floors(tally: object, threshold: float, sigmas: float) -> np.ndarray:
         return np.full(exg.SUM_LEVELS, -np.inf)
 
     monkeypatch.setattr(scans, "noise_floors", no_floors)
+    caught = run_reconstruction(load_session(noisy_cloddy), ReconstructionSettings())
+    assert len(caught.plants) == 4
+    assert caught.search is not None
+    assert any("not green" in m for m in caught.search.merges)
+    monkeypatch.setattr(plants, "_parts_seen_apart", lambda *args: None)
     result = run_reconstruction(load_session(noisy_cloddy), ReconstructionSettings())
     assert len(result.plants) >= 6
