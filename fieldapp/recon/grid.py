@@ -234,7 +234,8 @@ def stems_at_empty_nodes(
         heights = local[:, 2] - local_ground_z_m(soil_m, local[:, :2], soil_tree=soil_tree)
         # the foot may be hidden (a plot's edge, the neighbours' lower leaves): the band is
         # raised step by step, up to where a stem is still looked for
-        for raised in np.arange(0.0, settings.search_height_m - settings.band_m + 1e-9, step):
+        highest = max(settings.search_height_m - settings.band_m, 0.0)
+        for raised in np.arange(0.0, highest + 1e-9, step):
             origin, cells, fractions = stem_columns(local, heights - raised, weak)
             if len(cells):
                 break

@@ -409,7 +409,7 @@ def _nearest_plant_point(
     ``reach_m``, if any (only the points in the part's box grown by ``reach_m`` are searched)."""
     low, high = part_m.min(axis=0) - reach_m, part_m.max(axis=0) + reach_m
     inside = np.flatnonzero(np.all((points_m >= low) & (points_m <= high), axis=1))
-    near = inside[(labels[inside] >= 0)]
+    near = inside[labels[inside] >= 0]
     near = near[is_plant[labels[near]]]
     if len(near) == 0:
         return None

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.grid import grid_nodes
+from fieldapp.recon.grid import grid_nodes, stems_at_empty_nodes
 from fieldapp.recon.plants import search_plants, voxel_components
 from fieldapp.recon.settings import PlantSettings, StemSettings
 from fieldapp.recon.stems import find_stems
@@ -241,3 +241,14 @@ def test_an_empty_node_under_a_neighbours_leaf_stays_missing() -> None:
     search = search_plants(points, soil, PlantSettings(), 0.3, nodes)
     assert len(search.plants) == 2
     assert search.missing_cells == [(1, 3)]
+
+
+def test_a_stem_search_no_higher_than_its_band_still_looks_at_empty_nodes() -> None:
+    """``search_height_m`` under ``band_m``: the band is not raised, and the node is still
+    searched once (its stem found)."""
+    rng = np.random.default_rng(14)
+    points = plant(rng, (0.0, 0.0), [(0.0, 0.12, 0.3, 0.1)])
+    soil = ground_patch(rng, 1.0, 4000)
+    nodes = grid_nodes(1, 1, 0.8, 0.8, (0.0, 0.0), 0.0, np.eye(4))
+    low = StemSettings(search_height_m=0.1)
+    assert len(stems_at_empty_nodes(points, soil, [], nodes, low)) == 1
