@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.exg import excess_green
 from fieldapp.recon.geometry_split import LOW_M as LOCAL_SOIL_M
 from fieldapp.recon.geometry_split import (
     LocalGround,
@@ -29,6 +30,11 @@ from fieldapp.recon.settings import FilterSettings
 
 log = logging.getLogger(__name__)
 
+DULL_EXG = 0.05
+"""A point whose own excess green is under this is not green (a leaf's 0.2-0.5, a station's
+threshold 0.05-0.25): kept by the colour step's rim rules, it must stand
+``pass_through_dull_min_m`` clear of the local ground (black points, which have no colour,
+are left to the 1 cm of every other)."""
 OUTLIER_QUERY_BLOCK = 16_384
 """Points per neighbour query of the outlier filters: bounds its memory, and keeps each
 block's arrays (5 MB) small: with 65 536 the first query's fresh 20-40 MB arrays, which numpy
@@ -220,12 +226,16 @@ def filter_station(
 def _passes_through(
     green_field: Cloud, ground: LocalGround, settings: FilterSettings
 ) -> NDArray[np.bool_]:
-    """(N,) which green points stand ``pass_through_min_m`` clear of the local ``ground`` and
-    at most ``pass_through_max_m`` above the plane."""
+    """(N,) which green points stand ``pass_through_min_m`` clear of the local ``ground`` (those
+    not green by their own colour ``pass_through_dull_min_m``) and at most
+    ``pass_through_max_m`` above the plane."""
     clear = height_above(ground, green_field.points)
     passes: NDArray[np.bool_] = (clear >= settings.pass_through_min_m) & (  # off the soil
         green_field.points[:, 2] <= settings.pass_through_max_m  # above the plane
     )
+    colors = green_field.colors
+    dull = (excess_green(colors) < DULL_EXG) & (colors.max(axis=1) > 0)  # black: no colour
+    passes &= ~dull | (clear >= settings.pass_through_dull_min_m)
     return passes
 
 

@@ -20,7 +20,7 @@ from fieldapp.cli import main
 from fieldapp.io.session import load_session
 from fieldapp.recon import exg, plants, scans
 from fieldapp.recon.pipeline import run_reconstruction
-from fieldapp.recon.settings import ReconstructionSettings
+from fieldapp.recon.settings import FilterSettings, ReconstructionSettings
 
 from .test_end_to_end import matched_errors
 
@@ -63,5 +63,8 @@ def test_without_the_noise_floors_the_soil_makes_plants(
     assert caught.search is not None
     assert any("not green" in m for m in caught.search.merges)
     monkeypatch.setattr(plants, "_parts_seen_apart", lambda *args: None)
-    result = run_reconstruction(load_session(noisy_cloddy), ReconstructionSettings())
+    # and the pass-through holding points not green by their own colour 2.5 cm clear (a third
+    # defence, 2026-12-06): what is left is the threshold alone
+    alone = ReconstructionSettings(filters=FilterSettings(pass_through_dull_min_m=0.0))
+    result = run_reconstruction(load_session(noisy_cloddy), alone)
     assert len(result.plants) >= 6
