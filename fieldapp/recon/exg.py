@@ -28,6 +28,12 @@ JPEG of it (quality 90) leaves sums up to 32 with random hues; a level of noise 
 pixel's chromaticity by 1 / (R + G + B), so ExG means nothing there (read as colour, the JPEG'd
 black of a touching plot made Otsu's threshold leave no soil: 20 "plants", width RMSE 20 cm).
 No lit soil or leaf of the simulator's plots is darker than 134."""
+NOT_GREEN_EXG = 0.05
+"""Excess green under which colour is not plant matter: leaves' is 0.2-0.5, the colour step's
+thresholds 0.05-0.25. A point under it that the colour step kept is a leaf's rim or the soil
+its rim rules grew into (``filters.not_green``); a group whose median is under it is no plant
+(``plants._foreign``: an independent renderer's white sphere among leaves, its cap kept by the
+weak green grown from the leaves touching it, 0.05)."""
 VALLEY_SMOOTHING_BINS = 5
 MIN_GREEN_CONTRAST = 0.1
 """Least difference of the mean ExG of Otsu's two classes for colour to separate plants: green

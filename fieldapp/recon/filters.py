@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.exg import excess_green
+from fieldapp.recon.exg import NO_COLOUR_SUM, NOT_GREEN_EXG, excess_green
 from fieldapp.recon.geometry_split import LOW_M as LOCAL_SOIL_M
 from fieldapp.recon.geometry_split import (
     LocalGround,
@@ -30,11 +30,6 @@ from fieldapp.recon.settings import FilterSettings
 
 log = logging.getLogger(__name__)
 
-DULL_EXG = 0.05
-"""A point whose own excess green is under this is not green (a leaf's 0.2-0.5, a station's
-threshold 0.05-0.25): kept by the colour step's rim rules, it must stand
-``pass_through_dull_min_m`` clear of the local ground (black points, which have no colour,
-are left to the 1 cm of every other)."""
 OUTLIER_QUERY_BLOCK = 16_384
 """Points per neighbour query of the outlier filters: bounds its memory, and keeps each
 block's arrays (5 MB) small: with 65 536 the first query's fresh 20-40 MB arrays, which numpy
@@ -200,12 +195,13 @@ def filter_station(
         # image is registered a pixel or two off (RECONSTRUCTION.md, "Colour a pixel or two
         # off the depth")
         ground = station_ground(soil_field.points, soil_band_m)  # once for both copies
-        passed = _passes_through(green_field, ground, settings)
+        dull = not_green(green_field.colors)  # the same colours in both copies
+        passed = _passes_through(green_field.points, dull, ground, settings)
         if steady is not None:
             # point for point the same pixels at their blocks' median depths: a point passes
             # where both stand clear (in the sun the soil's noise lifts a pixel of green soil,
             # not its block)
-            passed &= _passes_through(steady[0], ground, settings)
+            passed &= _passes_through(steady[0].points, dull, ground, settings)
             steady_points = (
                 voxel_mean(steady[0].select(passed), settings.voxel_size_m).points,
                 _soil_sample(steady[1], soil_band_m, soil_voxel_m),
@@ -223,19 +219,30 @@ def filter_station(
     return FilteredStation(plants, soil, kept, steady_points)
 
 
+def not_green(colors: NDArray[np.uint8]) -> NDArray[np.bool_]:
+    """(N,) which of ``colors`` (N, 3) are not green by their own colour
+    (:data:`~fieldapp.recon.exg.NOT_GREEN_EXG`): a leaf's rim the colour step's rim rules kept
+    beside green, or the soil they grew into. Pixels without colour
+    (:data:`~fieldapp.recon.exg.NO_COLOUR_SUM`: libfreenect2's holes) are not counted: their
+    own rule grows them along a leaf."""
+    coloured = colors.sum(axis=1, dtype=np.int32) > NO_COLOUR_SUM
+    return coloured & (excess_green(colors) < NOT_GREEN_EXG)  # type: ignore[no-any-return]
+
+
 def _passes_through(
-    green_field: Cloud, ground: LocalGround, settings: FilterSettings
+    points_m: NDArray[np.float64],
+    dull: NDArray[np.bool_],
+    ground: LocalGround,
+    settings: FilterSettings,
 ) -> NDArray[np.bool_]:
-    """(N,) which green points stand ``pass_through_min_m`` clear of the local ``ground`` (those
-    not green by their own colour ``pass_through_dull_min_m``) and at most
-    ``pass_through_max_m`` above the plane."""
-    clear = height_above(ground, green_field.points)
-    passes: NDArray[np.bool_] = (clear >= settings.pass_through_min_m) & (  # off the soil
-        green_field.points[:, 2] <= settings.pass_through_max_m  # above the plane
+    """(N,) which green points ``points_m`` (N, 3) stand ``pass_through_min_m`` clear of the
+    local ``ground`` (those ``dull``, not green by their own colour (:func:`not_green`),
+    ``pass_through_dull_min_m``) and at most ``pass_through_max_m`` above the plane."""
+    clear = height_above(ground, points_m)
+    least = np.where(dull, settings.pass_through_dull_min_m, settings.pass_through_min_m)
+    passes: NDArray[np.bool_] = (clear >= least) & (  # off the soil
+        points_m[:, 2] <= settings.pass_through_max_m  # above the plane
     )
-    colors = green_field.colors
-    dull = (excess_green(colors) < DULL_EXG) & (colors.max(axis=1) > 0)  # black: no colour
-    passes &= ~dull | (clear >= settings.pass_through_dull_min_m)
     return passes
 
 

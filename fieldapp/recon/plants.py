@@ -21,7 +21,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.exg import excess_green
+from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green
 from fieldapp.recon.geodesic import (
     UNREACHED,
     Assignment,
@@ -350,7 +350,7 @@ def _parts_seen_apart(
         if counts[label] >= small:
             members = order[bounds[label] : bounds[label + 1]]
             feet[label] = base_xy_m(cloud.points[members], settings.base_slice_m)
-    is_plant = (counts >= small) | (np.arange(len(counts)) < stem_count) & (counts > 0)
+    is_plant = (counts >= small) | ((np.arange(len(counts)) < stem_count) & (counts > 0))
     joined, dropped, not_green = 0, 0, 0
     for label in parts:
         members = order[bounds[label] : bounds[label + 1]]
@@ -364,14 +364,14 @@ def _parts_seen_apart(
             continue
         if low <= ON_THE_SOIL_M:
             continue
-        on_base = np.linalg.norm(feet - base_xy_m(part, settings.base_slice_m), axis=1)
-        on_base[~is_plant] = np.inf
-        to_foot = np.linalg.norm(feet - part[:, :2].mean(axis=0), axis=1)
-        to_foot[~is_plant] = np.inf
+        base = base_xy_m(part, settings.base_slice_m)
+        on_base = np.where(is_plant, np.linalg.norm(feet - base, axis=1), np.inf)
         if on_base.min() <= settings.stems.min_separation_m:
             owner: int | None = int(np.argmin(on_base))
         else:
             owner = _nearest_plant_point(cloud.points, labels, is_plant, part, PART_REACH_M)
+            centre = part[:, :2].mean(axis=0)
+            to_foot = np.where(is_plant, np.linalg.norm(feet - centre, axis=1), np.inf)
             if owner is not None and to_foot[owner] > to_foot.min() + margin_m:
                 owner = None
         if owner is None:
@@ -653,10 +653,6 @@ def _measured(
 FLOATING_M = 0.15
 """A group of points no stem reaches whose lowest point stands this far above its ground does
 not grow from the soil where it is seen (:func:`_foreign`)."""
-NOT_GREEN_EXG = 0.05
-"""Median excess green under which such a group is not plant matter: leaves' is 0.2-0.5, the
-colour steps' thresholds 0.1-0.25; an independent renderer's white sphere among leaves, its
-cap kept by the weak green grown from the leaves touching it, 0.05."""
 
 
 def _coloured(cloud: Cloud) -> bool:
