@@ -244,6 +244,14 @@ def cell_keys(points_m: NDArray[np.float64], cell_m: float) -> NDArray[np.int64]
     return keys
 
 
+def _in_cells(
+    cells: NDArray[np.int64], cell_of: NDArray[np.intp], wanted: NDArray[np.int64]
+) -> NDArray[np.bool_]:
+    """(N,) which points lie in one of the ``wanted`` cells, each point's cell given by its
+    index ``cell_of`` (N,) into the station's sorted unique ``cells``."""
+    return np.isin(cells, wanted, assume_unique=True)[cell_of]  # type: ignore[no-any-return]
+
+
 def _dilate(keys: NDArray[np.int64]) -> NDArray[np.int64]:
     offsets = np.array([di * (1 << 21) + dj for di in (-1, 0, 1) for dj in (-1, 0, 1)])
     return np.unique((keys[:, None] + offsets[None, :]).ravel())
@@ -298,8 +306,12 @@ def find_overlaps(
     ``points_field_m``: per station (N, 3) in the field frame (coarse), thinned to one point
     per ``overlap_voxel_m`` voxel."""
     points_field_m = {s: thin(p, settings.overlap_voxel_m) for s, p in points_field_m.items()}
-    keys = {s: cell_keys(p, settings.overlap_cell_m) for s, p in points_field_m.items()}
-    cells = {s: np.unique(k) for s, k in keys.items()}
+    # each station's cells once, and which cell each point is in: a pair's points are then its
+    # cells' membership gathered per point (the same masks as np.isin over every point, for a
+    # fifth of the cost: a station has 60 000 points in 2 000 cells)
+    cells, cell_of = {}, {}
+    for s, p in points_field_m.items():
+        cells[s], cell_of[s] = np.unique(cell_keys(p, settings.overlap_cell_m), return_inverse=True)
     stations = sorted(points_field_m)
     shared_cells = {
         (a, b): np.intersect1d(cells[a], cells[b], assume_unique=True)
@@ -315,8 +327,8 @@ def find_overlaps(
                 Overlap(
                     a,
                     b,
-                    points_field_m[a][np.isin(keys[a], _dilate(shared))],
-                    points_field_m[b][np.isin(keys[b], shared)],
+                    points_field_m[a][_in_cells(cells[a], cell_of[a], _dilate(shared))],
+                    points_field_m[b][_in_cells(cells[b], cell_of[b], shared)],
                 )
             )
     return overlaps
