@@ -249,7 +249,7 @@ def _in_cells(
 ) -> NDArray[np.bool_]:
     """(N,) which points lie in one of the ``wanted`` cells, each point's cell given by its
     index ``cell_of`` (N,) into the station's sorted unique ``cells``."""
-    return np.isin(cells, wanted, assume_unique=True)[cell_of]  # type: ignore[no-any-return]
+    return np.isin(cells, wanted, assume_unique=True)[cell_of]
 
 
 def _dilate(keys: NDArray[np.int64]) -> NDArray[np.int64]:
