@@ -148,6 +148,21 @@ def excess_green(colors: NDArray[np.uint8]) -> NDArray[np.float64]:
     return (2 * g - r - b) / total
 
 
+def has_colour(colors: NDArray[np.uint8]) -> NDArray[np.bool_]:
+    """(N,) which of ``colors`` (N, 3) uint8 RGB carry colour: R + G + B above
+    :data:`NO_COLOUR_SUM` (libfreenect2's holes and a JPEG's black do not)."""
+    return colors.sum(axis=1, dtype=np.int32) > NO_COLOUR_SUM  # type: ignore[no-any-return]
+
+
+def not_green_group(colors: NDArray[np.uint8]) -> bool:
+    """Whether a group of points is not plant matter by its colour (``colors`` (N, 3)): the
+    median excess green of those with colour (:func:`has_colour`) under
+    :data:`NOT_GREEN_EXG`. A group with no colour at all is not judged by it (``False``):
+    black says nothing of what a point is."""
+    lit = colors[has_colour(colors)]
+    return bool(len(lit)) and float(np.median(excess_green(lit))) < NOT_GREEN_EXG
+
+
 def exg_keys(colors: NDArray[np.uint8]) -> NDArray[np.int32]:
     """(N,) int32: the key ``G * 766 + S`` of each colour (N, 3) uint8 RGB, which fixes its
     excess green (:func:`exg_of_keys`). Cheaper than the ExG itself, and a station's pixels

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.exg import NO_COLOUR_SUM, NOT_GREEN_EXG, excess_green
+from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green, has_colour
 from fieldapp.recon.geometry_split import LOW_M as LOCAL_SOIL_M
 from fieldapp.recon.geometry_split import (
     LocalGround,
@@ -225,8 +225,7 @@ def not_green(colors: NDArray[np.uint8]) -> NDArray[np.bool_]:
     beside green, or the soil they grew into. Pixels without colour
     (:data:`~fieldapp.recon.exg.NO_COLOUR_SUM`: libfreenect2's holes) are not counted: their
     own rule grows them along a leaf."""
-    coloured = colors.sum(axis=1, dtype=np.int32) > NO_COLOUR_SUM
-    return coloured & (excess_green(colors) < NOT_GREEN_EXG)  # type: ignore[no-any-return]
+    return has_colour(colors) & (excess_green(colors) < NOT_GREEN_EXG)
 
 
 def _passes_through(

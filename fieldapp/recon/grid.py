@@ -217,7 +217,10 @@ def stems_at_empty_nodes(
     by its neighbour along their touching leaves). ``soil_tree``: the plan-view tree over
     ``soil_m[:, :2]`` when the caller has one."""
     weak = settings.model_copy(update={"min_layer_fraction": settings.prior_layer_fraction})
+    # the foot may be hidden (a plot's edge, the neighbours' lower leaves): the band is raised
+    # a step at a time, up to where a stem is still looked for
     step = max(settings.max_foot_gap_m, settings.cell_m)
+    raises = np.arange(0.0, max(settings.search_height_m - settings.band_m, 0.0) + 1e-9, step)
     found: list[Stem] = []
     if len(points_m) == 0:
         return found
@@ -232,10 +235,7 @@ def stems_at_empty_nodes(
         if len(local) == 0:
             continue
         heights = local[:, 2] - local_ground_z_m(soil_m, local[:, :2], soil_tree=soil_tree)
-        # the foot may be hidden (a plot's edge, the neighbours' lower leaves): the band is
-        # raised step by step, up to where a stem is still looked for
-        highest = max(settings.search_height_m - settings.band_m, 0.0)
-        for raised in np.arange(0.0, highest + 1e-9, step):
+        for raised in raises:
             origin, cells, fractions = stem_columns(local, heights - raised, weak)
             if len(cells):
                 break

@@ -21,7 +21,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green
+from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green, not_green_group
 from fieldapp.recon.geodesic import (
     UNREACHED,
     Assignment,
@@ -313,7 +313,7 @@ def _parts_seen_apart(
     stem, ``feet_m`` (S, 2) the stems' feet) are parts of plants, not plants (``labels`` and
     ``ambiguous`` changed in place):
 
-    - not green (``coloured`` points, median excess green under :data:`NOT_GREEN_EXG`) and
+    - not green (``coloured`` points, :func:`~fieldapp.recon.exg.not_green_group`) and
       near the soil (lowest point within :data:`FLOATING_M`; higher up it is an object among
       the plants, :func:`_foreign`): soil or residue lifted into the plants beside a leaf or a
       straw (an independent renderer's pale straw is weakly green, and the leaves' rim rules
@@ -357,7 +357,7 @@ def _parts_seen_apart(
         part = cloud.points[members]
         ground = local_ground_z_m(soil_m, part[:, :2], float(part[:, 2].min()), soil_tree)
         low = float(part[:, 2].min() - np.median(ground))
-        if coloured and float(np.median(excess_green(cloud.colors[members]))) < NOT_GREEN_EXG:
+        if coloured and not_green_group(cloud.colors[members]):
             if low <= FLOATING_M:  # higher up: an object among the plants (_foreign)
                 labels[members] = NOISE
                 not_green += len(members)
@@ -670,7 +670,7 @@ def _foreign(plant: Cloud, traits: PlantTraits) -> float | None:
     hand. A green group up there is a plant's top whose lower part was not seen, and stays
     one."""
     low = float(plant.points[:, 2].min()) - traits.ground_z_m
-    if low <= FLOATING_M or float(np.median(excess_green(plant.colors))) >= NOT_GREEN_EXG:
+    if low <= FLOATING_M or not not_green_group(plant.colors):
         return None
     return low
 

@@ -59,3 +59,18 @@ def test_without_colour_nothing_is_dropped_for_its_colour() -> None:
     cloud = _plot(rng, (139, 149, 138), 0.66)
     grey = Cloud(cloud.points, np.full_like(cloud.colors, 128))
     assert len(search_plants(grey, soil, PlantSettings(), 0.3).plants) == 2
+
+
+def test_a_green_top_mostly_without_colour_is_a_plant() -> None:
+    """libfreenect2 leaves black (no colour) the pixels its colour camera does not see, bands
+    beside every near edge: a plant's top seen apart from its lower part, 60 % of it black,
+    is judged by the colour of the rest (green), not by black's excess green (0)."""
+    rng = np.random.default_rng(3)
+    soil = ground_patch(rng, 1.2, 30000)
+    cloud = _plot(rng, LEAF_RGB, 0.66)
+    colors = cloud.colors.copy()
+    top = np.flatnonzero(np.hypot(cloud.points[:, 0] - 0.7, cloud.points[:, 1] - 0.3) < 0.1)
+    colors[top[rng.random(len(top)) < 0.6]] = 0
+    search = search_plants(Cloud(cloud.points, colors), soil, PlantSettings(), 0.3)
+    assert len(search.plants) == 2
+    assert not any("not counted as a plant" in m for m in search.merges)
