@@ -335,25 +335,23 @@ def _parts_seen_apart(
     stem_count, margin_m = len(feet_m), settings.stems.ambiguity_margin_m
     if stem_count < MIN_STEMS_FOR_PARTS or labels.max(initial=-1) < stem_count:
         return
-    counts = np.bincount(labels[labels >= 0], minlength=int(labels.max()) + 1)
+    by_label = _members_by_label(labels, int(labels.max()) + 1)
+    counts = np.array([len(members) for members in by_label])
     small = PART_SHARE * float(np.median(counts[:stem_count]))
     parts = [lab for lab in range(stem_count, len(counts)) if 0 < counts[lab] < small]
     if not parts:
         return
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(len(counts) + 1))
     # the plants a part may belong to: the stems that kept their points (a leaf's end merged
     # into its plant has none) and the groups too large to be parts, each at its foot
     feet = np.full((len(counts), 2), np.inf)
     feet[:stem_count] = feet_m
     for label in range(stem_count, len(counts)):
         if counts[label] >= small:
-            members = order[bounds[label] : bounds[label + 1]]
-            feet[label] = base_xy_m(cloud.points[members], settings.base_slice_m)
+            feet[label] = base_xy_m(cloud.points[by_label[label]], settings.base_slice_m)
     is_plant = (counts >= small) | ((np.arange(len(counts)) < stem_count) & (counts > 0))
     joined, dropped, not_green = 0, 0, 0
     for label in parts:
-        members = order[bounds[label] : bounds[label + 1]]
+        members = by_label[label]
         part = cloud.points[members]
         ground = local_ground_z_m(soil_m, part[:, :2], float(part[:, 2].min()), soil_tree)
         low = float(part[:, 2].min() - np.median(ground))
@@ -396,6 +394,14 @@ def _parts_seen_apart(
             f"{not_green} points in small groups no stem reaches, near the soil and not green "
             "(soil or residue beside a leaf), not counted as plants"
         )
+
+
+def _members_by_label(labels: NDArray[np.intp], count: int) -> list[NDArray[np.intp]]:
+    """The indices of the points of each label 0..``count`` - 1 (``labels`` (N,); NOISE and
+    unreached points left out), from one stable sort: in the order the points are."""
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(count + 1))
+    return [order[bounds[label] : bounds[label + 1]] for label in range(count)]
 
 
 def _nearest_plant_point(
@@ -615,10 +621,7 @@ def _measured(
     (:func:`_foreign`) is not a plant; ``notes`` is told of each."""
     measured: list[tuple[PlantTraits, Cloud, bool, float]] = []
     measured_labels: list[int] = []
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(labels.max(initial=-1) + 2))
-    for label in range(labels.max(initial=-1) + 1):
-        members = order[bounds[label] : bounds[label + 1]]
+    for label, members in enumerate(_members_by_label(labels, int(labels.max(initial=-1)) + 1)):
         if len(members) < settings.min_points:
             continue
         plant = cloud.select(members)
