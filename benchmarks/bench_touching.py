@@ -2,8 +2,9 @@
 
 ``prepare`` simulates sessions (``fieldapp simulate --stage touching`` and seedling plots, of
 the default plant model or of ``--plant-model``; keep each model in its own ``--dir``),
-reconstructs each up to the plants step once and pickles that step's inputs (the plot cloud
-and soil in the map frame, the local ground radius). ``run`` then runs only the plants step
+reconstructs each up to the plants step once and pickles that step's inputs (the plot cloud,
+its doubtful points and soil in the map frame, the local ground radius; inputs prepared before
+the doubtful points were kept run without them). ``run`` then runs only the plants step
 (without a grid prior) and its traits on every pickled input, and on perturbed copies of it
 (a random share of the points dropped), and prints per session: plants found / phantoms,
 height and width RMSE and MAPE, flagged plants, the worst plant and its width error (matched
@@ -58,6 +59,8 @@ def _keeper(target: Path) -> Any:
             "colors": placed.cloud.colors,
             "soil_m": placed.soil_m,
             "ground_radius_m": ground_radius_m,
+            "doubtful_points": placed.doubtful.points,
+            "doubtful_colors": placed.doubtful.colors,
         }
         target.write_bytes(pickle.dumps(inputs))
         raise _Stop
@@ -123,8 +126,13 @@ def evaluate(inputs: dict[str, Any], truth_path: Path, settings: Any) -> dict[st
     from fieldapp.results.identity import match_positions
 
     cloud = Cloud(inputs["points"], inputs["colors"])
+    doubtful = None  # inputs prepared before the doubtful points have none
+    if "doubtful_points" in inputs:
+        doubtful = Cloud(inputs["doubtful_points"], inputs["doubtful_colors"])
     start = time.process_time()
-    search = search_plants(cloud, inputs["soil_m"], settings, inputs["ground_radius_m"], None)
+    search = search_plants(
+        cloud, inputs["soil_m"], settings, inputs["ground_radius_m"], None, doubtful
+    )
     cpu = time.process_time() - start
     truth = load_truth(truth_path).plants
     truth_xy = np.array([t.plot_xy_m for t in truth]).reshape(-1, 2)
@@ -161,7 +169,10 @@ def _shifted(inputs: dict[str, Any], shift_mm: tuple[float, float, float]) -> di
     """The whole cloud and soil shifted by ``shift_mm``: nothing a plant is moves, only where
     the plants step's voxel grid cuts it."""
     shift = np.array(shift_mm) / 1000.0
-    return {**inputs, "points": inputs["points"] + shift, "soil_m": inputs["soil_m"] + shift}
+    shifted = {**inputs, "points": inputs["points"] + shift, "soil_m": inputs["soil_m"] + shift}
+    if "doubtful_points" in inputs:
+        shifted["doubtful_points"] = inputs["doubtful_points"] + shift
+    return shifted
 
 
 def _perturbed(inputs: dict[str, Any], seed: int) -> dict[str, Any]:

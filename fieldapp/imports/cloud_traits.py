@@ -23,10 +23,10 @@ from fieldapp.errors import FieldappError
 from fieldapp.imports.clouds import LoadedCloud
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.exg import excess_green, otsu_threshold
-from fieldapp.recon.filters import remove_outliers, voxel_mean
+from fieldapp.recon.filters import split_outliers, voxel_mean
 from fieldapp.recon.ground import GroundNotFound, T_level, fit_ground_plane, subsample
 from fieldapp.recon.outputs import PlantRow, write_outputs
-from fieldapp.recon.plants import Plant, find_plants
+from fieldapp.recon.plants import Plant, search_plants
 from fieldapp.recon.settings import ReconstructionSettings
 
 log = logging.getLogger(__name__)
@@ -126,13 +126,21 @@ def cloud_traits(
     soil = levelled.select(np.abs(levelled.points[:, 2]) <= settings.ground.soil_band_m)
     plants_cloud = voxel_mean(levelled.select(mask & keep), settings.filters.voxel_size_m)
     kept["voxel_mean"] = len(plants_cloud)
-    plants_cloud, counts = remove_outliers(plants_cloud, settings.filters, settings.threads)
+    plants_cloud, doubtful, counts = split_outliers(
+        plants_cloud, settings.filters, settings.threads
+    )
     soil_m = voxel_mean(soil, settings.ground.soil_voxel_m).points
     if len(soil_m) == 0:
         soil_m = np.zeros((1, 3))
-    plants = find_plants(
-        plants_cloud, soil_m, settings.plants, settings.ground.local_ground_radius_m
+    search = search_plants(
+        plants_cloud,
+        soil_m,
+        settings.plants,
+        settings.ground.local_ground_radius_m,
+        doubtful=doubtful,
     )
+    plants, plants_cloud = search.plants, search.cloud or plants_cloud
+    counts["doubtful_joined"] = search.joined
     result = CloudTraits(plants, plants_cloud, T, kept | counts, ground, separation)
     if not plants:
         result.warnings.append(

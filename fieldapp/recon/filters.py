@@ -258,7 +258,20 @@ def remove_outliers(
     station's view of a leaf together: a real surface has support, a stray point has none).
     Returns the cloud kept and the points kept by each filter. Both filters are answered by
     one k-nearest-neighbour search (:func:`outlier_inliers`)."""
-    statistical, radius = outlier_inliers(
+    kept, _, counts = split_outliers(cloud, settings, workers, doubtful=False)
+    return kept, counts
+
+
+def split_outliers(
+    cloud: Cloud, settings: FilterSettings, workers: int = 1, doubtful: bool = True
+) -> tuple[Cloud, Cloud, dict[str, int]]:
+    """:func:`remove_outliers`, and the points it removes that are only *doubtful*: those the
+    statistical filter keeps with its floor at ``sor_doubtful_distance_m`` and that then pass
+    the radius filter among its inliers so kept (``FilterSettings.sor_doubtful_distance_m``;
+    none without ``doubtful``). Returns (kept, doubtful, the points kept by each filter and
+    the doubtful count)."""
+    loose = settings.sor_doubtful_distance_m if doubtful else None
+    masks = outlier_masks(
         cloud.points,
         settings.sor_neighbors,
         settings.sor_std_ratio,
@@ -266,9 +279,25 @@ def remove_outliers(
         settings.ror_min_points,
         workers,
         settings.sor_min_distance_m,
+        loose,
     )
-    counts = {"statistical_outliers": int(statistical.sum()), "radius_outliers": int(radius.sum())}
-    return cloud.select(radius), counts
+    counts = {
+        "statistical_outliers": int(masks.statistical.sum()),
+        "radius_outliers": int(masks.radius.sum()),
+    }
+    if doubtful:
+        counts["doubtful_found"] = int(masks.doubtful.sum())
+    return cloud.select(masks.radius), cloud.select(masks.doubtful), counts
+
+
+@dataclass(frozen=True)
+class OutlierMasks:
+    """(N,) masks of :func:`outlier_masks`: the statistical filter's inliers, those that
+    also pass the radius filter among them (the points kept), and the doubtful points."""
+
+    statistical: NDArray[np.bool_]
+    radius: NDArray[np.bool_]
+    doubtful: NDArray[np.bool_]
 
 
 def outlier_inliers(
@@ -282,7 +311,27 @@ def outlier_inliers(
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """Masks (N,) of the inliers of :func:`statistical_outliers` on ``points`` (N, 3) and of
     those that then also pass :func:`radius_outliers` among the statistical inliers: the same
-    masks as the two filters run one after the other, from one tree and one query.
+    masks as the two filters run one after the other, from one tree and one query
+    (:func:`outlier_masks`)."""
+    masks = outlier_masks(
+        points, neighbors, std_ratio, radius_m, min_points, workers, min_distance_m
+    )
+    return masks.statistical, masks.radius
+
+
+def outlier_masks(
+    points: NDArray[np.float64],
+    neighbors: int,
+    std_ratio: float,
+    radius_m: float,
+    min_points: int,
+    workers: int = 1,
+    min_distance_m: float = 0.0,
+    doubtful_distance_m: float | None = None,
+) -> OutlierMasks:
+    """:func:`outlier_inliers`'s two masks, and with ``doubtful_distance_m`` the doubtful
+    points: not kept, but kept by the two filters with the statistical floor at
+    ``doubtful_distance_m`` instead of ``min_distance_m``.
 
     The ``neighbors`` + 1 nearest points, sorted by distance, give each point's mean distance
     (SOR) and its nearest neighbours within ``radius_m`` (ROR). Of those only the nearest
@@ -294,7 +343,8 @@ def outlier_inliers(
     """
     n = len(points)
     if n == 0:
-        return np.ones(0, dtype=bool), np.ones(0, dtype=bool)
+        none = np.ones(0, dtype=bool)
+        return OutlierMasks(none, none, np.zeros(0, dtype=bool))
     tree = _Neighbours(points, workers)
     k = min(neighbors + 1, n)
     # The query in blocks, keeping of each block only what the filters need: the mean
@@ -315,22 +365,56 @@ def outlier_inliers(
         within[block] = near.sum(axis=1)
         near_index[block] = np.where(near, index, -1)[:, :kept]  # nearest first
         full[block] = distances[:, -1] <= radius_m
-    statistical = np.ones(n, dtype=bool)
-    if n > neighbors:
-        statistical = mean_distance <= sor_limit(mean_distance, std_ratio, min_distance_m)
-    count = np.zeros(n, dtype=np.int64)
-    every_one_kept = np.zeros(n, dtype=bool)
-    for start in range(0, n, OUTLIER_QUERY_BLOCK):
-        rows = near_index[start : start + OUTLIER_QUERY_BLOCK]
-        stop = start + len(rows)
-        count[start:stop] = ((rows >= 0) & statistical[rows]).sum(axis=1)
-        every_one_kept[start:stop] = (rows >= 0).sum(axis=1) == within[start:stop]
     beyond = full if k < n else np.zeros(n, dtype=bool)  # neighbours beyond the k nearest
-    unsure = np.flatnonzero(statistical & (count < min_points) & (beyond | ~every_one_kept))
-    if len(unsure):
-        inliers = cKDTree(points[statistical])
-        count[unsure] = inliers.query_ball_point(points[unsure], radius_m, return_length=True) - 1
-    return statistical, statistical & (count >= min_points)
+    neighbours = _NearOnes(points, near_index, within, beyond, radius_m, min_points)
+
+    def statistical(floor_m: float) -> NDArray[np.bool_]:
+        if n <= neighbors:
+            return np.ones(n, dtype=bool)
+        return mean_distance <= sor_limit(mean_distance, std_ratio, floor_m)
+
+    inliers = statistical(min_distance_m)
+    radius = inliers & neighbours.enough(inliers)
+    doubtful = np.zeros(n, dtype=bool)
+    if doubtful_distance_m is not None and doubtful_distance_m > min_distance_m:
+        loose = statistical(doubtful_distance_m)
+        if (loose & ~inliers).any():
+            doubtful = loose & ~radius & neighbours.enough(loose)
+    return OutlierMasks(inliers, radius, doubtful)
+
+
+@dataclass(frozen=True)
+class _NearOnes:
+    """Each point's nearest neighbours within the radius filter's ``radius_m`` as
+    :func:`outlier_masks` keeps them (``near_index``: (N, kept), -1 for none; ``within``: how
+    many there are among the k nearest; ``beyond``: whether more may lie beyond the k)."""
+
+    points: NDArray[np.float64]
+    near_index: NDArray[np.int32]
+    within: NDArray[np.int32]
+    beyond: NDArray[np.bool_]
+    radius_m: float
+    min_points: int
+
+    def enough(self, inliers: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """(N,) which points have ``min_points`` of the ``inliers`` within the radius."""
+        n = len(self.points)
+        count = np.zeros(n, dtype=np.int64)
+        every_one_kept = np.zeros(n, dtype=bool)
+        for start in range(0, n, OUTLIER_QUERY_BLOCK):
+            rows = self.near_index[start : start + OUTLIER_QUERY_BLOCK]
+            stop = start + len(rows)
+            count[start:stop] = ((rows >= 0) & inliers[rows]).sum(axis=1)
+            every_one_kept[start:stop] = (rows >= 0).sum(axis=1) == self.within[start:stop]
+        unsure = np.flatnonzero(
+            inliers & (count < self.min_points) & (self.beyond | ~every_one_kept)
+        )
+        if len(unsure):
+            tree = cKDTree(self.points[inliers])
+            count[unsure] = (
+                tree.query_ball_point(self.points[unsure], self.radius_m, return_length=True) - 1
+            )
+        return count >= self.min_points
 
 
 class _Neighbours:

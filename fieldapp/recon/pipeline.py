@@ -100,6 +100,8 @@ def reconstruct(
         grid = stages.planting_grid(session, placed.T_map_field)
         ground_radius_m = settings.ground.local_ground_radius_m
         found = stages.find_plants(placed, plant_settings, ground_radius_m, grid.value.nodes)
+        if found.value.cloud is not None:  # with the doubtful points that joined a plant
+            placed = replace(placed, cloud=found.value.cloud, doubtful=Cloud.empty())
         crop = rig_crop(settings.crop, session.calibration)
         seen = (session.calibration, reference.value, scanned.value, crop)
         covered = stages.coverage(
@@ -423,6 +425,11 @@ def _with_meets(
     return notes
 
 
+def _joined(search: PlantSearch) -> dict[str, int]:
+    """The doubtful points that joined a plant, for ``kept`` (none: nothing said)."""
+    return {"doubtful_joined": search.joined} if search.cloud is not None else {}
+
+
 def _result(
     session_id: str,
     plot: _Plot,
@@ -442,7 +449,7 @@ def _result(
         cloud=placed.cloud,
         registrations=placed.registrations,
         T_field_reference=placed.registrations[plot.reference].T_field_station,
-        kept=plot.scanned.kept | plot.fused.kept,
+        kept=plot.scanned.kept | plot.fused.kept | _joined(plot.search),
         exg_thresholds=plot.scanned.exg_thresholds,
         timings_s=dict(timer.seconds),
         cpu_s=dict(timer.cpu_seconds),

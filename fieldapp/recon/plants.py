@@ -20,6 +20,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from fieldapp.recon.attach import attach_doubtful
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green, not_green_group
 from fieldapp.recon.geodesic import (
@@ -165,6 +166,11 @@ class PlantSearch:
     extra_plants: list[int] = field(default_factory=list)
     meets: dict[int, int] = field(default_factory=dict)
     grid_fit: GridFit | None = None
+    cloud: Cloud | None = None
+    """The cloud the plants were measured in: the one searched and the doubtful points that
+    joined its plants (:func:`~fieldapp.recon.attach.attach_doubtful`)."""
+    joined: int = 0
+    """How many doubtful points joined a plant."""
 
     def warnings(self, flag_ambiguous_share: float) -> list[str]:
         """One line per plant that may hold another's points, per missing grid cell (as a
@@ -217,9 +223,12 @@ def search_plants(
     settings: PlantSettings,
     ground_radius_m: float,
     grid: GridNodes | None = None,
+    doubtful: Cloud | None = None,
 ) -> PlantSearch:
     """Plants from their stems (density clusters where no stem is seen), measured, in reading
-    order, with the planting grid ``grid`` (field frame) as a prior when given."""
+    order, with the planting grid ``grid`` (field frame) as a prior when given; the
+    ``doubtful`` points (:func:`~fieldapp.recon.filters.split_outliers`) take no part in the
+    search, and join the plants they touch before these are measured."""
     if grid is None and settings.grid is not None:
         grid = prior_nodes(settings.grid)
     merges: list[str] = []
@@ -257,6 +266,9 @@ def search_plants(
         settings,
         merges,
     )
+    joined = 0
+    if doubtful is not None and len(doubtful):
+        cloud, labels, ambiguous, joined = _with_doubtful(cloud, labels, ambiguous, doubtful)
 
     def measured(notes: list[str] | None = None) -> tuple[list[Plant], dict[int, int]]:
         return _measured(
@@ -275,12 +287,31 @@ def search_plants(
     plants, plant_labels = measured(merges)
     if _merge_shared_bases(labels, plants, plant_labels, settings.stems.min_separation_m, merges):
         plants, plant_labels = measured()  # the labels merged in place
-    search = PlantSearch(plants, merges=merges, grid_fit=grid_fit)
+    search = PlantSearch(plants, merges=merges, grid_fit=grid_fit, cloud=cloud, joined=joined)
     if grid is not None:
         _place_on_grid(search, grid, soil_m, soil_tree)
     search.splits = _splits(cloud.points, labels, plant_labels, settings.cluster_voxel_m)
     search.meets = widest_meets(search.plants, search.splits, settings.cluster_voxel_m)
     return search
+
+
+def _with_doubtful(
+    cloud: Cloud, labels: NDArray[np.intp], ambiguous: NDArray[np.bool_], doubtful: Cloud
+) -> tuple[Cloud, NDArray[np.intp], NDArray[np.bool_], int]:
+    """``cloud`` with the ``doubtful`` points that reach a plant
+    (:func:`~fieldapp.recon.attach.attach_doubtful`) after its own, each labelled with that
+    plant, never ambiguous; and how many joined."""
+    found = attach_doubtful(cloud.points, labels, doubtful.points)
+    joins = found >= 0
+    if not joins.any():
+        return cloud, labels, ambiguous, 0
+    joined = doubtful.select(joins)
+    return (
+        Cloud.concatenate([cloud, joined]),
+        np.concatenate([labels, found[joins]]),
+        np.concatenate([ambiguous, np.zeros(len(joined), dtype=bool)]),
+        len(joined),
+    )
 
 
 PART_SHARE = 0.1

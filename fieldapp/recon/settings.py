@@ -66,6 +66,14 @@ class FilterSettings(_Section):
     within this (``filters.sor_limit``): about 3 times the pixel footprint at the crop's 2.25
     m, where a surface seen once has its 35 nearest 2.2 footprints away on average. 0: the
     paper's limit alone."""
+    sor_doubtful_distance_m: float = Field(default=0.04, ge=0.0)
+    """A point the statistical filter removes whose mean distance to its neighbours is within
+    this (and that passes the radius filter among such points) is *doubtful*: not used to
+    find the plants, it then joins the plant it touches (``plants.attach_doubtful``), and is
+    dropped where it touches none. A leaf's thin tip is sparse, seen by one station, and
+    failed the floor above; kept outright, the same points bridged touching plants and moved
+    whole leaves between them (RECONSTRUCTION.md, "Doubtful points"). At or under
+    ``sor_min_distance_m``: none is doubtful (the paper's filter alone)."""
     ror_radius_m: float = Field(default=0.008, gt=0.0)
     ror_min_points: int = Field(default=1, ge=1)
     voxel_size_m: float = Field(default=0.002, gt=0.0)

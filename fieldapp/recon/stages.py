@@ -31,7 +31,7 @@ from fieldapp.recon.coverage import (
     station_poses,
     uncovered,
 )
-from fieldapp.recon.filters import FilteredStation, filter_station, remove_outliers, voxel_mean
+from fieldapp.recon.filters import FilteredStation, filter_station, split_outliers, voxel_mean
 from fieldapp.recon.forkmap import ForkedMap
 from fieldapp.recon.grid import GridNodes
 from fieldapp.recon.guards import COARSE_KEPT, UNRELIABLE
@@ -107,6 +107,8 @@ class Fused:
     cloud: Cloud
     soil_m: NDArray[np.float64]
     kept: dict[str, int]
+    doubtful: Cloud = field(default_factory=Cloud.empty)
+    """The points the outlier filters found doubtful (:func:`filters.split_outliers`)."""
 
 
 @dataclass(frozen=True)
@@ -118,6 +120,9 @@ class Placed:
     soil_m: NDArray[np.float64]
     registrations: dict[int, StationRegistration]
     T_map_field: Matrix4 | None
+    doubtful: Cloud = field(default_factory=Cloud.empty)
+    """The doubtful points (:class:`Fused`), in the same frame: the plants step joins those
+    that touch a plant to it, and its cloud then replaces ``cloud`` (:func:`find_plants`)."""
 
 
 @dataclass(frozen=True)
@@ -457,8 +462,8 @@ def fuse(
     """Step 6: one plant cloud of the plot, overlaps averaged; outliers removed where every
     station's view of a leaf is together (statistical, then radius)."""
     fused, soil_m = _joined(filtered, registrations, filters.voxel_size_m)
-    cloud, outlier_counts = remove_outliers(fused, filters, threads)
-    return Fused(cloud, soil_m, {"fused": len(fused)} | outlier_counts)
+    cloud, doubtful, outlier_counts = split_outliers(fused, filters, threads)
+    return Fused(cloud, soil_m, {"fused": len(fused)} | outlier_counts, doubtful)
 
 
 def _joined(
@@ -505,9 +510,9 @@ def on_map(
         turntable_axis_direction(view_step.matrix),
     )
     if T_map_field is None:
-        return Placed(fused.cloud, fused.soil_m, registrations, None)
+        return Placed(fused.cloud, fused.soil_m, registrations, None, fused.doubtful)
     cloud, soil_m, placed = in_map_frame(T_map_field, fused.cloud, fused.soil_m, registrations)
-    return Placed(cloud, soil_m, placed, T_map_field)
+    return Placed(cloud, soil_m, placed, T_map_field, fused.doubtful.transformed(T_map_field))
 
 
 def planting_grid(session: Session, T_map_field: Matrix4 | None) -> Staged[GridPrior]:
@@ -610,8 +615,12 @@ def find_plants(
 ) -> Staged[PlantSearch]:
     """Step 7-8: plants from their stems (density clusters where no stem is seen), the
     planting grid as a prior, each measured (height, maximum width). Warns of plants that may
-    hold a neighbour's points, grid cells left empty, plants off the grid, and no plant."""
-    search = search_plants(placed.cloud, placed.soil_m, settings, ground_radius_m, grid)
+    hold a neighbour's points, grid cells left empty, plants off the grid, and no plant. The
+    doubtful points join the plants they touch (``PlantSearch.cloud``: the plot's cloud
+    after)."""
+    search = search_plants(
+        placed.cloud, placed.soil_m, settings, ground_radius_m, grid, placed.doubtful
+    )
     warnings = search.warnings(settings.stems.flag_ambiguous_share)
     return Staged(search, (*warnings, *(() if search.plants else ("no plant found",))))
 

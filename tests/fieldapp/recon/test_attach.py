@@ -1,0 +1,132 @@
+"""Doubtful points (kept only by the statistical filter's raised floor) join the plant they
+touch after the plants are found without them (:mod:`fieldapp.recon.attach`)."""
+
+import numpy as np
+
+from fieldapp.recon.attach import ATTACH_GAP_M, ATTACH_REACH_M, attach_doubtful
+from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.filters import outlier_inliers, outlier_masks, split_outliers
+from fieldapp.recon.plants import search_plants
+from fieldapp.recon.settings import FilterSettings, PlantSettings
+
+from .synthetic import LEAF_RGB, colored, ground_patch, seedling
+
+
+def _strip(x0: float, x1: float, step: float, y: float = 0.0, z: float = 0.2) -> np.ndarray:
+    x = np.arange(x0, x1 + 1e-9, step)
+    return np.column_stack([x, np.full(len(x), y), np.full(len(x), z)])
+
+
+def test_a_tip_joins_the_leaf_it_grows_from_and_a_stray_group_joins_nothing() -> None:
+    leaf_a, leaf_b = _strip(0.0, 0.10, 0.002), _strip(0.30, 0.40, 0.002)
+    points = np.concatenate([leaf_a, leaf_b])
+    labels = np.repeat([0, 1], [len(leaf_a), len(leaf_b)])
+    tip = _strip(0.106, 0.16, 0.006)  # on from a's end, sparser
+    stray = _strip(0.20, 0.24, 0.006, y=0.2)  # touches neither
+    found = attach_doubtful(points, labels, np.concatenate([tip, stray]))
+    assert found[: len(tip)].tolist() == [0] * len(tip)
+    assert found[len(tip) :].tolist() == [-1] * len(stray)
+
+
+def test_a_chain_between_two_leaves_is_shared_by_path_length() -> None:
+    """Each doubtful point of a chain that touches two plants takes the one it reaches by the
+    shorter path through the chain, however near the other plant's points lie beside it."""
+    leaf_a, leaf_b = _strip(0.0, 0.10, 0.002), _strip(0.20, 0.30, 0.002)
+    points = np.concatenate([leaf_a, leaf_b])
+    labels = np.repeat([3, 7], [len(leaf_a), len(leaf_b)])
+    chain = _strip(0.106, 0.194, 0.008)  # 12 points, each step 8 mm
+    found = attach_doubtful(points, labels, chain)
+    nearer_a = np.abs(chain[:, 0] - 0.10) < np.abs(chain[:, 0] - 0.20)
+    assert (found[nearer_a] == 3).all() and (found[~nearer_a] == 7).all()
+
+
+def test_only_labelled_points_lead_and_steps_stop_at_the_reach() -> None:
+    leaf = _strip(0.0, 0.10, 0.002)
+    noise = _strip(0.10 + ATTACH_REACH_M / 2, 0.12, 0.002)  # in no plant (-1)
+    points = np.concatenate([leaf, noise])
+    labels = np.concatenate([np.zeros(len(leaf), np.intp), np.full(len(noise), -1)])
+    beyond_noise = _strip(0.12 + 0.5 * ATTACH_REACH_M, 0.14, 0.004)
+    gap = _strip(0.10 + 2.5 * ATTACH_REACH_M, 0.20, 0.004)  # a gap wider than a step
+    found = attach_doubtful(points, labels, np.concatenate([beyond_noise, gap]), gap_m=0.0)
+    assert (found == -1).all()
+    assert attach_doubtful(points, labels, np.zeros((0, 3))).shape == (0,)
+    assert (attach_doubtful(points, np.full(len(points), -1), leaf[:3]) == -1).all()
+
+
+def test_a_group_that_reaches_no_plant_joins_the_nearest_within_the_gap() -> None:
+    """A tip's sparse end, cut from its leaf by the stretch the filter removed outright,
+    joins as a whole the plant nearest any of its points, within ``ATTACH_GAP_M``."""
+    leaf_a, leaf_b = _strip(0.0, 0.10, 0.002), _strip(0.30, 0.40, 0.002)
+    points = np.concatenate([leaf_a, leaf_b])
+    labels = np.repeat([4, 9], [len(leaf_a), len(leaf_b)])
+    near_a = _strip(0.10 + 0.6 * ATTACH_GAP_M, 0.10 + 0.6 * ATTACH_GAP_M + 0.05, 0.006)
+    near_b = _strip(0.30 - 0.5 * ATTACH_GAP_M - 0.04, 0.30 - 0.5 * ATTACH_GAP_M, 0.006)
+    alone = _strip(0.0, 0.06, 0.006, y=1.5 * ATTACH_GAP_M)  # beside a, beyond the gap
+    groups = [near_a, near_b, alone]
+    found = attach_doubtful(points, labels, np.concatenate(groups))
+    sizes = np.cumsum([0] + [len(g) for g in groups])
+    assert (found[sizes[0] : sizes[1]] == 4).all()
+    assert (found[sizes[1] : sizes[2]] == 9).all()
+    assert (found[sizes[2] : sizes[3]] == -1).all()
+
+
+def _leaf_with_a_sparse_tip_and_strays(rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    """A dense leaf (20 cm across), a tip running 4 cm on from its edge one point every 6 mm
+    (two rows 6 mm apart: each point has a neighbour within the radius filter's 8 mm; the
+    mean distance to the 35 nearest grows from 1.1 to 3.6 cm along it, over the filter's limit
+    of 2.4 cm at its end), and strays far from both."""
+    leaf = ground_patch(rng, 0.1, 6000, noise_m=0.0005)
+    leaf[:, 2] += 0.2
+    tip = np.concatenate([_strip(0.106, 0.146, 0.006, y=y) for y in (0.0, 0.006)])
+    strays = np.array([[0.5, 0.5, 0.6], [-0.5, 0.3, 0.3], [0.3, -0.4, 0.25]])
+    return leaf, tip, strays
+
+
+def test_the_raised_floor_finds_the_tip_doubtful_and_keeps_the_rest_as_before() -> None:
+    leaf, tip, strays = _leaf_with_a_sparse_tip_and_strays(np.random.default_rng(3))
+    points = np.concatenate([leaf, tip, strays])
+    masks = outlier_masks(points, 35, 1.5, 0.008, 1, 1, 0.02, 0.04)
+    statistical, radius = outlier_inliers(points, 35, 1.5, 0.008, 1, 1, 0.02)
+    np.testing.assert_array_equal(masks.statistical, statistical)
+    np.testing.assert_array_equal(masks.radius, radius)
+    is_tip = np.zeros(len(points), bool)
+    is_tip[len(leaf) : len(leaf) + len(tip)] = True
+    assert (~radius[is_tip]).sum() >= 4  # the filter takes the tip's end
+    assert masks.doubtful[is_tip & ~radius].all()  # which is doubtful, not an outlier
+    assert not masks.doubtful[-len(strays) :].any() and not radius[-len(strays) :].any()
+    assert not (masks.doubtful & masks.radius).any()
+    off = outlier_masks(points, 35, 1.5, 0.008, 1, 1, 0.02, 0.02)
+    assert not off.doubtful.any()
+
+
+def test_split_outliers_counts_the_doubtful_and_remove_outliers_is_unchanged() -> None:
+    leaf, tip, strays = _leaf_with_a_sparse_tip_and_strays(np.random.default_rng(4))
+    cloud = colored(np.concatenate([leaf, tip, strays]), LEAF_RGB)
+    kept, doubtful, counts = split_outliers(cloud, FilterSettings())
+    assert counts["doubtful_found"] == len(doubtful) > 0
+    assert len(kept) + len(doubtful) <= len(cloud) - len(strays)
+    same, same_counts = split_outliers(cloud, FilterSettings(), doubtful=False)[::2]
+    np.testing.assert_array_equal(same.points, kept.points)
+    assert "doubtful_found" not in same_counts
+
+
+def test_a_plant_measured_with_its_doubtful_tip_and_a_stray_veil_left_out() -> None:
+    rng = np.random.default_rng(8)
+    plant = seedling(rng, 0.0, 0.0, 0.30, 0.30, 9000)  # disc at 18 cm, 15 cm radius
+    other = seedling(rng, 0.8, 0.0, 0.30, 0.30, 9000)
+    cloud = colored(np.concatenate([plant, other]), LEAF_RGB)
+    tip = _strip(0.152, 0.19, 0.005, z=0.18)  # 4 cm on from the disc's rim, towards +x
+    veil = _strip(0.40, 0.46, 0.005, z=0.5)  # far above, between the plants
+    doubtful = colored(np.concatenate([tip, veil]), LEAF_RGB)
+    settings, soil = PlantSettings(), np.zeros((0, 3))
+    before = search_plants(cloud, soil, settings, 0.15)
+    after = search_plants(cloud, soil, settings, 0.15, doubtful=doubtful)
+    assert [p.traits.points for p in before.plants] == [9000, 9000]
+    assert after.joined == len(tip)
+    assert after.cloud is not None and len(after.cloud) == len(cloud) + len(tip)
+    first, second = after.plants
+    assert first.traits.points == 9000 + len(tip) and second.traits.points == 9000
+    assert first.traits.width_m > before.plants[0].traits.width_m + 0.02
+    assert second.traits.width_m == before.plants[1].traits.width_m
+    np.testing.assert_array_equal(after.plants[1].cloud.points, before.plants[1].cloud.points)
+    assert isinstance(after.cloud, Cloud)
