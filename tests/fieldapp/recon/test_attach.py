@@ -130,3 +130,23 @@ def test_a_plant_measured_with_its_doubtful_tip_and_a_stray_veil_left_out() -> N
     assert second.traits.width_m == before.plants[1].traits.width_m
     np.testing.assert_array_equal(after.plants[1].cloud.points, before.plants[1].cloud.points)
     assert isinstance(after.cloud, Cloud)
+
+
+def test_the_grid_lookup_never_misses_a_point_within_the_distance() -> None:
+    """The tree the joins search holds only the labelled points the grid finds near a doubtful
+    one: every point within the distance must be among them, at any offset and scale."""
+    from scipy.spatial import cKDTree
+
+    from fieldapp.recon.attach import _near
+
+    rng = np.random.default_rng(11)
+    for distance in (0.01, 0.05, 0.13):
+        around = rng.uniform(-1.0, 2.0, (40, 3))
+        direction = rng.normal(size=(400, 3))
+        direction /= np.linalg.norm(direction, axis=1)[:, None]
+        inside = np.repeat(around, 10, axis=0) + direction * distance * rng.uniform(0, 1, (400, 1))
+        points = np.concatenate([rng.uniform(-1.5, 2.5, (20_000, 3)), inside])
+        within = np.isfinite(cKDTree(around).query(points, distance_upper_bound=distance)[0])
+        near = _near(points, around, distance)
+        assert within.sum() > 40 and near[within].all()
+        assert near.sum() < 0.2 * len(points)  # and not every point
