@@ -31,6 +31,11 @@ ATTACH_GAP_M = 0.05
 plant it joins: a tip's sparse end lies beyond the stretch of it the filter removed
 outright, 2-5 cm on from its leaf's kept points (median 2.9 cm, this project's touching
 plot seed 3)."""
+ATTACH_MARGIN_M = 0.01
+"""A group joins the plant nearest it only where every other plant's points lie at least this
+much farther: nearer, which of two touching plants a sparse pair belongs to is a guess (the
+second plant model's touching seed 3: a pair 3.9 cm from one plant and 4.7 cm from its
+neighbour made the first 2.2 cm too wide), and the group is dropped."""
 
 
 def attach_doubtful(
@@ -39,12 +44,14 @@ def attach_doubtful(
     doubtful_m: NDArray[np.float64],
     reach_m: float = ATTACH_REACH_M,
     gap_m: float = ATTACH_GAP_M,
+    margin_m: float = ATTACH_MARGIN_M,
 ) -> NDArray[np.intp]:
     """(D,) the label each of ``doubtful_m`` (D, 3) takes: that of the labelled point of
     ``points_m`` (N, 3), ``labels`` (N,) (-1: in no plant), it reaches along the shortest
     path of steps of at most ``reach_m`` through doubtful points; for a group of doubtful
     points (steps of at most ``reach_m``) that reaches none so, that of the labelled point
-    nearest the group, within ``gap_m``; -1 for the rest."""
+    nearest the group, within ``gap_m``, where every other label's points lie ``margin_m``
+    farther; -1 for the rest."""
     d = len(doubtful_m)
     found = np.full(d, -1, dtype=np.intp)
     if d == 0:
@@ -76,9 +83,38 @@ def attach_doubtful(
     distance, nearest = labelled_tree.query(doubtful_m[alone], distance_upper_bound=gap_m)
     order = np.lexsort((distance, group[alone]))  # by group, nearest first
     first = order[np.r_[True, np.diff(group[alone][order]) != 0]]
+    around = labelled_tree.query_ball_point(doubtful_m[alone], gap_m)
     for index in first[np.isfinite(distance[first])]:
-        found[alone[group[alone] == group[alone[index]]]] = labels[labelled[nearest[index]]]
+        members = np.flatnonzero(group[alone] == group[alone[index]])
+        label = labels[labelled[nearest[index]]]
+        other = _nearest_other(
+            points_m, labels, labelled, around, doubtful_m[alone], members, label
+        )
+        if other >= distance[index] + margin_m:
+            found[alone[members]] = label
     return found
+
+
+def _nearest_other(
+    points_m: NDArray[np.float64],
+    labels: NDArray[np.intp],
+    labelled: NDArray[np.intp],
+    around: list[list[int]],
+    group_m: NDArray[np.float64],
+    members: NDArray[np.intp],
+    label: int,
+) -> float:
+    """The distance from the ``members`` of a group (rows of ``group_m``) to the nearest
+    point of a plant other than ``label`` among those ``around`` each (indices into
+    ``labelled``); infinite where there is none."""
+    nearest = np.inf
+    for member in members:
+        near = labelled[np.asarray(around[member], dtype=np.intp)]
+        near = near[labels[near] != label]
+        if len(near):
+            gaps = np.linalg.norm(points_m[near] - group_m[member], axis=1)
+            nearest = min(nearest, float(gaps.min()))
+    return nearest
 
 
 def _near(

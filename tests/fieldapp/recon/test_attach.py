@@ -150,3 +150,16 @@ def test_the_grid_lookup_never_misses_a_point_within_the_distance() -> None:
         near = _near(points, around, distance)
         assert within.sum() > 40 and near[within].all()
         assert near.sum() < 0.2 * len(points)  # and not every point
+
+
+def test_a_group_about_as_near_two_plants_is_dropped() -> None:
+    """Which of two plants a group lying about as near both belongs to is a guess: it joins
+    only where every other plant lies ``ATTACH_MARGIN_M`` farther than the nearest."""
+    leaf_a, leaf_b = _strip(0.0, 0.10, 0.002), _strip(0.19, 0.30, 0.002)
+    points = np.concatenate([leaf_a, leaf_b])
+    labels = np.repeat([1, 2], [len(leaf_a), len(leaf_b)])
+    between = np.array([[0.14, 0.0, 0.2], [0.146, 0.0, 0.2]])  # 4.0 cm from a, 4.4 cm from b
+    assert (attach_doubtful(points, labels, between) == -1).all()
+    nearer_a = between - [0.02, 0.0, 0.0]  # 2.0 cm from a, 6.4 cm from b
+    assert (attach_doubtful(points, labels, nearer_a) == 1).all()
+    assert (attach_doubtful(points, labels, between, margin_m=0.0) == 1).all()
