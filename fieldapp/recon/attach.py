@@ -35,7 +35,7 @@ ATTACH_MARGIN_M = 0.01
 """A group joins the plant nearest it only where every other plant's points lie at least this
 much farther: nearer, which of two touching plants a sparse pair belongs to is a guess (the
 second plant model's touching seed 3: a pair 3.9 cm from one plant and 4.7 cm from its
-neighbour made the first 2.2 cm too wide), and the group is dropped."""
+neighbour made the first 2.2 cm wider), and the group is dropped."""
 
 
 def attach_doubtful(
