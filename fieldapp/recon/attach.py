@@ -38,6 +38,11 @@ second plant model's touching seed 3: a pair 3.9 cm from one plant and 4.7 cm fr
 neighbour made the first 2.2 cm wider), and the group is dropped."""
 
 
+MAX_GRID_CELLS = 1 << 26
+"""The largest grid :func:`_near` builds (64 MB): a 9 x 9 station plot needs about a third;
+beyond, every labelled point goes into the joins' tree (the same joins, slower)."""
+
+
 def attach_doubtful(
     points_m: NDArray[np.float64],
     labels: NDArray[np.intp],
@@ -82,10 +87,12 @@ def attach_doubtful(
     _, group = connected_components(inside, directed=False)
     distance, nearest = labelled_tree.query(doubtful_m[alone], distance_upper_bound=gap_m)
     order = np.lexsort((distance, group[alone]))  # by group, nearest first
-    first = order[np.r_[True, np.diff(group[alone][order]) != 0]]
+    starts = np.flatnonzero(np.r_[True, np.diff(group[alone][order]) != 0])
     around = labelled_tree.query_ball_point(doubtful_m[alone], gap_m)
-    for index in first[np.isfinite(distance[first])]:
-        members = np.flatnonzero(group[alone] == group[alone[index]])
+    for members in np.split(order, starts[1:]):
+        index = members[0]  # the group's point nearest a plant
+        if not np.isfinite(distance[index]):
+            continue
         label = labels[labelled[nearest[index]]]
         other = _nearest_other(
             points_m, labels, labelled, around, doubtful_m[alone], members, label
@@ -128,6 +135,8 @@ def _near(
     low = around_m.min(axis=0) - 2.5 * cell_m  # every cell of theirs two or more in
     cells = np.floor((around_m - low) / cell_m).astype(np.intp)
     shape = cells.max(axis=0) + 3
+    if np.prod(shape.astype(np.float64)) > MAX_GRID_CELLS:  # a field, not a plot: no grid
+        return np.ones(len(points_m), dtype=bool)
     grid = np.zeros(shape, dtype=bool)
     for di, dj, dk in itertools.product(range(-2, 3), repeat=3):
         grid[cells[:, 0] + di, cells[:, 1] + dj, cells[:, 2] + dk] = True

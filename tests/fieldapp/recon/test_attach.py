@@ -141,15 +141,17 @@ def test_the_grid_lookup_never_misses_a_point_within_the_distance() -> None:
 
     rng = np.random.default_rng(11)
     for distance in (0.01, 0.05, 0.13):
-        around = rng.uniform(-1.0, 2.0, (40, 3))
+        around = rng.uniform(-10 * distance, 30 * distance, (40, 3))
         direction = rng.normal(size=(400, 3))
         direction /= np.linalg.norm(direction, axis=1)[:, None]
         inside = np.repeat(around, 10, axis=0) + direction * distance * rng.uniform(0, 1, (400, 1))
-        points = np.concatenate([rng.uniform(-1.5, 2.5, (20_000, 3)), inside])
+        points = np.concatenate([rng.uniform(-15 * distance, 35 * distance, (20_000, 3)), inside])
         within = np.isfinite(cKDTree(around).query(points, distance_upper_bound=distance)[0])
         near = _near(points, around, distance)
         assert within.sum() > 40 and near[within].all()
-        assert near.sum() < 0.2 * len(points)  # and not every point
+        assert near.sum() < 0.5 * len(points)  # and not every point
+    far = np.array([[0.0, 0.0, 0.0], [5000.0, 5000.0, 1.0]])  # a grid too large: every point
+    assert _near(points, far, 0.01).all()
 
 
 def test_a_group_about_as_near_two_plants_is_dropped() -> None:
