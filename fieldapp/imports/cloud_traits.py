@@ -139,7 +139,8 @@ def cloud_traits(
         settings.ground.local_ground_radius_m,
         doubtful=doubtful,
     )
-    plants, plants_cloud = search.plants, search.cloud or plants_cloud
+    plants = search.plants
+    plants_cloud = search.cloud if search.cloud is not None else plants_cloud
     counts["doubtful_joined"] = search.joined
     result = CloudTraits(plants, plants_cloud, T, kept | counts, ground, separation)
     if not plants:
