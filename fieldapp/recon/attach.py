@@ -80,23 +80,23 @@ def attach_doubtful(
     if len(alone) == 0 or gap_m <= 0.0:
         return found
     # the groups that reached no plant: each joins the labelled point nearest any of its own
-    keep = np.isin(among.row, alone) & np.isin(among.col, alone)
+    lonely = found < 0
+    keep = lonely[among.row] & lonely[among.col]
     inside = coo_matrix(
         (np.ones(int(keep.sum())), (among.row[keep], among.col[keep])), shape=(d, d)
     )
-    _, group = connected_components(inside, directed=False)
-    distance, nearest = labelled_tree.query(doubtful_m[alone], distance_upper_bound=gap_m)
-    order = np.lexsort((distance, group[alone]))  # by group, nearest first
-    starts = np.flatnonzero(np.r_[True, np.diff(group[alone][order]) != 0])
-    around = labelled_tree.query_ball_point(doubtful_m[alone], gap_m)
+    group = connected_components(inside, directed=False)[1][alone]
+    alone_m = doubtful_m[alone]
+    distance, nearest = labelled_tree.query(alone_m, distance_upper_bound=gap_m)
+    order = np.lexsort((distance, group))  # by group, nearest first
+    starts = np.flatnonzero(np.r_[True, np.diff(group[order]) != 0])
+    around = labelled_tree.query_ball_point(alone_m, gap_m)
     for members in np.split(order, starts[1:]):
         index = members[0]  # the group's point nearest a plant
         if not np.isfinite(distance[index]):
             continue
         label = labels[labelled[nearest[index]]]
-        other = _nearest_other(
-            points_m, labels, labelled, around, doubtful_m[alone], members, label
-        )
+        other = _nearest_other(points_m, labels, labelled, around, alone_m, members, label)
         if other >= distance[index] + margin_m:
             found[alone[members]] = label
     return found

@@ -37,7 +37,7 @@ asks the kernel to back with huge pages, cost 0.3-0.4 s of system time in page f
 (compaction), as much as the rest of the stage."""
 ROR_SPARE = 3
 """The radius filter keeps this many of each point's neighbours within its radius beyond the
-count it asks for (:func:`outlier_inliers`)."""
+count it asks for (:func:`outlier_masks`)."""
 
 
 def pass_through(height_m: NDArray[np.float64], min_m: float, max_m: float) -> NDArray[np.bool_]:
@@ -257,7 +257,7 @@ def remove_outliers(
     """Statistical then radius outlier removal on the fused plant cloud of the plot (every
     station's view of a leaf together: a real surface has support, a stray point has none).
     Returns the cloud kept and the points kept by each filter. Both filters are answered by
-    one k-nearest-neighbour search (:func:`outlier_inliers`)."""
+    one k-nearest-neighbour search (:func:`outlier_masks`)."""
     kept, _, counts = split_outliers(cloud, settings, workers, doubtful=False)
     return kept, counts
 
@@ -300,25 +300,6 @@ class OutlierMasks:
     doubtful: NDArray[np.bool_]
 
 
-def outlier_inliers(
-    points: NDArray[np.float64],
-    neighbors: int,
-    std_ratio: float,
-    radius_m: float,
-    min_points: int,
-    workers: int = 1,
-    min_distance_m: float = 0.0,
-) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
-    """Masks (N,) of the inliers of :func:`statistical_outliers` on ``points`` (N, 3) and of
-    those that then also pass :func:`radius_outliers` among the statistical inliers: the same
-    masks as the two filters run one after the other, from one tree and one query
-    (:func:`outlier_masks`)."""
-    masks = outlier_masks(
-        points, neighbors, std_ratio, radius_m, min_points, workers, min_distance_m
-    )
-    return masks.statistical, masks.radius
-
-
 def outlier_masks(
     points: NDArray[np.float64],
     neighbors: int,
@@ -329,9 +310,11 @@ def outlier_masks(
     min_distance_m: float = 0.0,
     doubtful_distance_m: float | None = None,
 ) -> OutlierMasks:
-    """:func:`outlier_inliers`'s two masks, and with ``doubtful_distance_m`` the doubtful
-    points: not kept, but kept by the two filters with the statistical floor at
-    ``doubtful_distance_m`` instead of ``min_distance_m``.
+    """Masks (N,) of the inliers of :func:`statistical_outliers` on ``points`` (N, 3) and of
+    those that then also pass :func:`radius_outliers` among the statistical inliers: the same
+    masks as the two filters run one after the other, from one tree and one query. With
+    ``doubtful_distance_m``, the doubtful points too: not kept, but kept by the two filters
+    with the statistical floor at ``doubtful_distance_m`` instead of ``min_distance_m``.
 
     The ``neighbors`` + 1 nearest points, sorted by distance, give each point's mean distance
     (SOR) and its nearest neighbours within ``radius_m`` (ROR). Of those only the nearest
@@ -354,67 +337,45 @@ def outlier_masks(
     kept = min(k, min_points + ROR_SPARE + 1)  # one more: the point itself is among them
     mean_distance = np.empty(n)
     near_index = np.empty((n, kept), dtype=np.int32)
-    within = np.empty(n, dtype=np.int32)  # neighbours within the radius, among the k
-    full = np.empty(n, dtype=bool)  # every one of the k within the radius: count unsure
+    # whether the neighbours kept may not settle a point's count: more of the k lie within the
+    # radius than were kept, or every one of the k does (more may lie beyond them)
+    unsettled = np.empty(n, dtype=bool)
     for start in range(0, n, OUTLIER_QUERY_BLOCK):
         block = slice(start, min(start + OUTLIER_QUERY_BLOCK, n))
         distances, index = tree.query(points[block], k)
         mean_distance[block] = distances[:, 1:].mean(axis=1) if k > 1 else 0.0
         itself = index == np.arange(block.start, block.stop)[:, None]
         near = (distances <= radius_m) & ~itself
-        within[block] = near.sum(axis=1)
         near_index[block] = np.where(near, index, -1)[:, :kept]  # nearest first
-        full[block] = distances[:, -1] <= radius_m
-    beyond = full if k < n else np.zeros(n, dtype=bool)  # neighbours beyond the k nearest
-    neighbours = _NearOnes(points, near_index, within, beyond, radius_m, min_points)
+        unsettled[block] = near[:, kept:].any(axis=1) | ((distances[:, -1] <= radius_m) & (k < n))
 
     def statistical(floor_m: float) -> NDArray[np.bool_]:
         if n <= neighbors:
             return np.ones(n, dtype=bool)
         return mean_distance <= sor_limit(mean_distance, std_ratio, floor_m)
 
+    def enough(inliers: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """(N,) which points have ``min_points`` of the ``inliers`` within the radius."""
+        count = np.zeros(n, dtype=np.int64)
+        for start in range(0, n, OUTLIER_QUERY_BLOCK):
+            rows = near_index[start : start + OUTLIER_QUERY_BLOCK]
+            count[start : start + len(rows)] = ((rows >= 0) & inliers[rows]).sum(axis=1)
+        unsure = np.flatnonzero(inliers & (count < min_points) & unsettled)
+        if len(unsure):
+            found = cKDTree(points[inliers]).query_ball_point(
+                points[unsure], radius_m, return_length=True
+            )
+            count[unsure] = found - 1
+        return count >= min_points
+
     inliers = statistical(min_distance_m)
-    radius = inliers & neighbours.enough(inliers)
+    radius = inliers & enough(inliers)
     doubtful = np.zeros(n, dtype=bool)
     if doubtful_distance_m is not None and doubtful_distance_m > min_distance_m:
         loose = statistical(doubtful_distance_m)
         if (loose & ~inliers).any():
-            doubtful = loose & ~radius & neighbours.enough(loose)
+            doubtful = loose & ~radius & enough(loose)
     return OutlierMasks(inliers, radius, doubtful)
-
-
-@dataclass(frozen=True)
-class _NearOnes:
-    """Each point's nearest neighbours within the radius filter's ``radius_m`` as
-    :func:`outlier_masks` keeps them (``near_index``: (N, kept), -1 for none; ``within``: how
-    many there are among the k nearest; ``beyond``: whether more may lie beyond the k)."""
-
-    points: NDArray[np.float64]
-    near_index: NDArray[np.int32]
-    within: NDArray[np.int32]
-    beyond: NDArray[np.bool_]
-    radius_m: float
-    min_points: int
-
-    def enough(self, inliers: NDArray[np.bool_]) -> NDArray[np.bool_]:
-        """(N,) which points have ``min_points`` of the ``inliers`` within the radius."""
-        n = len(self.points)
-        count = np.zeros(n, dtype=np.int64)
-        every_one_kept = np.zeros(n, dtype=bool)
-        for start in range(0, n, OUTLIER_QUERY_BLOCK):
-            rows = self.near_index[start : start + OUTLIER_QUERY_BLOCK]
-            stop = start + len(rows)
-            count[start:stop] = ((rows >= 0) & inliers[rows]).sum(axis=1)
-            every_one_kept[start:stop] = (rows >= 0).sum(axis=1) == self.within[start:stop]
-        unsure = np.flatnonzero(
-            inliers & (count < self.min_points) & (self.beyond | ~every_one_kept)
-        )
-        if len(unsure):
-            tree = cKDTree(self.points[inliers])
-            count[unsure] = (
-                tree.query_ball_point(self.points[unsure], self.radius_m, return_length=True) - 1
-            )
-        return count >= self.min_points
 
 
 class _Neighbours:

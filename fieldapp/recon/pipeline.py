@@ -425,11 +425,6 @@ def _with_meets(
     return notes
 
 
-def _joined(search: PlantSearch) -> dict[str, int]:
-    """The doubtful points that joined a plant, for ``kept`` (none: nothing said)."""
-    return {"doubtful_joined": search.joined} if search.cloud is not None else {}
-
-
 def _result(
     session_id: str,
     plot: _Plot,
@@ -449,7 +444,7 @@ def _result(
         cloud=placed.cloud,
         registrations=placed.registrations,
         T_field_reference=placed.registrations[plot.reference].T_field_station,
-        kept=plot.scanned.kept | plot.fused.kept | _joined(plot.search),
+        kept=plot.scanned.kept | plot.fused.kept | {"doubtful_joined": plot.search.joined},
         exg_thresholds=plot.scanned.exg_thresholds,
         timings_s=dict(timer.seconds),
         cpu_s=dict(timer.cpu_seconds),

@@ -69,7 +69,7 @@ class FilterSettings(_Section):
     sor_doubtful_distance_m: float = Field(default=0.04, ge=0.0)
     """A point the statistical filter removes whose mean distance to its neighbours is within
     this (and that passes the radius filter among such points) is *doubtful*: not used to
-    find the plants, it then joins the plant it touches (``plants.attach_doubtful``), and is
+    find the plants, it then joins the plant it touches (``attach.attach_doubtful``), and is
     dropped where it touches none. A leaf's thin tip is sparse, seen by one station, and
     failed the floor above; kept outright, the same points bridged touching plants and moved
     whole leaves between them (RECONSTRUCTION.md, "Doubtful points"). At or under

@@ -16,7 +16,7 @@ from fieldapp.recon.exg import (
 )
 from fieldapp.recon.filters import (
     filter_station,
-    outlier_inliers,
+    outlier_masks,
     pass_through,
     radius_outliers,
     remove_outliers,
@@ -110,8 +110,8 @@ def test_the_statistical_filter_keeps_a_clean_cloud_s_sparse_tip() -> None:
     with_strays = np.concatenate([points, strays])
     kept = statistical_outliers(with_strays, 35, 1.5, min_distance_m=0.02)
     assert kept[: len(points)].all() and not kept[-2:].any()
-    statistical, _ = outlier_inliers(with_strays, 35, 1.5, 0.008, 1, min_distance_m=0.02)
-    np.testing.assert_array_equal(statistical, kept)
+    masks = outlier_masks(with_strays, 35, 1.5, 0.008, 1, min_distance_m=0.02)
+    np.testing.assert_array_equal(masks.statistical, kept)
 
 
 def test_the_floor_leaves_a_noisy_cloud_s_limit_alone() -> None:
@@ -127,10 +127,15 @@ def test_the_floor_leaves_a_noisy_cloud_s_limit_alone() -> None:
 
 
 def _sor_then_ror(
-    points: np.ndarray, neighbors: int, std_ratio: float, radius_m: float, min_points: int
+    points: np.ndarray,
+    neighbors: int,
+    std_ratio: float,
+    radius_m: float,
+    min_points: int,
+    min_distance_m: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The two filters one after the other, each with its own tree (the paper's order)."""
-    statistical = statistical_outliers(points, neighbors, std_ratio)
+    statistical = statistical_outliers(points, neighbors, std_ratio, min_distance_m=min_distance_m)
     radius = np.zeros(len(points), dtype=bool)
     radius[statistical] = radius_outliers(points[statistical], radius_m, min_points)
     return statistical, radius
@@ -155,13 +160,25 @@ def test_one_query_gives_the_masks_of_sor_then_ror(
     blobs = rng.normal(0.0, 0.004, (6, 30, 3)) + rng.uniform(-0.2, 0.2, (6, 1, 3))
     strays = rng.uniform(-0.3, 0.3, (40, 3))
     points = np.concatenate([surface, surface[:50], blobs.reshape(-1, 3), strays])
-    statistical, radius = outlier_inliers(points, neighbors, 1.5, radius_m, min_points)
+    masks = outlier_masks(points, neighbors, 1.5, radius_m, min_points)
     expected_statistical, expected_radius = _sor_then_ror(
         points, neighbors, 1.5, radius_m, min_points
     )
-    np.testing.assert_array_equal(statistical, expected_statistical)
-    np.testing.assert_array_equal(radius, expected_radius)
-    assert 0 < radius.sum() < len(points)  # not all kept, not all dropped
+    np.testing.assert_array_equal(masks.statistical, expected_statistical)
+    np.testing.assert_array_equal(masks.radius, expected_radius)
+    assert 0 < masks.radius.sum() < len(points)  # not all kept, not all dropped
+    # the doubtful points: kept by the two filters in turn with the floor raised, and not
+    # without; with the limit at the mean distance (std_ratio 0) some lie between
+    tight = outlier_masks(points, neighbors, 0.0, radius_m, min_points, 1, 0.0, DOUBTFUL_M)
+    _, strict = _sor_then_ror(points, neighbors, 0.0, radius_m, min_points)
+    _, loose = _sor_then_ror(points, neighbors, 0.0, radius_m, min_points, DOUBTFUL_M)
+    np.testing.assert_array_equal(tight.radius, strict)
+    np.testing.assert_array_equal(tight.doubtful, loose & ~strict)
+    assert tight.doubtful.any()
+
+
+DOUBTFUL_M = 0.06
+"""A raised floor for the doubtful points, over the mean distances of the clouds here."""
 
 
 @pytest.mark.parametrize("spare", [0, 3])
@@ -175,20 +192,21 @@ def test_one_query_where_inliers_and_outliers_interleave(
     monkeypatch.setattr(filters, "ROR_SPARE", spare)
     rng = np.random.default_rng(min_points)
     points = ground_patch(rng, 0.05, 4000, noise_m=0.001)
-    statistical, radius = outlier_inliers(points, 35, 0.0, 0.004, min_points)
+    masks = outlier_masks(points, 35, 0.0, 0.004, min_points)
     expected_statistical, expected_radius = _sor_then_ror(points, 35, 0.0, 0.004, min_points)
-    assert 0.3 < statistical.mean() < 0.7
-    np.testing.assert_array_equal(statistical, expected_statistical)
-    np.testing.assert_array_equal(radius, expected_radius)
+    assert 0.3 < masks.statistical.mean() < 0.7
+    np.testing.assert_array_equal(masks.statistical, expected_statistical)
+    np.testing.assert_array_equal(masks.radius, expected_radius)
 
 
 @pytest.mark.parametrize("n", [0, 1, 2, 5])
 def test_one_query_on_clouds_smaller_than_the_neighbours(n: int) -> None:
     points = np.random.default_rng(n).uniform(0.0, 0.01, (n, 3))
-    statistical, radius = outlier_inliers(points, 35, 1.5, 0.008, 1)
+    masks = outlier_masks(points, 35, 1.5, 0.008, 1, 1, 0.0, DOUBTFUL_M)
     expected_statistical, expected_radius = _sor_then_ror(points, 35, 1.5, 0.008, 1)
-    np.testing.assert_array_equal(statistical, expected_statistical)
-    np.testing.assert_array_equal(radius, expected_radius)
+    np.testing.assert_array_equal(masks.statistical, expected_statistical)
+    np.testing.assert_array_equal(masks.radius, expected_radius)
+    assert not masks.doubtful.any()
 
 
 def test_voxel_mean_averages_points_and_colours_per_voxel() -> None:
@@ -278,7 +296,8 @@ def test_the_neighbour_search_runs_on_the_threads_asked_with_the_same_masks() ->
     points = np.concatenate([ground_patch(rng, 0.05, 4000), rng.uniform(-0.3, 0.3, (30, 3))])
     masks = []
     for threads in (1, 2):
-        masks.append(outlier_inliers(points, 35, 1.5, 0.008, 1, threads))
+        found = outlier_masks(points, 35, 1.5, 0.008, 1, threads)
+        masks.append((found.statistical, found.radius))
         for library in libraries:
             assert ctypes.CDLL(str(library)).omp_get_max_threads() == threads
     np.testing.assert_array_equal(masks[0][0], masks[1][0])
