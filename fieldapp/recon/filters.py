@@ -220,12 +220,13 @@ def filter_station(
 
 
 def not_green(colors: NDArray[np.uint8]) -> NDArray[np.bool_]:
-    """(N,) which of ``colors`` (N, 3) are not green by their own colour
-    (:data:`~fieldapp.recon.exg.NOT_GREEN_EXG`): a leaf's rim the colour step's rim rules kept
-    beside green, or the soil they grew into. Pixels without colour
-    (:data:`~fieldapp.recon.exg.NO_COLOUR_SUM`: libfreenect2's holes) are not counted: their
-    own rule grows them along a leaf."""
-    return has_colour(colors) & (excess_green(colors) < NOT_GREEN_EXG)
+    """(N,) which of ``colors`` (N, 3) are not green by their own colour: excess green under
+    :data:`~fieldapp.recon.exg.NOT_GREEN_EXG` (a leaf's rim the colour step's rim rules kept
+    beside green, or the soil they grew into), or no colour at all
+    (:data:`~fieldapp.recon.exg.NO_COLOUR_SUM`: libfreenect2's holes and dark pixels, which
+    their own rule grows along a leaf; near the ground they are mostly the soil beside a stem
+    or a leaf that the colour camera, 5.2 cm aside, does not see)."""
+    return ~has_colour(colors) | (excess_green(colors) < NOT_GREEN_EXG)
 
 
 def _passes_through(

@@ -50,7 +50,8 @@ class FilterSettings(_Section):
     pass_through_max_m: float = Field(default=1.5, gt=0.0)
     pass_through_dull_min_m: float = Field(default=0.025, ge=0.0)
     """How far a point whose own colour is not green (``filters.not_green``: a leaf's rim grown
-    back by the colour step's rim rules, or the soil they grew into) must stand clear of the
+    back by the colour step's rim rules, or the soil they grew into; or a pixel without colour)
+    must stand clear of the
     local ground: on an independent renderer's plots the rim rules grew 251 000 soil pixels
     against 3 200 of leaf, and the soil on clods and ridges 1-5 cm up joined the plants (a
     seedling 32 % soil and straw, 19 cm too wide)."""

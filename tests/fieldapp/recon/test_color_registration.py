@@ -102,7 +102,7 @@ def test_green_lying_on_a_rise_of_the_soil_is_not_a_plant() -> None:
     leaf = np.column_stack([leaf_xy, np.full(300, 0.02)])  # 2 cm above flat soil
     green = np.concatenate([on_rise, leaf])
     filtered = filter_station(
-        Cloud(green, np.zeros((len(green), 3), np.uint8)),
+        Cloud(green, np.tile(np.array([[70, 150, 60]], np.uint8), (len(green), 1))),
         Cloud(soil, np.zeros((len(soil), 3), np.uint8)),
         FilterSettings(voxel_size_m=1e-4),
         soil_band_m=0.08,

@@ -79,8 +79,9 @@ def test_green_soil_lifted_by_noise_at_its_own_depth_is_not_a_plant() -> None:
     lifted = np.column_stack([green_soil_xy, rng.uniform(0.015, 0.04, 400)])  # own depths
     settled = np.column_stack([green_soil_xy, rng.normal(0.0, 0.002, 400)])  # medians
     leaf = np.column_stack([rng.uniform(-0.1, 0.1, (300, 2)), np.full(300, 0.05)])
-    green = Cloud(np.concatenate([lifted, leaf]), np.zeros((700, 3), np.uint8))
-    steady_green = Cloud(np.concatenate([settled, leaf]), np.zeros((700, 3), np.uint8))
+    colours = np.tile(np.array([[70, 150, 60]], np.uint8), (700, 1))  # all green: the soil's
+    green = Cloud(np.concatenate([lifted, leaf]), colours)  # held to the plain 1 cm
+    steady_green = Cloud(np.concatenate([settled, leaf]), colours)
     empty_soil = Cloud(soil, np.zeros((len(soil), 3), np.uint8))
     settings = FilterSettings(voxel_size_m=1e-4)
     alone = filter_station(green, empty_soil, settings, 0.08, 0.01)
