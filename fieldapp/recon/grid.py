@@ -155,6 +155,15 @@ def off_the_grid(grid: GridNodes, stems_xy_m: NDArray[np.float64]) -> NDArray[np
     return off
 
 
+def nearest_nodes(grid: GridNodes, stems_xy_m: NDArray[np.float64]) -> NDArray[np.intp]:
+    """(S,) the node nearest each of the stems ``stems_xy_m`` (S, 2) within the snap radius,
+    -1 where none is: two stems at one node are two claims on one plant's place."""
+    if len(stems_xy_m) == 0 or len(grid.xy_m) == 0:
+        return np.full(len(stems_xy_m), -1, dtype=np.intp)
+    distance, node = cKDTree(grid.xy_m).query(stems_xy_m, distance_upper_bound=grid.snap_radius_m)
+    return np.where(np.isfinite(distance), node, -1).astype(np.intp)
+
+
 def _moved(T: Matrix4, xy_m: NDArray[np.float64]) -> NDArray[np.float64]:
     return transform_points(T, np.column_stack([xy_m, np.zeros(len(xy_m))]))[:, :2]
 

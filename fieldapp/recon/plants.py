@@ -38,6 +38,7 @@ from fieldapp.recon.grid import (
     apply_grid_prior_nodes,
     at_nodes,
     fitted_to_stems,
+    nearest_nodes,
     off_the_grid,
     prior_nodes,
     stems_at_empty_nodes,
@@ -238,6 +239,7 @@ def search_plants(
     soil_tree = cKDTree(soil_m[:, :2]) if len(soil_m) else None
     grid_fit: GridFit | None = None
     off_grid: NDArray[np.bool_] | None = None
+    node_of: NDArray[np.intp] | None = None
     if settings.stems.enabled and len(cloud):
         stems, merged = find_stems(cloud.points, soil_m, settings.stems, soil_tree)
         if merged:
@@ -247,8 +249,10 @@ def search_plants(
             stems = stems + stems_at_empty_nodes(
                 cloud.points, soil_m, stems, grid, settings.stems, soil_tree
             )
-            off_grid = off_the_grid(grid, np.array([stem.xy_m for stem in stems]).reshape(-1, 2))
-    labels, ambiguous = _labels(cloud.points, stems, settings, merges, off_grid)
+            stems_xy = np.array([stem.xy_m for stem in stems]).reshape(-1, 2)
+            off_grid = off_the_grid(grid, stems_xy)
+            node_of = None if off_grid is None else nearest_nodes(grid, stems_xy)
+    labels, ambiguous = _labels(cloud.points, stems, settings, merges, off_grid, node_of)
     if not stems and grid is not None:
         labels = apply_grid_prior_nodes(
             cloud.points, labels, grid, 2 * settings.base_slice_m, merges
@@ -487,10 +491,12 @@ def _labels(
     settings: PlantSettings,
     merges: list[str],
     off_grid: NDArray[np.bool_] | None = None,
+    node_of: NDArray[np.intp] | None = None,
 ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
     """Per point: its stem (0..S-1), a density cluster (S..) where no stem reaches, or
     :data:`NOISE`; and whether it is ambiguous between two stems. ``off_grid`` (S,): the
-    stems a planting grid has no node for (:func:`fieldapp.recon.grid.off_the_grid`)."""
+    stems a planting grid has no node for (:func:`fieldapp.recon.grid.off_the_grid`);
+    ``node_of`` (S,): each stem's nearest node (:func:`fieldapp.recon.grid.nearest_nodes`)."""
     labels = np.full(len(points_m), NOISE, dtype=np.intp)
     ambiguous = np.zeros(len(points_m), dtype=bool)
     if stems:
@@ -502,7 +508,7 @@ def _labels(
         ambiguous = assignment.ambiguous
         if s.leaf_ends:
             ambiguous = _merge_leaf_ends(
-                graph, stems, assignment, labels, ambiguous, s, merges, off_grid
+                graph, stems, assignment, labels, ambiguous, s, merges, off_grid, node_of
             )
         guessed = _join_fragments(
             points_m, labels, settings.cluster_voxel_m, s.ambiguity_margin_m, merges
@@ -534,9 +540,11 @@ def _merge_leaf_ends(
     s: StemSettings,
     merges: list[str],
     off_grid: NDArray[np.bool_] | None = None,
+    node_of: NDArray[np.intp] | None = None,
 ) -> NDArray[np.bool_]:
     """Stems that are the end of another plant's leaf come down to the soil
-    (:func:`fieldapp.recon.geodesic.leaf_ends`; those ``off_grid`` by the lower share)
+    (:func:`fieldapp.recon.geodesic.leaf_ends`; those ``off_grid``, or at the node of the
+    stem they would join (``node_of``), by the lower share)
     relabelled as that plant in ``labels`` (in place, stem labels only); returns
     ``ambiguous`` without the doubts they settle."""
     into = leaf_ends(
@@ -550,6 +558,7 @@ def _merge_leaf_ends(
         s.leaf_end_slack_m,
         off_grid,
         s.leaf_end_share_off_grid,
+        node_of,
     )
     ended = into != np.arange(len(stems))
     if not ended.any():
