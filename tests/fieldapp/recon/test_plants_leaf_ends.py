@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from fieldapp.cli import main
 from fieldapp.io.session import load_session
 from fieldapp.recon import plants, stages
+from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.grid import GridNodes
 from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.plants import search_plants
@@ -90,6 +91,23 @@ def _two_nodes(x_m: float) -> GridNodes:
     return GridNodes(np.array([[0.0, 0.0], [x_m, 0.0]]), np.array([1, 1]), np.array([1, 2]))
 
 
+def _end_beside_a_low_leaf(
+    seed: int, second: tuple[float, float, float]
+) -> tuple[Cloud, NDArray[np.float64], int]:
+    """A plant at (0, 0) with a leaf come down to the soil and a second leaf (``second``: its
+    node height, length and level height) running low the same way, a plant at (0.8, 0): the
+    cloud, the soil and how many points are the first plant's."""
+    rng = np.random.default_rng(seed)
+    a = plant(rng, (0.0, 0.0), [(20.0, 0.22, 0.55, 0.15), (200.0, 0.35, 0.5, 0.12)], 0.6)
+    down = _grounded_leaf(rng)
+    node_z, length, level_z = second
+    low = level_leaf(rng, (0.0, 0.0), 290.0, node_z, length, level_z, 4000)
+    b = plant(rng, (0.8, 0.0), [(180.0, 0.15, 0.60, 0.12), (0.0, 0.22, 0.40, 0.15)])
+    soil = ground_patch(rng, 1.2, 40000)
+    cloud = colored(np.concatenate([a, down, low, b]), (50, 110, 25))
+    return cloud, soil, len(a) + len(down) + len(low)
+
+
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("second", [(0.10, 0.55, 0.12), (0.08, 0.5, 0.10), (0.1, 0.5, 0.08)])
 def test_a_leaf_end_beside_another_leaf_of_its_plant_is_merged_off_the_grid(
@@ -100,22 +118,14 @@ def test_a_leaf_end_beside_another_leaf_of_its_plant_is_merged_off_the_grid(
     (first-model touching plot seed 3: 0.83, and 0.69-0.88 on four more plots). Without a
     planting grid it stays a flagged plant; with one it stands at no node and is merged by the
     grid's lower share (0.6)."""
-    rng = np.random.default_rng(seed)
-    a = plant(rng, (0.0, 0.0), [(20.0, 0.22, 0.55, 0.15), (200.0, 0.35, 0.5, 0.12)], 0.6)
-    down = _grounded_leaf(rng)
-    node_z, length, level_z = second
-    low = level_leaf(rng, (0.0, 0.0), 290.0, node_z, length, level_z, 4000)
-    b = plant(rng, (0.8, 0.0), [(180.0, 0.15, 0.60, 0.12), (0.0, 0.22, 0.40, 0.15)])
-    soil = ground_patch(rng, 1.2, 40000)
-    cloud = colored(np.concatenate([a, down, low, b]), (50, 110, 25))
-
+    cloud, soil, own = _end_beside_a_low_leaf(seed, second)
     assert len(search_plants(cloud, soil, PlantSettings(), 0.3).plants) == 3
     search = search_plants(cloud, soil, PlantSettings(), 0.3, _two_nodes(0.8))
     assert len(search.plants) == 2
     assert f"1 {MERGED}" in search.merges
     assert not search.extra_plants
     first = min(search.plants, key=lambda p: np.hypot(p.traits.x_m, p.traits.y_m))
-    assert len(first.cloud) >= 0.98 * (len(a) + len(down) + len(low))
+    assert len(first.cloud) >= 0.98 * own
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -129,14 +139,7 @@ def test_a_leaf_end_nearer_its_plant_s_node_than_the_plant_is_merged(
     the node, its stem 8.4 cm; 29 plants for 27 there). Two stems at one node are two claims
     on one plant's place: the smaller is held to the share asked off the grid, and merged;
     without that, the end is a plant."""
-    rng = np.random.default_rng(seed)
-    a = plant(rng, (0.0, 0.0), [(20.0, 0.22, 0.55, 0.15), (200.0, 0.35, 0.5, 0.12)], 0.6)
-    down = _grounded_leaf(rng)
-    node_z, length, level_z = second
-    low = level_leaf(rng, (0.0, 0.0), 290.0, node_z, length, level_z, 4000)
-    b = plant(rng, (0.8, 0.0), [(180.0, 0.15, 0.60, 0.12), (0.0, 0.22, 0.40, 0.15)])
-    soil = ground_patch(rng, 1.2, 40000)
-    cloud = colored(np.concatenate([a, down, low, b]), (50, 110, 25))
+    cloud, soil, own = _end_beside_a_low_leaf(seed, second)
     towards_the_end = 0.13 * np.array([np.cos(np.radians(290.0)), np.sin(np.radians(290.0))])
     grid = GridNodes(np.array([towards_the_end, [0.8, 0.0]]), np.array([1, 1]), np.array([1, 2]))
 
@@ -145,7 +148,7 @@ def test_a_leaf_end_nearer_its_plant_s_node_than_the_plant_is_merged(
     assert f"1 {MERGED}" in search.merges
     first = min(search.plants, key=lambda p: np.hypot(p.traits.x_m, p.traits.y_m))
     assert np.hypot(first.traits.x_m, first.traits.y_m) < 0.03
-    assert len(first.cloud) >= 0.98 * (len(a) + len(down) + len(low))
+    assert len(first.cloud) >= 0.98 * own
     # the control: with the node's claims not compared, the end keeps the node, the plant
     # stands off the grid and is too large to merge, and the end is a plant
     monkeypatch.setattr(plants, "nearest_nodes", lambda _grid, xy: np.full(len(xy), -1))
