@@ -29,6 +29,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.filters import voxel_keys
+from fieldapp.recon.grid import NodeClaims
 
 UNREACHED = -1
 LYING_M = 0.04
@@ -458,22 +459,21 @@ def leaf_ends(
     reach_m: float,
     share: float,
     slack_m: float,
-    off_grid: NDArray[np.bool_] | None = None,
+    claims: NodeClaims | None = None,
     share_off_grid: float = 1.0,
-    node_of: NDArray[np.intp] | None = None,
 ) -> NDArray[np.intp]:
     """(S,) for each stem (``feet_m`` (S, 3): its foot's xy and local ground) the stem it is
     merged into (itself when kept): a stem whose voxels more than :data:`LYING_M` above its
     ground lie, ``share`` of them or more, along the way between its foot and the foot of the
     stem that reaches them second (the two feet's plain path lengths to the voxel, no bend or
     inward cost, at most ``slack_m`` more than the shortest way between the feet), and which
-    holds at most :data:`LEAF_END_SIZE` of that stem's voxels. A stem ``off_grid`` (S,) (a
-    planting grid has no node for it) needs ``share_off_grid`` of them on the way, and only to
-    be no larger than that stem: the plan says no plant stands there. So does a stem whose
-    nearest node (``node_of`` (S,), :func:`fieldapp.recon.grid.nearest_nodes`) is that stem's
-    too: the plan has one plant there, and which of the two stands nearer the node says
-    nothing (an independent renderer's leaf end 13 cm from its stem stood 5.7 cm from the
-    node, the stem 8.4 cm).
+    holds at most :data:`LEAF_END_SIZE` of that stem's voxels. Where a planting grid places the
+    stems (``claims``, :func:`fieldapp.recon.grid.node_claims`), a stem off it needs
+    ``share_off_grid`` of them on the way, and only to be no larger than that stem: the plan
+    says no plant stands there. So does a stem whose nearest node is that stem's too: the plan
+    has one plant there, and which of the two stands nearer the node says nothing (an
+    independent renderer's leaf end 13 cm from its stem stood 5.7 cm from the node, the stem
+    8.4 cm).
 
     A leaf that arches over and comes down to the soil fills the band above the ground as a
     stem does; its "plant" is the leaf's end, a strip on the way between its foot and the plant
@@ -520,9 +520,11 @@ def leaf_ends(
         if len(seconds) == 0:
             continue
         other = int(np.bincount(seconds).argmax())
-        off = off_grid is not None and bool(off_grid[stem])
-        if node_of is not None and node_of[stem] >= 0 and node_of[stem] == node_of[other]:
-            off = True  # one plant's place: the smaller of the two is held as off the grid
+        off = claims is not None and (
+            bool(claims.off[stem])
+            # one plant's place: the smaller of the two is held as off the grid
+            or (claims.node[stem] >= 0 and claims.node[stem] == claims.node[other])
+        )
         if size[stem] > (1.0 if off else LEAF_END_SIZE) * size[other]:
             continue
         total = plain(stem)[mine] + plain(other)[mine]

@@ -34,7 +34,7 @@ grid is off by less than half a spacing (40 cm on the 80 cm grid), never with th
 FIT_ROUNDS = 20
 TRUSTED_SHARE = 0.5
 """A grid is a prior on where plants stand only when this share of its nodes or more have a
-stem at them (:func:`off_the_grid`); a field's gaps leave 5-20 % of them empty."""
+stem at them (:func:`node_claims`); a field's gaps leave 5-20 % of them empty."""
 FIT_MIN_MOVE_SHARE = 1 / 3
 """A fit moving no node farther than this share of the snap radius (5 cm of 15) is not
 applied: the grid stands on its plants as well as plants stand on their nodes, and moving it
@@ -140,28 +140,30 @@ def at_nodes(
     return _paired(grid.xy_m, xy_m, grid.snap_radius_m)
 
 
-def off_the_grid(grid: GridNodes, stems_xy_m: NDArray[np.float64]) -> NDArray[np.bool_] | None:
-    """(S,) the stems ``stems_xy_m`` (S, 2) that stand at no node (:func:`at_nodes`). ``None``
-    when fewer than :data:`TRUSTED_SHARE` of the nodes have a stem: a grid that far from the
-    stems (a plan for another plot, a base lost beyond what the fit mends) says nothing about
-    where plants are."""
+@dataclass(frozen=True)
+class NodeClaims:
+    """Where stems stand on a planting grid: ``node`` (S,) each stem's nearest node within the
+    snap radius (-1: none), and ``off`` (S,) the stems at no node (:func:`at_nodes`: not the
+    nearest stem of any). Two stems of one ``node`` are two claims on one plant's place."""
+
+    node: NDArray[np.intp]
+    off: NDArray[np.bool_]
+
+
+def node_claims(grid: GridNodes, stems_xy_m: NDArray[np.float64]) -> NodeClaims | None:
+    """Where the stems ``stems_xy_m`` (S, 2) stand on ``grid``. ``None`` when fewer than
+    :data:`TRUSTED_SHARE` of the nodes have a stem: a grid that far from the stems (a plan for
+    another plot, a base lost beyond what the fit mends) says nothing about where plants
+    are."""
     if len(stems_xy_m) == 0 or len(grid.xy_m) == 0:
         return None
-    nodes, stems = at_nodes(grid, stems_xy_m)
+    distance, node = _nearest(grid.xy_m, stems_xy_m, grid.snap_radius_m)
+    nodes, stems = _first_claims(distance, node)
     if len(nodes) < TRUSTED_SHARE * len(grid.xy_m):
         return None
     off = np.ones(len(stems_xy_m), dtype=bool)
     off[stems] = False
-    return off
-
-
-def nearest_nodes(grid: GridNodes, stems_xy_m: NDArray[np.float64]) -> NDArray[np.intp]:
-    """(S,) the node nearest each of the stems ``stems_xy_m`` (S, 2) within the snap radius,
-    -1 where none is: two stems at one node are two claims on one plant's place."""
-    if len(stems_xy_m) == 0 or len(grid.xy_m) == 0:
-        return np.full(len(stems_xy_m), -1, dtype=np.intp)
-    distance, node = cKDTree(grid.xy_m).query(stems_xy_m, distance_upper_bound=grid.snap_radius_m)
-    return np.where(np.isfinite(distance), node, -1).astype(np.intp)
+    return NodeClaims(node, off)
 
 
 def _moved(T: Matrix4, xy_m: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -173,13 +175,29 @@ def _paired(
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """(node, stem) index pairs: each stem with its nearest node within ``reach_m``, one stem a
     node (the nearest), in node order."""
+    return _first_claims(*_nearest(nodes_xy_m, stems_xy_m, reach_m))
+
+
+def _nearest(
+    nodes_xy_m: NDArray[np.float64], stems_xy_m: NDArray[np.float64], reach_m: float
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """(S,) each stem's distance to its nearest node within ``reach_m`` (inf: none) and that
+    node (-1: none)."""
     distance, node = cKDTree(nodes_xy_m).query(stems_xy_m, distance_upper_bound=reach_m)
-    stems = np.flatnonzero(np.isfinite(distance))
+    return distance, np.where(np.isfinite(distance), node, -1).astype(np.intp)
+
+
+def _first_claims(
+    distance: NDArray[np.float64], node: NDArray[np.intp]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """(node, stem) pairs of :func:`_nearest`'s answer: one stem a node, the nearest, in node
+    order."""
+    stems = np.flatnonzero(node >= 0)
     order = stems[np.lexsort((distance[stems], node[stems]))]
     first = np.ones(len(order), dtype=bool)
     first[1:] = node[order][1:] != node[order][:-1]
     kept = order[first]
-    return node[kept].astype(np.intp), kept.astype(np.intp)
+    return node[kept], kept.astype(np.intp)
 
 
 def plan_nodes(grid: PlantingGrid, T_field_map: Matrix4) -> GridNodes:

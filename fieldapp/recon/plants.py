@@ -35,11 +35,11 @@ from fieldapp.recon.geodesic import (
 from fieldapp.recon.grid import (
     GridFit,
     GridNodes,
+    NodeClaims,
     apply_grid_prior_nodes,
     at_nodes,
     fitted_to_stems,
-    nearest_nodes,
-    off_the_grid,
+    node_claims,
     prior_nodes,
     stems_at_empty_nodes,
 )
@@ -238,8 +238,7 @@ def search_plants(
     # ground, the plants' soil and the grid's seen nodes all ask it
     soil_tree = cKDTree(soil_m[:, :2]) if len(soil_m) else None
     grid_fit: GridFit | None = None
-    off_grid: NDArray[np.bool_] | None = None
-    node_of: NDArray[np.intp] | None = None
+    claims: NodeClaims | None = None
     if settings.stems.enabled and len(cloud):
         stems, merged = find_stems(cloud.points, soil_m, settings.stems, soil_tree)
         if merged:
@@ -249,10 +248,8 @@ def search_plants(
             stems = stems + stems_at_empty_nodes(
                 cloud.points, soil_m, stems, grid, settings.stems, soil_tree
             )
-            stems_xy = np.array([stem.xy_m for stem in stems]).reshape(-1, 2)
-            off_grid = off_the_grid(grid, stems_xy)
-            node_of = None if off_grid is None else nearest_nodes(grid, stems_xy)
-    labels, ambiguous = _labels(cloud.points, stems, settings, merges, off_grid, node_of)
+            claims = node_claims(grid, np.array([stem.xy_m for stem in stems]).reshape(-1, 2))
+    labels, ambiguous = _labels(cloud.points, stems, settings, merges, claims)
     if not stems and grid is not None:
         labels = apply_grid_prior_nodes(
             cloud.points, labels, grid, 2 * settings.base_slice_m, merges
@@ -490,13 +487,11 @@ def _labels(
     stems: list[Stem],
     settings: PlantSettings,
     merges: list[str],
-    off_grid: NDArray[np.bool_] | None = None,
-    node_of: NDArray[np.intp] | None = None,
+    claims: NodeClaims | None = None,
 ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
     """Per point: its stem (0..S-1), a density cluster (S..) where no stem reaches, or
-    :data:`NOISE`; and whether it is ambiguous between two stems. ``off_grid`` (S,): the
-    stems a planting grid has no node for (:func:`fieldapp.recon.grid.off_the_grid`);
-    ``node_of`` (S,): each stem's nearest node (:func:`fieldapp.recon.grid.nearest_nodes`)."""
+    :data:`NOISE`; and whether it is ambiguous between two stems. ``claims``: where a
+    planting grid places the stems (:func:`fieldapp.recon.grid.node_claims`)."""
     labels = np.full(len(points_m), NOISE, dtype=np.intp)
     ambiguous = np.zeros(len(points_m), dtype=bool)
     if stems:
@@ -508,7 +503,7 @@ def _labels(
         ambiguous = assignment.ambiguous
         if s.leaf_ends:
             ambiguous = _merge_leaf_ends(
-                graph, stems, assignment, labels, ambiguous, s, merges, off_grid, node_of
+                graph, stems, assignment, labels, ambiguous, s, merges, claims
             )
         guessed = _join_fragments(
             points_m, labels, settings.cluster_voxel_m, s.ambiguity_margin_m, merges
@@ -539,12 +534,11 @@ def _merge_leaf_ends(
     ambiguous: NDArray[np.bool_],
     s: StemSettings,
     merges: list[str],
-    off_grid: NDArray[np.bool_] | None = None,
-    node_of: NDArray[np.intp] | None = None,
+    claims: NodeClaims | None = None,
 ) -> NDArray[np.bool_]:
     """Stems that are the end of another plant's leaf come down to the soil
-    (:func:`fieldapp.recon.geodesic.leaf_ends`; those ``off_grid``, or at the node of the
-    stem they would join (``node_of``), by the lower share)
+    (:func:`fieldapp.recon.geodesic.leaf_ends`; those the grid's ``claims`` put off it, or at
+    the node of the stem they would join, by the lower share)
     relabelled as that plant in ``labels`` (in place, stem labels only); returns
     ``ambiguous`` without the doubts they settle."""
     into = leaf_ends(
@@ -556,9 +550,8 @@ def _merge_leaf_ends(
         s.reach_m,
         s.leaf_end_share,
         s.leaf_end_slack_m,
-        off_grid,
+        claims,
         s.leaf_end_share_off_grid,
-        node_of,
     )
     ended = into != np.arange(len(stems))
     if not ended.any():

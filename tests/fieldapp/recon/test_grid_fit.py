@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from devices.geometry import make_transform, rotation_z
-from fieldapp.recon.grid import GridNodes, fitted_to_stems, grid_nodes, off_the_grid
+from fieldapp.recon.grid import GridNodes, fitted_to_stems, grid_nodes, node_claims
 from fieldapp.recon.plants import search_plants
 from fieldapp.recon.settings import PlantSettings
 
@@ -113,12 +113,13 @@ def test_stems_off_the_grid_and_a_grid_too_far_to_say() -> None:
     with stems at fewer than half of its nodes is no prior at all (``None``)."""
     sown = _sown(np.random.default_rng(0))
     stems = np.concatenate([sown.xy_m[:12] + 0.03, [[0.8, 0.45], [0.42, 0.38]]])
-    off = off_the_grid(sown, stems)
-    assert off is not None
+    claims = node_claims(sown, stems)
+    assert claims is not None
     # the last stands 2.8 cm from node (1, 1), the first 4.2 cm: both within the snap radius,
     # only the nearer at the node, as plants are placed; (0.8, 0.45) is between two nodes
-    assert off.tolist() == [True] + [False] * 11 + [True, False]
-    assert off_the_grid(_misplaced(sown, 0.4, 0.4, 0.0), stems) is None
-    assert off_the_grid(sown, stems[:7]) is None  # 7 of 16 nodes
-    assert off_the_grid(sown, stems[:8]) is not None
-    assert off_the_grid(sown, np.empty((0, 2))) is None
+    assert claims.off.tolist() == [True] + [False] * 11 + [True, False]
+    assert claims.node.tolist() == [*range(12), -1, 0]  # both claim node (1, 1)
+    assert node_claims(_misplaced(sown, 0.4, 0.4, 0.0), stems) is None
+    assert node_claims(sown, stems[:7]) is None  # 7 of 16 nodes
+    assert node_claims(sown, stems[:8]) is not None
+    assert node_claims(sown, np.empty((0, 2))) is None

@@ -10,6 +10,7 @@ with half of the lower leaves down to the soil the plants step counted 123 such 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,7 @@ from fieldapp.cli import main
 from fieldapp.io.session import load_session
 from fieldapp.recon import plants, stages
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.grid import GridNodes
+from fieldapp.recon.grid import GridNodes, NodeClaims
 from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.plants import search_plants
 from fieldapp.recon.result import Reconstruction
@@ -151,7 +152,14 @@ def test_a_leaf_end_nearer_its_plant_s_node_than_the_plant_is_merged(
     assert len(first.cloud) >= 0.98 * own
     # the control: with the node's claims not compared, the end keeps the node, the plant
     # stands off the grid and is too large to merge, and the end is a plant
-    monkeypatch.setattr(plants, "nearest_nodes", lambda _grid, xy: np.full(len(xy), -1))
+    claimed = plants.node_claims
+
+    def no_shared_nodes(grid: GridNodes, xy: NDArray[np.float64]) -> NodeClaims | None:
+        claims = claimed(grid, xy)
+        assert claims is not None
+        return replace(claims, node=np.arange(len(xy)) + len(grid.xy_m))  # a node each
+
+    monkeypatch.setattr(plants, "node_claims", no_shared_nodes)
     assert len(search_plants(cloud, soil, PlantSettings(), 0.3, grid).plants) == 3
 
 
