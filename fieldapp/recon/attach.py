@@ -76,11 +76,11 @@ def attach_doubtful(
     )
     if to_labelled.nnz:
         found = _along_paths(among, to_labelled, d, labels[labelled])
-    alone = np.flatnonzero(found < 0)
+    lonely = found < 0
+    alone = np.flatnonzero(lonely)
     if len(alone) == 0 or gap_m <= 0.0:
         return found
     # the groups that reached no plant: each joins the labelled point nearest any of its own
-    lonely = found < 0
     keep = lonely[among.row] & lonely[among.col]
     inside = coo_matrix(
         (np.ones(int(keep.sum())), (among.row[keep], among.col[keep])), shape=(d, d)
