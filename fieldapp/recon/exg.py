@@ -163,6 +163,25 @@ def not_green_group(colors: NDArray[np.uint8]) -> bool:
     return bool(len(lit)) and float(np.median(excess_green(lit))) < NOT_GREEN_EXG
 
 
+GREY_SATURATION = 0.2
+"""Saturation ((max - min) / max of R, G, B) under which a colour has no hue: grey, white or
+near black. Soil, straw and a leaf's tip seen with the soil's colour (a colour pixel beside the
+depth pixel) are brown or yellow, 0.3-0.5; an independent renderer's reference spheres and
+their stands, and the shade on them, 0.05-0.13."""
+
+
+def grey_group(colors: NDArray[np.uint8]) -> bool:
+    """Whether a group of points has no hue (``colors`` (N, 3)): the median saturation of
+    those with colour (:func:`has_colour`) under :data:`GREY_SATURATION`; a group with no
+    colour at all is not judged by it (``False``)."""
+    lit = colors[has_colour(colors)].astype(np.float64)
+    if not len(lit):
+        return False
+    top = lit.max(axis=1)
+    saturation = (top - lit.min(axis=1)) / np.maximum(top, 1.0)
+    return float(np.median(saturation)) < GREY_SATURATION
+
+
 def exg_keys(colors: NDArray[np.uint8]) -> NDArray[np.int32]:
     """(N,) int32: the key ``G * 766 + S`` of each colour (N, 3) uint8 RGB, which fixes its
     excess green (:func:`exg_of_keys`). Cheaper than the ExG itself, and a station's pixels

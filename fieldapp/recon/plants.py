@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 
 from fieldapp.recon.attach import attach_doubtful
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green, not_green_group
+from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green, grey_group, not_green_group
 from fieldapp.recon.geodesic import (
     UNREACHED,
     Assignment,
@@ -249,12 +249,14 @@ def search_plants(
                 cloud.points, soil_m, stems, grid, settings.stems, soil_tree
             )
             claims = node_claims(grid, np.array([stem.xy_m for stem in stems]).reshape(-1, 2))
-    labels, ambiguous = _labels(cloud.points, stems, settings, merges, claims)
+    coloured = _coloured(cloud)
+    labels, ambiguous = _labels(
+        cloud.points, stems, settings, merges, claims, cloud.colors if coloured else None
+    )
     if not stems and grid is not None:
         labels = apply_grid_prior_nodes(
             cloud.points, labels, grid, 2 * settings.base_slice_m, merges
         )
-    coloured = _coloured(cloud)
     feet = np.array([stem.xy_m for stem in stems]).reshape(-1, 2)
     _parts_seen_apart(
         cloud,
@@ -488,12 +490,15 @@ def _labels(
     settings: PlantSettings,
     merges: list[str],
     claims: NodeClaims | None = None,
+    colors: NDArray[np.uint8] | None = None,
 ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
     """Per point: its stem (0..S-1), a density cluster (S..) where no stem reaches, or
     :data:`NOISE`; and whether it is ambiguous between two stems. ``claims``: where a
-    planting grid places the stems (:func:`fieldapp.recon.grid.node_claims`)."""
+    planting grid places the stems (:func:`fieldapp.recon.grid.node_claims`); ``colors``:
+    the points' colours where they tell plant from not (:func:`_join_fragments`)."""
     labels = np.full(len(points_m), NOISE, dtype=np.intp)
     ambiguous = np.zeros(len(points_m), dtype=bool)
+    refused = np.zeros(len(points_m), dtype=bool)
     if stems:
         s = settings.stems
         xy = np.array([stem.xy_m for stem in stems])
@@ -505,8 +510,8 @@ def _labels(
             ambiguous = _merge_leaf_ends(
                 graph, stems, assignment, labels, ambiguous, s, merges, claims
             )
-        guessed = _join_fragments(
-            points_m, labels, settings.cluster_voxel_m, s.ambiguity_margin_m, merges
+        guessed, refused = _join_fragments(
+            points_m, labels, settings.cluster_voxel_m, s.ambiguity_margin_m, merges, colors
         )
         if s.follow_leaves:
             feet = np.array([[*stem.xy_m, stem.ground_z_m] for stem in stems])
@@ -517,7 +522,7 @@ def _labels(
             # neighbour's leaf made a 5 x 5 touching plot's p55 18 cm too wide, unflagged
             guessed[moved] = True
         ambiguous |= guessed  # for the report only: the ribbons follow the assignment's doubts
-    rest = np.flatnonzero(labels == UNREACHED)
+    rest = np.flatnonzero((labels == UNREACHED) & ~refused)
     if len(rest):
         clusters = drop_small(
             voxel_components(points_m[rest], settings.cluster_voxel_m), settings.min_points
@@ -575,7 +580,8 @@ def _join_fragments(
     voxel_m: float,
     margin_m: float,
     merges: list[str],
-) -> NDArray[np.bool_]:
+    colors: NDArray[np.uint8] | None = None,
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """Points no stem reaches along the plant (the graph joins only voxels 1.5 cm apart) but
     that density clustering puts with reached points go to the stem of the nearest reached
     point of their cluster: a leaf seen with a gap at its base stays with its plant. Returns
@@ -583,24 +589,47 @@ def _join_fragments(
     (canopies touch), those whose nearest point of another stem there is less than
     ``margin_m`` farther than the one they went to (a gap-cut leaf between two plants went to
     the nearer: touching depth-only irregular seed 87, 2 340 points of a leaf 13 cm too narrow
-    joined to the neighbour, 12 cm too wide, neither flagged)."""
+    joined to the neighbour, 12 cm too wide, neither flagged).
+
+    With ``colors`` (N, 3), a fragment (the points to join that touch one another) whose
+    colour is neither green nor of any hue (:func:`~fieldapp.recon.exg.not_green_group`,
+    :func:`~fieldapp.recon.exg.grey_group`: grey, white, near black) is an object a plant's
+    leaves touch, not a leaf: it is refused, left out of every plant, and the (N,) refused
+    points are returned too. On an independent renderer's plots: reference spheres and their
+    stands, 103-1 318 points 11-97 cm up, that raised the heights of the plants they joined by
+    up to 24 cm. A brown or yellow fragment is joined: a leaf's tip seen with the colour of the
+    soil beside it looks so (15-28 points at the top of seedlings and tall plants alike)."""
     guessed = np.zeros(len(points_m), dtype=bool)
+    refused = np.zeros(len(points_m), dtype=bool)
     unreached = labels == UNREACHED
     if not unreached.any() or unreached.all():
-        return guessed
+        return guessed, refused
     clusters = voxel_components(points_m, voxel_m)
     has_stem = np.zeros(int(clusters.max()) + 1, dtype=bool)
     has_stem[clusters[~unreached]] = True
     joined = np.flatnonzero(unreached & has_stem[clusters])
+    if colors is not None and len(joined):
+        fragments = voxel_components(points_m[joined], voxel_m)
+        for fragment in _by_cluster(fragments, np.arange(len(joined))):
+            seen = colors[joined[fragment]]
+            if not_green_group(seen) and grey_group(seen):
+                refused[joined[fragment]] = True
+        if refused.any():
+            merges.append(
+                f"{int(refused.sum())} points neither green nor of any hue touching plants but "
+                "not reached along them (an object among the plants: a reference sphere, a "
+                "stand, a label) not joined"
+            )
+            joined = joined[~refused[joined]]
     if len(joined) == 0:
-        return guessed
+        return guessed, refused
     reached = np.flatnonzero(~unreached & np.isin(clusters, clusters[joined]))
     for r, j in zip(*(_by_cluster(clusters, part) for part in (reached, joined)), strict=True):
         distance, nearest = cKDTree(points_m[r]).query(points_m[j])
         labels[j] = labels[r[nearest]]
         guessed[j] = _second_stem_near(points_m, labels, r, j, distance, margin_m)
     merges.append(f"{len(joined)} points not reached along a plant joined to the nearest plant")
-    return guessed
+    return guessed, refused
 
 
 def _by_cluster(clusters: NDArray[np.intp], members: NDArray[np.intp]) -> list[NDArray[np.intp]]:

@@ -18,6 +18,7 @@ from fieldapp.recon.exg import (
     exg_tally,
     exg_values,
     green_contrast,
+    grey_group,
     keep_soil,
     noise_floors,
     otsu_threshold,
@@ -177,3 +178,27 @@ def test_a_moved_cut_is_said(monkeypatch: pytest.MonkeyPatch) -> None:
     *_, tally, moved = scans._separation(frames, "otsu")
     assert tally is not None
     assert moved == otsu_threshold(*exg_values(tally))  # the cut as Otsu made it
+
+
+@pytest.mark.parametrize(
+    ("rgb", "grey"),
+    [
+        ((139, 149, 138), True),  # a reference sphere in the shade
+        ((40, 40, 44), True),  # a dark stand
+        ((230, 230, 235), True),  # a white card in the sun
+        ((120, 90, 59), False),  # soil, or a tip seen with its colour
+        ((189, 174, 107), False),  # pale straw
+        ((50, 110, 25), False),  # a leaf
+    ],
+)
+def test_a_group_without_hue_is_grey_whatever_its_brightness(
+    rgb: tuple[int, int, int], grey: bool
+) -> None:
+    colors = np.tile(np.array(rgb, np.uint8), (50, 1))
+    colors[:10] = 0  # libfreenect2's holes: not colour, not counted either way
+    assert grey_group(colors) is grey
+
+
+def test_a_group_without_colour_is_not_judged_grey() -> None:
+    assert grey_group(np.zeros((20, 3), np.uint8)) is False
+    assert grey_group(np.full((20, 3), 10, np.uint8)) is False  # a JPEG's black

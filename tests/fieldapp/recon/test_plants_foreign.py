@@ -74,3 +74,40 @@ def test_a_green_top_mostly_without_colour_is_a_plant() -> None:
     search = search_plants(Cloud(cloud.points, colors), soil, PlantSettings(), 0.3)
     assert len(search.plants) == 2
     assert not any("not counted as a plant" in m for m in search.merges)
+
+
+def _stand_beside_a_leaf(rng: np.random.Generator, rgb: tuple[int, int, int]) -> Cloud:
+    """The plant of :func:`_plot` (35 cm stem, its first leaf's tip at x = 0.40 m, 14 cm up)
+    and a 16 mm stand 2.2 cm past that tip, from 12 to 60 cm up, under a 12 cm sphere's cap:
+    what the cameras kept of a reference sphere on its stand (the foot hidden by the leaves).
+    The gap is wider than the plant graph's steps (1.5 cm), narrower than a density cluster's
+    (2.5 cm voxels): the stand is not reached along the plant, but shares its cluster."""
+    a = colored(plant(rng, (0.0, 0.0), [(0.0, 0.2, 0.4, 0.12), (180.0, 0.3, 0.4, 0.1)]), LEAF_RGB)
+    angle = rng.uniform(0.0, 2.0 * np.pi, 1500)
+    z = rng.uniform(0.12, 0.6, 1500)
+    stand = np.column_stack([0.43 + 0.008 * np.cos(angle), 0.008 * np.sin(angle), z])
+    thing = colored(np.concatenate([stand, _cap(rng, (0.43, 0.0, 0.6))]), rgb)
+    return Cloud(np.concatenate([a.points, thing.points]), np.concatenate([a.colors, thing.colors]))
+
+
+def test_a_grey_stand_touching_a_leaf_is_not_joined_to_the_plant() -> None:
+    """An independent renderer's reference spheres and their stands touched the leaves of tall
+    plants without being reached along them: joined as a leaf seen with a gap at its base
+    would be, they raised the plants' heights by up to 24 cm. Grey, white or near black, and
+    not green, such a fragment is not joined; a brown one is (a leaf's tip seen with the
+    soil's colour), a green one is, and without colour (depth-only) nothing is judged by it."""
+    rng = np.random.default_rng(4)
+    soil = ground_patch(rng, 1.2, 30000)
+    for rgb in ((139, 149, 138), (40, 40, 44), (200, 200, 205)):  # sphere, stand, sunlit cap
+        search = search_plants(_stand_beside_a_leaf(rng, rgb), soil, PlantSettings(), 0.3)
+        assert len(search.plants) == 1
+        assert search.plants[0].traits.height_m < 0.4  # its 35 cm stem, not the 66 cm cap
+        assert any("neither green nor of any hue" in m for m in search.merges)
+    for rgb in (LEAF_RGB, (120, 90, 59)):
+        search = search_plants(_stand_beside_a_leaf(rng, rgb), soil, PlantSettings(), 0.3)
+        assert len(search.plants) == 1 and search.plants[0].traits.height_m > 0.6
+        assert not any("neither green nor of any hue" in m for m in search.merges)
+    cloud = _stand_beside_a_leaf(rng, (139, 149, 138))
+    depth_only = Cloud(cloud.points, np.full_like(cloud.colors, 128))
+    search = search_plants(depth_only, soil, PlantSettings(), 0.3)
+    assert len(search.plants) == 1 and search.plants[0].traits.height_m > 0.6

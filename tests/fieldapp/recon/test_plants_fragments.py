@@ -24,7 +24,7 @@ def _joined(parts: list[tuple[np.ndarray, int]]) -> tuple[np.ndarray, np.ndarray
     points = np.concatenate([p for p, _ in parts])
     labels = np.concatenate([np.full(len(p), label) for p, label in parts]).astype(np.intp)
     merges: list[str] = []
-    guessed = _join_fragments(points, labels, VOXEL_M, MARGIN_M, merges)
+    guessed, _ = _join_fragments(points, labels, VOXEL_M, MARGIN_M, merges)
     assert merges and "joined to the nearest plant" in merges[0]
     return points, labels, guessed
 
