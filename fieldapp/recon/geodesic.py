@@ -364,6 +364,54 @@ def sheet_graph(
     return weighted, state_voxel, bend_edges
 
 
+@dataclass(frozen=True)
+class StateGraph:
+    """What a path pays to step over the voxel graph: ``edges`` (S, S) between states (a
+    voxel's, or one per sheet where sheets cross), ``state_voxel`` (S,) each state's voxel, in
+    voxel order, and ``bend`` the bend part of each edge (laid out as ``edges``) where a collar
+    is to be free of it, else None."""
+
+    edges: csr_matrix
+    state_voxel: NDArray[np.intp]
+    bend: csr_matrix | None
+
+
+def state_graph(
+    graph: VoxelGraph,
+    stems_xy_m: NDArray[np.float64],
+    seed_radius_m: float,
+    bend_penalty_m: float = 0.0,
+    sheet_aware: bool = False,
+    keep_bend: bool = False,
+) -> StateGraph:
+    """The costs :func:`assign_to_stems` searches over (its arguments of the same names);
+    built once, it serves every assignment over the same stems or a subset of them."""
+    voxels = len(graph.centres_m)
+    shared = _shared(graph, graph.plan_tree, stems_xy_m, seed_radius_m) if sheet_aware else None
+    if bend_penalty_m > 0.0 and shared is not None and shared.any():
+        ring = _ring_spread(graph)  # once, for the sheets and the states' normals
+        sheets = crossing_sheets(graph, within=shared, ring=ring)
+        edges, state_voxel, bend = sheet_graph(
+            graph, bend_penalty_m, sheets, ring[1][:, :, 0], keep_bend
+        )
+        return StateGraph(edges, state_voxel, bend)
+    if bend_penalty_m > 0.0:
+        edges, bend = _bend_edges(graph, bend_penalty_m, keep_bend)
+        return StateGraph(edges, np.arange(voxels, dtype=np.intp), bend)
+    return StateGraph(graph.edges, np.arange(voxels, dtype=np.intp), None)
+
+
+@dataclass(frozen=True)
+class Junctions:
+    """Steps across gaps that a stem's own paths may take near it (:func:`assign_to_stems`):
+    between voxels more than the graph's longest step and at most ``gap_m`` apart, both within
+    ``radius_m`` (plan view) of the stem, each costing its length plus ``penalty_m``."""
+
+    radius_m: float
+    gap_m: float
+    penalty_m: float
+
+
 def assign_to_stems(
     graph: VoxelGraph,
     stems_xy_m: NDArray[np.float64],
@@ -376,6 +424,8 @@ def assign_to_stems(
     sheet_aware: bool = False,
     collar_radius_m: float = 0.0,
     collar_height_m: float = 0.0,
+    junctions: Junctions | None = None,
+    costs: StateGraph | None = None,
 ) -> Assignment:
     """Each voxel to the stem (``stems_xy_m`` (S, 2)) it is geodesically nearest to.
 
@@ -388,23 +438,22 @@ def assign_to_stems(
     paths pay no bend on steps within that (plan view) of the stem and no higher than
     ``collar_height_m`` above its highest source (:func:`_free_collar`): the turn from a stem
     onto its own leaf; every other stem's paths still pay there. Off by default: measured on
-    both plant models in ``docs/notes/touching-canopies.md`` ("The collar, per source")."""
+    both plant models in ``docs/notes/touching-canopies.md`` ("The collar, per source").
+
+    With ``junctions``, a stem's own paths may also step across the gaps near it
+    (:class:`Junctions`): a leaf whose base no camera saw whole, cut from its stem in the
+    graph, is reached from its stem across the gap, at a price (``penalty_m``) that only a
+    neighbour reaching it by a longer way, across a contact, does not beat. ``costs``: the
+    :func:`state_graph` of these stems (or of a set they are part of), when the caller has it."""
     voxels = len(graph.centres_m)
     tree = graph.plan_tree
-    shared = _shared(graph, tree, stems_xy_m, seed_radius_m) if sheet_aware else None
-    bend: csr_matrix | None = None  # each edge's bend part, when a collar is free of it
     collar = collar_radius_m > 0.0
-    if bend_penalty_m > 0.0 and shared is not None and shared.any():
-        ring = _ring_spread(graph)  # once, for the sheets and the states' normals
-        sheets = crossing_sheets(graph, within=shared, ring=ring)
-        edges, state_voxel, bend = sheet_graph(
-            graph, bend_penalty_m, sheets, ring[1][:, :, 0], collar
+    if costs is None:
+        costs = state_graph(
+            graph, stems_xy_m, seed_radius_m, bend_penalty_m, sheet_aware, keep_bend=collar
         )
-    elif bend_penalty_m > 0.0:
-        edges, bend = _bend_edges(graph, bend_penalty_m, collar)
-        state_voxel = np.arange(voxels, dtype=np.intp)
-    else:
-        edges, state_voxel = graph.edges, np.arange(voxels, dtype=np.intp)
+    edges, state_voxel, bend = costs.edges, costs.state_voxel, costs.bend
+    longest = float(graph.edges.data.max(initial=0.0))  # the graph's own steps are no longer
     count = np.bincount(state_voxel, minlength=voxels)  # each voxel's states, in voxel order
     first = np.concatenate([[0], np.cumsum(count)[:-1]])
     best = np.full(voxels, np.inf)
@@ -427,9 +476,11 @@ def assign_to_stems(
         position[states] = np.arange(len(states))
         sub = _subgraph(edges, states, position)
         at = graph.centres_m[state_voxel[states]]
-        if bend is not None:
+        if bend is not None and collar:
             top = float(at[sources, 2].max()) + collar_height_m  # above the stem's foot
             sub = _free_collar(sub, _subgraph(bend, states, position), at, xy, collar_radius_m, top)
+        if junctions is not None:
+            sub = _across_junctions(sub, at, xy, junctions, longest)
         sub = _outward(sub, at, xy, inward_penalty)
         position[states] = -1
         by_state = dijkstra(sub, directed=True, indices=sources, min_only=True)
@@ -591,6 +642,35 @@ def _free_collar(
     out = edges.copy()
     out.data = edges.data - np.where(free, bend.data, 0.0)
     return out
+
+
+def _across_junctions(
+    edges: csr_matrix,
+    centres_m: NDArray[np.float64],
+    stem_xy: NDArray[np.float64],
+    junctions: Junctions,
+    longest_m: float,
+) -> csr_matrix:
+    """``edges`` (between the states at ``centres_m``) with the steps across the gaps near
+    this path's own stem (:class:`Junctions`) added both ways; the graph's own steps are at
+    most ``longest_m``, so no step is added twice."""
+    near = np.flatnonzero(
+        np.sum((centres_m[:, :2] - stem_xy) ** 2, axis=1) <= junctions.radius_m**2
+    )
+    if len(near) < 2:
+        return edges
+    pairs = cKDTree(centres_m[near]).query_pairs(junctions.gap_m, output_type="ndarray")
+    a, b = near[pairs[:, 0]], near[pairs[:, 1]]
+    length = np.linalg.norm(centres_m[a] - centres_m[b], axis=1)
+    gap = length > longest_m
+    if not gap.any():
+        return edges
+    a, b, cost = a[gap], b[gap], length[gap] + junctions.penalty_m
+    steps = coo_matrix(
+        (np.concatenate([cost, cost]), (np.concatenate([a, b]), np.concatenate([b, a]))),
+        shape=edges.shape,
+    )
+    return (edges + steps).tocsr()
 
 
 def _outward(

@@ -26,9 +26,12 @@ from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green, grey_group, not_gree
 from fieldapp.recon.geodesic import (
     UNREACHED,
     Assignment,
+    Junctions,
+    StateGraph,
     VoxelGraph,
     assign_to_stems,
     leaf_ends,
+    state_graph,
     voxel_graph,
     voxel_neighbours,
 )
@@ -64,13 +67,21 @@ def assign_by_settings(
     stems_xy_m: NDArray[np.float64],
     s: StemSettings,
     graph: VoxelGraph | None = None,
+    states: StateGraph | None = None,
+    junctions: bool = True,
 ) -> Assignment:
     """Every point of ``points_m`` (N, 3) to the stem at ``stems_xy_m`` (S, 2) it is nearest to
     along the plant (:func:`fieldapp.recon.geodesic.assign_to_stems` over a voxel graph, or
-    ``graph``, the points' when the caller has built it), with the stem settings ``s``: one
-    place for the reconstruction and manual splits alike."""
+    ``graph``, the points' when the caller has built it, and ``states``, its
+    :func:`stem_states`), with the stem settings ``s``: one place for the reconstruction and
+    manual splits alike. ``junctions``: with the steps across the gaps near each stem
+    (``s.junction_radius_m``)."""
+    graph = voxel_graph(points_m, s.graph_voxel_m) if graph is None else graph
+    steps = None
+    if junctions and s.junction_radius_m > 0.0:
+        steps = Junctions(s.junction_radius_m, s.junction_gap_m, s.junction_penalty_m)
     return assign_to_stems(
-        voxel_graph(points_m, s.graph_voxel_m) if graph is None else graph,
+        graph,
         stems_xy_m,
         s.seed_radius_m,
         s.seed_height_m,
@@ -81,6 +92,21 @@ def assign_by_settings(
         s.sheet_aware,
         s.collar_radius_m,
         s.collar_height_m,
+        steps,
+        stem_states(graph, stems_xy_m, s) if states is None else states,
+    )
+
+
+def stem_states(graph: VoxelGraph, stems_xy_m: NDArray[np.float64], s: StemSettings) -> StateGraph:
+    """The costs the assignment of ``graph``'s voxels to the stems at ``stems_xy_m`` searches
+    over (:func:`fieldapp.recon.geodesic.state_graph`), with the stem settings ``s``."""
+    return state_graph(
+        graph,
+        stems_xy_m,
+        s.seed_radius_m,
+        s.bend_penalty_m,
+        s.sheet_aware,
+        keep_bend=s.collar_radius_m > 0.0,
     )
 
 
@@ -503,13 +529,22 @@ def _labels(
         s = settings.stems
         xy = np.array([stem.xy_m for stem in stems])
         graph = voxel_graph(points_m, s.graph_voxel_m)
-        assignment = assign_by_settings(points_m, xy, s, graph)
+        states = stem_states(graph, xy, s)
+        junctions = s.junction_radius_m > 0.0
+        # the leaves' ends are judged on the assignment without the steps across gaps: with
+        # them an end standing under its neighbours' leaves steps onto them and is no end
+        assignment = assign_by_settings(points_m, xy, s, graph, states, junctions=False)
         labels[:] = assignment.stem
         ambiguous = assignment.ambiguous
+        kept = np.arange(len(stems))
         if s.leaf_ends:
-            ambiguous = _merge_leaf_ends(
+            ambiguous, kept = _merge_leaf_ends(
                 graph, stems, assignment, labels, ambiguous, s, merges, claims
             )
+        if junctions:
+            again = assign_by_settings(points_m, xy[kept], s, graph, states)
+            labels[:] = np.where(again.stem >= 0, kept[np.maximum(again.stem, 0)], UNREACHED)
+            ambiguous = again.ambiguous
         guessed, refused = _join_fragments(
             points_m, labels, settings.cluster_voxel_m, s.ambiguity_margin_m, merges, colors
         )
@@ -540,12 +575,12 @@ def _merge_leaf_ends(
     s: StemSettings,
     merges: list[str],
     claims: NodeClaims | None = None,
-) -> NDArray[np.bool_]:
+) -> tuple[NDArray[np.bool_], NDArray[np.intp]]:
     """Stems that are the end of another plant's leaf come down to the soil
     (:func:`fieldapp.recon.geodesic.leaf_ends`; those the grid's ``claims`` put off it, or at
     the node of the stem they would join, by the lower share)
     relabelled as that plant in ``labels`` (in place, stem labels only); returns
-    ``ambiguous`` without the doubts they settle."""
+    ``ambiguous`` without the doubts they settle, and the stems kept (indices, ascending)."""
     into = leaf_ends(
         graph,
         np.array([[*stem.xy_m, stem.ground_z_m] for stem in stems]),
@@ -559,8 +594,9 @@ def _merge_leaf_ends(
         s.leaf_end_share_off_grid,
     )
     ended = into != np.arange(len(stems))
+    kept = np.flatnonzero(~ended)
     if not ended.any():
-        return ambiguous
+        return ambiguous, kept
     reached = labels >= 0
     labels[reached] = into[labels[reached]]
     # a doubt between a leaf's end and the plant it grows from is none once they are one
@@ -571,7 +607,7 @@ def _merge_leaf_ends(
         f"{int(ended.sum())} stems found where a leaf comes down to the soil merged into the "
         "plant the leaf grows from"
     )
-    return ambiguous & ~settled
+    return ambiguous & ~settled, kept
 
 
 def _join_fragments(

@@ -186,6 +186,18 @@ class StemSettings(_Section):
     no higher than ``collar_height_m`` above the top of its foot: the turn from a stem onto
     its own leaf is free, a neighbour's path turning there still pays (0: off)."""
     collar_height_m: float = Field(default=0.0, ge=0.0)
+    junction_radius_m: float = Field(default=0.08, ge=0.0)
+    """A stem's own paths may step across gaps within this (plan view) of it: the junction of
+    a leaf and its stem, where the cameras saw the stem from one side and the leaf's base not
+    whole (``geodesic.Junctions``; 0: off). The leaves' ends that come down to the soil are
+    judged before (on the assignment without these steps), so that such an end does not step
+    onto the leaves above it."""
+    junction_gap_m: float = Field(default=0.04, gt=0.0)
+    """The widest gap such a step crosses."""
+    junction_penalty_m: float = Field(default=1.0, ge=0.0)
+    """What such a step costs on top of its length: as much as the sharpest bend, so that a
+    neighbour's leaf passing by the stem stays with the neighbour, whose way along it is
+    shorter than this stem's way plus the step."""
     reach_m: float = Field(default=1.0, gt=0.0)
     """How far (plan view) from its stem a plant's leaves may reach."""
     ambiguity_margin_m: float = Field(default=0.15, ge=0.0)
