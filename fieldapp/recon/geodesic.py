@@ -624,6 +624,13 @@ def _subgraph(edges: csr_matrix, local: NDArray[np.intp], position: NDArray[np.i
     return coo_matrix((rows.data[keep], (row_ids[keep], columns[keep])), shape=(n, n)).tocsr()
 
 
+def _near(
+    centres_m: NDArray[np.float64], stem_xy: NDArray[np.float64], radius_m: float
+) -> NDArray[np.bool_]:
+    """(V,) whether each of ``centres_m`` lies within ``radius_m`` of the stem (plan view)."""
+    return np.sum((centres_m[:, :2] - stem_xy) ** 2, axis=1) <= radius_m**2  # type: ignore[no-any-return]
+
+
 def _free_collar(
     edges: csr_matrix,
     bend: csr_matrix,
@@ -634,9 +641,7 @@ def _free_collar(
 ) -> csr_matrix:
     """``edges`` without their ``bend`` part (laid out as ``edges``) on the steps that stay
     within ``radius_m`` (plan view) of this path's own stem and below ``top_m``: its collar."""
-    inside = (np.sum((centres_m[:, :2] - stem_xy) ** 2, axis=1) <= radius_m**2) & (
-        centres_m[:, 2] <= top_m
-    )
+    inside = _near(centres_m, stem_xy, radius_m) & (centres_m[:, 2] <= top_m)
     rows = np.repeat(np.arange(edges.shape[0]), np.diff(edges.indptr))
     free = inside[rows] & inside[edges.indices]
     out = edges.copy()
@@ -654,9 +659,7 @@ def _across_junctions(
     """``edges`` (between the states at ``centres_m``) with the steps across the gaps near
     this path's own stem (:class:`Junctions`) added both ways; the graph's own steps are at
     most ``longest_m``, so no step is added twice."""
-    near = np.flatnonzero(
-        np.sum((centres_m[:, :2] - stem_xy) ** 2, axis=1) <= junctions.radius_m**2
-    )
+    near = np.flatnonzero(_near(centres_m, stem_xy, junctions.radius_m))
     if len(near) < 2:
         return edges
     pairs = cKDTree(centres_m[near]).query_pairs(junctions.gap_m, output_type="ndarray")
@@ -694,7 +697,7 @@ def _sources(
     centres_m: NDArray[np.float64], xy: NDArray[np.float64], radius_m: float, height_m: float
 ) -> NDArray[np.intp]:
     """Indices (into ``centres_m``) of the voxels at the stem's foot."""
-    near = np.flatnonzero(np.sum((centres_m[:, :2] - xy) ** 2, axis=1) <= radius_m**2)
+    near = np.flatnonzero(_near(centres_m, xy, radius_m))
     if len(near) == 0:
         return near
     z = centres_m[near, 2]
