@@ -4,9 +4,11 @@
   plant's lower half (leaf tips droop low but lie flat), its lowest ``base_slice_m``;
 - **local ground**: the median height of the soil points around the base;
 - **top**, taken robustly: the highest point joined to the plant's body, from which a chain of
-  plant points, each within ``TOP_LINK_M`` of the next, leads down ``TOP_REACH_M`` (a leaf tip
-  sampled one point wide has one; a stray point or a speck of flying pixels left by the filters
-  above the plant has none);
+  plant points, each rising at most ``TOP_LINK_M`` above the next and at most
+  ``TOP_LINK_ACROSS_M`` across from it, leads down ``TOP_REACH_M`` (a leaf tip sampled one
+  point wide has one, and so has a thin upright tip scattered across by the sensor's lateral
+  noise; a stray point or a speck of flying pixels left by the filters above the plant has
+  none);
 - **width**: the diameter of the smallest circle enclosing the plant's projection on the ground
   (Welzl's algorithm on the convex hull of the projection).
 """
@@ -33,9 +35,15 @@ TOP_CANDIDATES = 200
 """Only this many of the highest points are tested as the top."""
 
 TOP_LINK_M = 0.008
-"""The longest step of the chain that leads from the top down into the plant: 2-4 times the
+"""The longest step up of the chain that leads from the top down into the plant: 2-4 times the
 points' spacing on a leaf (the last centimetre of a pointed tip is sampled a point every
 5-8 mm on the simulated plots), under the 1 cm a stray point stands off the plant."""
+
+TOP_LINK_ACROSS_M = 0.015
+"""The longest step of that chain across (in plan): a thin upright top (a whorl's rolled tip,
+under a pixel wide) is sampled a few points at each height, scattered across by its width and
+the sensor's lateral noise (1.6-3 pixels, 7-14 mm at 1.5-2 m), while a stray point or a speck
+stands *above* the plant. A step is within an ellipsoid of these two half-axes."""
 
 TOP_REACH_M = 0.02
 """How far below the top that chain must lead: more than a speck of flying pixels is tall."""
@@ -174,11 +182,12 @@ def local_ground_z_m(
 
 
 def robust_top_z_m(points_m: NDArray[np.float64], support_points: int, radius_m: float) -> float:
-    """The z of the highest point from which a chain of points, each within
-    :data:`TOP_LINK_M` of the next, leads :data:`TOP_REACH_M` below it: connectivity, not
-    density. A pointed leaf tip sampled one point wide continues its leaf point by point and is
-    the top; a stray point, or a cluster of flying pixels under ``TOP_REACH_M`` tall, more than
-    ``TOP_LINK_M`` from the plant, is not. Only the :data:`TOP_CANDIDATES` highest points are
+    """The z of the highest point from which a chain of points, each step within the ellipsoid
+    of :data:`TOP_LINK_M` up and :data:`TOP_LINK_ACROSS_M` across, leads :data:`TOP_REACH_M`
+    below it: connectivity, not density. A pointed leaf tip sampled one point wide continues
+    its leaf point by point and is the top, and so is a thin upright tip whose points scatter
+    across; a stray point, or a cluster of flying pixels under ``TOP_REACH_M`` tall, more than
+    ``TOP_LINK_M`` above the plant, is not. Only the :data:`TOP_CANDIDATES` highest points are
     tested; when none leads down (a plant under ``TOP_REACH_M`` tall), the highest point with
     at least ``support_points`` other points within ``radius_m``; the highest point of all when
     none has such support."""
@@ -188,7 +197,9 @@ def robust_top_z_m(points_m: NDArray[np.float64], support_points: int, radius_m:
     near_index = np.flatnonzero(points_m[:, 2] >= low)
     near = points_m[near_index]
     tree = cKDTree(near)
-    pairs = tree.query_pairs(link_m, output_type="ndarray")
+    # the ellipsoid of a step (TOP_LINK_ACROSS_M across, link_m up) as a ball: heights stretched
+    stretched = near * np.array([1.0, 1.0, TOP_LINK_ACROSS_M / link_m])
+    pairs = cKDTree(stretched).query_pairs(TOP_LINK_ACROSS_M, output_type="ndarray")
     graph = coo_matrix(
         (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(len(near),) * 2
     )

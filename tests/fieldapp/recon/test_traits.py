@@ -83,6 +83,19 @@ def test_robust_top_reaches_a_pointed_tip_sampled_one_point_wide() -> None:
     assert top == pytest.approx(0.268, abs=1e-9)
 
 
+def test_robust_top_reaches_a_thin_upright_top_scattered_across() -> None:
+    """A whorl's rolled tip, under a pixel wide, rises 3 cm above the plant: the sensor gives a
+    point every 4 mm up it, scattered 1 cm across by its width and the lateral noise (at 1.5-2
+    m, 1.6-3 pixels are 7-14 mm). No step of the chain is within 8 mm, every step rises less
+    than that: the top is the tip's last point (with steps judged by their length alone, it
+    was the first, 2.8 cm lower)."""
+    z = 0.256 + 0.004 * np.arange(8)
+    x = np.where(np.arange(8) % 2 == 0, 0.005, -0.005)
+    tip = np.column_stack([x, np.zeros(8), z])
+    top = robust_top_z_m(np.concatenate([_stem(), tip]), support_points=3, radius_m=0.006)
+    assert top == pytest.approx(0.284, abs=1e-9)
+
+
 @pytest.mark.parametrize("above_m", [0.01, 0.02, 0.03])
 @pytest.mark.parametrize("x_m", [0.0, 0.02])  # over the middle, over the edge
 def test_robust_top_ignores_a_stray_point_1_to_3_cm_above(above_m: float, x_m: float) -> None:
