@@ -432,9 +432,10 @@ def assign_to_stems(
     A stem's sources are the voxels within ``seed_radius_m`` of its foot in plan view and no
     higher than ``seed_height_m`` above the lowest of them. Each step back towards the stem
     (in plan view) costs ``inward_penalty`` times its inward length on top of its length
-    (:func:`_outward`), and passing from one surface onto another up to ``bend_penalty_m``
-    (:func:`bend_weighted`); with ``sheet_aware``, judged against the sheet the path is on
-    where two sheets cross (:func:`sheet_graph`). With ``collar_radius_m`` > 0 a stem's own
+    (:func:`_outward`; not within ``seed_radius_m``, the stem's own column), and passing from
+    one surface onto another up to ``bend_penalty_m`` (:func:`bend_weighted`); with
+    ``sheet_aware``, judged against the sheet the path is on where two sheets cross
+    (:func:`sheet_graph`). With ``collar_radius_m`` > 0 a stem's own
     paths pay no bend on steps within that (plan view) of the stem and no higher than
     ``collar_height_m`` above its highest source (:func:`_free_collar`): the turn from a stem
     onto its own leaf; every other stem's paths still pay there. Off by default: measured on
@@ -481,7 +482,7 @@ def assign_to_stems(
             sub = _free_collar(sub, _subgraph(bend, states, position), at, xy, collar_radius_m, top)
         if junctions is not None:
             sub = _across_junctions(sub, at, xy, junctions, longest)
-        sub = _outward(sub, at, xy, inward_penalty)
+        sub = _outward(sub, at, xy, inward_penalty, seed_radius_m)
         position[states] = -1
         by_state = dijkstra(sub, directed=True, indices=sources, min_only=True)
         distance = np.minimum.reduceat(by_state, offset) if len(states) > len(local) else by_state
@@ -677,15 +678,25 @@ def _across_junctions(
 
 
 def _outward(
-    edges: csr_matrix, centres_m: NDArray[np.float64], stem_xy: NDArray[np.float64], penalty: float
+    edges: csr_matrix,
+    centres_m: NDArray[np.float64],
+    stem_xy: NDArray[np.float64],
+    penalty: float,
+    column_m: float = 0.0,
 ) -> csr_matrix:
     """``edges`` made directed: the step u -> v costs its length plus ``penalty`` times how much
     nearer to the stem (plan view) v is than u. A plant grows outwards from its stem: a leaf
     reached from a neighbour's stem across a contact and followed back towards that stem pays
-    for every centimetre, the same leaf reached along itself from its own stem does not."""
+    for every centimetre, the same leaf reached along itself from its own stem does not.
+
+    Within ``column_m`` of the stem (its own column, where its sources are) no step is inward:
+    there "towards the stem" means nothing, and a path climbing the stem zig-zags between
+    voxel centroids a few millimetres either side of it. At 10 x those sideways steps cost a
+    seedling's stem so much that a tall neighbour's leaf touching it took its leaf, and the
+    seedling was merged as a leaf's end (`test_a_seedling_touching_a_tall_plant_is_a_plant`)."""
     if penalty <= 0.0:
         return edges
-    radius = np.hypot(*(centres_m[:, :2] - stem_xy).T)
+    radius = np.maximum(np.hypot(*(centres_m[:, :2] - stem_xy).T), column_m)
     rows = np.repeat(np.arange(edges.shape[0]), np.diff(edges.indptr))
     inward = np.maximum(radius[rows] - radius[edges.indices], 0.0)
     out = edges.copy()

@@ -171,11 +171,12 @@ class StemSettings(_Section):
     graph_voxel_m: float = Field(default=0.01, gt=0.0)
     seed_radius_m: float = Field(default=0.03, gt=0.0)
     seed_height_m: float = Field(default=0.15, gt=0.0)
-    inward_penalty: float = Field(default=10.0, ge=0.0)
-    """Extra cost per metre a path runs back towards the stem (plants grow outwards). A
-    neighbour whose leaf a leaf pointing at it lies on would otherwise take that leaf's outer
-    part back along it, inwards (3 until 2026-12-06; 6-15 measured alike, 20 and more break
-    other plots: RECONSTRUCTION.md, "Every point to its stem")."""
+    inward_penalty: float = Field(default=15.0, ge=0.0)
+    """Extra cost per metre a path runs back towards the stem (plants grow outwards), outside
+    the stem's own column (``seed_radius_m``). A neighbour whose leaf a leaf pointing at it
+    lies on would otherwise take that leaf's outer part back along it, inwards (3 until
+    2026-12-06; 10-25 measured alike, 30 and more lose a seedling beside a tall plant:
+    RECONSTRUCTION.md, "Touching canopies", "The inward cost")."""
     bend_penalty_m: float = Field(default=1.0, ge=0.0)
     """Extra cost of a path passing from one surface onto another (a leaf onto the neighbour's
     leaf it touches): up to this for a right angle between the surfaces' normals."""

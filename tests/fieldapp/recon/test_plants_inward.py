@@ -4,8 +4,8 @@ part stays with its own plant because the neighbour would have to follow it back
 The first model's touching plot of seed 8: p07's 74 cm leaf points at p06, its tip ending
 11-17 cm from p06's stem, and lies on p06's leaf 36-40 cm up. With a step back towards the stem
 costing 3 times its inward length, p06 reached the leaf's outer half sooner across the contact
-than p07 along it (655 points, p07 11.9 cm too narrow, the plot's width RMSE 3.17 cm); at 10
-times, p07 keeps it (1.13 cm; RECONSTRUCTION.md, "Every point to its stem")."""
+than p07 along it (655 points, p07 11.9 cm too narrow, the plot's width RMSE 3.17 cm); at 15
+times, p07 keeps it (1.13 cm; RECONSTRUCTION.md, "Touching canopies", "The inward cost")."""
 
 from __future__ import annotations
 

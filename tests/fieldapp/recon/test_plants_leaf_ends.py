@@ -273,7 +273,7 @@ def test_a_plot_with_late_plants_and_leaves_down_to_the_soil_off_the_grid(tmp_pa
     assert np.sqrt(np.mean(e["dh_cm"] ** 2)) <= 1.0
     assert np.sqrt(np.mean(e["dw_cm"] ** 2)) <= 2.0
     # the control: the same step without the grid kept the phantom while a step back towards
-    # the stem cost 3 times its length; at 10 the leaf's end is reached along its own plant
+    # the stem cost 3 times its length; at 15 the leaf's end is reached along its own plant
     # either way, so the control keeps the old cost to show what the grid alone does
     placed = kept["placed"]
     old = PlantSettings(stems=StemSettings(inward_penalty=3.0))
