@@ -16,11 +16,10 @@ import numpy as np
 import pytest
 
 from fieldapp.cli import main
-from fieldapp.io.session import load_session
-from fieldapp.recon import stages
-from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.plants import PlantSearch, search_plants
-from fieldapp.recon.settings import PlantSettings, ReconstructionSettings, StemSettings
+from fieldapp.recon.settings import PlantSettings, StemSettings
+
+from .test_plants_leaf_ends import _reconstructed
 
 pytestmark = pytest.mark.slow  # one simulated touching plot, reconstructed once
 
@@ -32,18 +31,7 @@ def plot(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, Any], dict
     """The touching plot of seed 8 and the plants step's inputs, kept from its reconstruction."""
     folder = tmp_path_factory.mktemp("sim") / "pointing"
     assert main(["simulate", "--out", str(folder), "--seed", "8", "--stage", "touching"]) == 0
-    kept: dict[str, Any] = {}
-    original = stages.find_plants
-
-    def keep(placed: Any, settings: Any, ground_radius_m: float, grid: Any) -> Any:
-        kept.update(placed=placed, ground_radius_m=ground_radius_m)
-        return original(placed, settings, ground_radius_m, grid)
-
-    stages.find_plants = keep
-    try:
-        run_reconstruction(load_session(folder), ReconstructionSettings(threads=1))
-    finally:
-        stages.find_plants = original
+    _, kept = _reconstructed(folder)
     return json.loads((folder / "truth.json").read_text()), kept
 
 
