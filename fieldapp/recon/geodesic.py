@@ -72,6 +72,11 @@ class VoxelGraph:
         (the assignment, the crossing sheets, the leaf ends)."""
         return cKDTree(self.centres_m[:, :2])
 
+    @cached_property
+    def longest_m(self) -> float:
+        """The graph's longest step (0 without steps): the steps across gaps are longer."""
+        return float(self.edges.data.max(initial=0.0))
+
 
 @dataclass(frozen=True)
 class Assignment:
@@ -454,7 +459,6 @@ def assign_to_stems(
             graph, stems_xy_m, seed_radius_m, bend_penalty_m, sheet_aware, keep_bend=collar
         )
     edges, state_voxel, bend = costs.edges, costs.state_voxel, costs.bend
-    longest = float(graph.edges.data.max(initial=0.0))  # the graph's own steps are no longer
     count = np.bincount(state_voxel, minlength=voxels)  # each voxel's states, in voxel order
     first = np.concatenate([[0], np.cumsum(count)[:-1]])
     best = np.full(voxels, np.inf)
@@ -481,7 +485,7 @@ def assign_to_stems(
             top = float(at[sources, 2].max()) + collar_height_m  # above the stem's foot
             sub = _free_collar(sub, _subgraph(bend, states, position), at, xy, collar_radius_m, top)
         if junctions is not None:
-            sub = _across_junctions(sub, at, xy, junctions, longest)
+            sub = _across_junctions(sub, at, xy, junctions, graph.longest_m)
         sub = _outward(sub, at, xy, inward_penalty, seed_radius_m)
         position[states] = -1
         by_state = dijkstra(sub, directed=True, indices=sources, min_only=True)

@@ -196,7 +196,6 @@ def robust_top_z_m(points_m: NDArray[np.float64], support_points: int, radius_m:
     low = points_m[order[-1], 2] - reach_m - max(link_m, radius_m)
     near_index = np.flatnonzero(points_m[:, 2] >= low)
     near = points_m[near_index]
-    tree = cKDTree(near)
     # the ellipsoid of a step (TOP_LINK_ACROSS_M across, link_m up) as a ball: heights stretched
     stretched = near * np.array([1.0, 1.0, TOP_LINK_ACROSS_M / link_m])
     pairs = cKDTree(stretched).query_pairs(TOP_LINK_ACROSS_M, output_type="ndarray")
@@ -213,7 +212,7 @@ def robust_top_z_m(points_m: NDArray[np.float64], support_points: int, radius_m:
     leads = lowest[labels[local[order]]] <= points_m[order, 2] - reach_m
     if leads.any():
         return float(points_m[order[int(np.argmax(leads))], 2])
-    counts = tree.query_ball_point(points_m[order], radius_m, return_length=True)
+    counts = cKDTree(near).query_ball_point(points_m[order], radius_m, return_length=True)
     supported = np.flatnonzero(counts - 1 >= support_points)
     chosen = order[supported[0]] if len(supported) else order[0]
     return float(points_m[chosen, 2])
