@@ -26,11 +26,20 @@ ATTACH_REACH_M = 0.01
 """How far a doubtful point may be from the point it joins through: the radius filter's
 8 mm, with room for the 2 mm voxels the fused cloud is averaged in. Farther, a tip's points
 would reach across the gap between two leaves."""
-ATTACH_GAP_M = 0.05
+ATTACH_GAP_M = 0.08
 """How far a group of doubtful points that reaches no plant point by point may lie from the
 plant it joins: a tip's sparse end lies beyond the stretch of it the filter removed
-outright, 2-5 cm on from its leaf's kept points (median 2.9 cm, this project's touching
-plot seed 3)."""
+outright, 2-5 cm on from its leaf's kept points on this project's touching plot seed 3
+(median 2.9 cm), 5.8-6.5 cm at the drooping tips that set the widths of an independent
+renderer's touching plants (2026-12-06, session 36; 5 cm until then). At 8 cm: the widths of
+three of that renderer's four touching plots 1.75 / 2.39 / 1.66 -> 1.62 / 1.66 / 0.76 cm, and
+the same to the digit on 32 plots of this project's two plant models and the fourth renderer.
+The margin below is what keeps a group between two plants out; a group near the soil
+keeps :data:`ATTACH_GROUND_GAP_M`."""
+ATTACH_GROUND_GAP_M = 0.05
+"""The gap for a group with a point near the soil (``floating`` false): there a group may be
+a clod or the soil beside a leaf, not a tip (a depth-only plot with 40 clods a square metre:
+at 8 cm clods joined four plants, width RMSE 0.87 -> 2.12 cm)."""
 ATTACH_MARGIN_M = 0.01
 """A group joins the plant nearest it only where every other plant's points lie at least this
 much farther: nearer, which of two touching plants a sparse pair belongs to is a guess (the
@@ -50,13 +59,16 @@ def attach_doubtful(
     reach_m: float = ATTACH_REACH_M,
     gap_m: float = ATTACH_GAP_M,
     margin_m: float = ATTACH_MARGIN_M,
+    floating: NDArray[np.bool_] | None = None,
+    ground_gap_m: float = ATTACH_GROUND_GAP_M,
 ) -> NDArray[np.intp]:
     """(D,) the label each of ``doubtful_m`` (D, 3) takes: that of the labelled point of
     ``points_m`` (N, 3), ``labels`` (N,) (-1: in no plant), it reaches along the shortest
     path of steps of at most ``reach_m`` through doubtful points; for a group of doubtful
     points (steps of at most ``reach_m``) that reaches none so, that of the labelled point
     nearest the group, within ``gap_m``, where every other label's points lie ``margin_m``
-    farther; -1 for the rest."""
+    farther (``ground_gap_m`` for a group with a point not ``floating`` (D,), clear of the
+    soil; every group floats when it is not given); -1 for the rest."""
     d = len(doubtful_m)
     found = np.full(d, -1, dtype=np.intp)
     if d == 0:
@@ -94,6 +106,9 @@ def attach_doubtful(
     for members in np.split(order, starts[1:]):
         index = members[0]  # the group's point nearest a plant
         if not np.isfinite(distance[index]):
+            continue
+        on_the_soil = floating is not None and not floating[alone[members]].all()
+        if on_the_soil and distance[index] > ground_gap_m:
             continue
         label = labels[labelled[nearest[index]]]
         other = _nearest_other(points_m, labels, labelled, around, alone_m, members, label)

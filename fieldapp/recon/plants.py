@@ -60,6 +60,10 @@ MEETS_WARNING = "may be wider than measured, their widest extent meets another p
 report entry (with the other's id) and in the warnings."""
 
 NOISE = -1
+FRAGMENT = -2
+"""A point of a group no stem reaches that is too small to be a plant (under ``min_points``):
+a leaf's tip or a piece of leaf the outlier filters left apart from the rest of it. It joins
+the plant it reaches as a doubtful point does (:func:`_with_loose`), or is left out as noise."""
 
 
 def assign_by_settings(
@@ -295,9 +299,9 @@ def search_plants(
         settings,
         merges,
     )
-    joined = 0
-    if doubtful is not None and len(doubtful):
-        cloud, labels, ambiguous, joined = _with_doubtful(cloud, labels, ambiguous, doubtful)
+    cloud, labels, ambiguous, joined = _with_loose(
+        cloud, labels, ambiguous, doubtful, soil_m, soil_tree, coloured, merges
+    )
 
     def measured(notes: list[str] | None = None) -> tuple[list[Plant], dict[int, int]]:
         return _measured(
@@ -324,20 +328,63 @@ def search_plants(
     return search
 
 
-def _with_doubtful(
-    cloud: Cloud, labels: NDArray[np.intp], ambiguous: NDArray[np.bool_], doubtful: Cloud
+def _with_loose(
+    cloud: Cloud,
+    labels: NDArray[np.intp],
+    ambiguous: NDArray[np.bool_],
+    doubtful: Cloud | None,
+    soil_m: NDArray[np.float64],
+    soil_tree: cKDTree | None,
+    coloured: bool,
+    merges: list[str],
 ) -> tuple[Cloud, NDArray[np.intp], NDArray[np.bool_], int]:
-    """``cloud`` with the ``doubtful`` points that reach a plant
-    (:func:`~fieldapp.recon.attach.attach_doubtful`) after its own, each labelled with that
-    plant, never ambiguous; and how many joined."""
-    found = attach_doubtful(cloud.points, labels, doubtful.points)
-    joins = found >= 0
+    """The loose points joined to the plants they reach
+    (:func:`~fieldapp.recon.attach.attach_doubtful`), never ambiguous: the ``doubtful`` points
+    (:func:`~fieldapp.recon.filters.split_outliers`), appended to ``cloud`` with their plant,
+    and the cloud's own :data:`FRAGMENT` points, labelled in place (:data:`NOISE` where they
+    reach none). The two are searched together, so a leaf's tip the outlier filters left in
+    pieces (a few points kept, a few doubtful) is followed through both. Returns the cloud, its
+    labels and doubts, and how many doubtful points joined. A group may be a clod, not a
+    tip, where a point of it lies within :data:`ON_THE_SOIL_M` of the local ground
+    (``soil_m``), is not green by its own colour, or the plot has no colour (``coloured``:
+    clods cut from the soil float too, their lower part kept as soil): it joins only within
+    :data:`~fieldapp.recon.attach.ATTACH_GROUND_GAP_M`.
+
+    Why the fragments: a drooping tip seen by few views, at the plant's widest extent, came
+    through as groups of 40-100 points 1-3 cm from the rest of its leaf, which density
+    clustering drops as too small to be a plant; on an independent renderer's touching plots
+    that took 4-5.5 cm off the widths of the plants they ended."""
+    fragments = np.flatnonzero(labels == FRAGMENT)
+    labels[fragments] = NOISE
+    loose = cloud.points[fragments]
+    if doubtful is not None and len(doubtful):
+        loose = np.concatenate([loose, doubtful.points])
+    if len(loose) == 0:
+        return cloud, labels, ambiguous, 0
+    colors = cloud.colors[fragments]
+    if doubtful is not None and len(doubtful):
+        colors = np.concatenate([colors, doubtful.colors])
+    floating = np.zeros(len(loose), dtype=bool)
+    if coloured:
+        ground = local_ground_z_m(soil_m, loose[:, :2], 0.0, soil_tree)
+        clear = loose[:, 2] - ground > ON_THE_SOIL_M
+        floating = clear & (excess_green(colors) >= NOT_GREEN_EXG)
+    found = attach_doubtful(cloud.points, labels, loose, floating=floating)
+    own, theirs = found[: len(fragments)], found[len(fragments) :]
+    labels[fragments] = own
+    ambiguous[fragments[own >= 0]] = False
+    if (own >= 0).any():
+        merges.append(
+            f"{int((own >= 0).sum())} points of fragments too small to be plants joined to the "
+            "plant they reach"
+        )
+    joins = theirs >= 0
     if not joins.any():
         return cloud, labels, ambiguous, 0
-    joined = doubtful.select(joins)
+    joined = doubtful.select(joins)  # type: ignore[union-attr]  # theirs is empty without it
     return (
         Cloud.concatenate([cloud, joined]),
-        np.concatenate([labels, found[joins]]),
+        np.concatenate([labels, theirs[joins]]),
         np.concatenate([ambiguous, np.zeros(len(joined), dtype=bool)]),
         len(joined),
     )
@@ -518,10 +565,11 @@ def _labels(
     claims: NodeClaims | None = None,
     colors: NDArray[np.uint8] | None = None,
 ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
-    """Per point: its stem (0..S-1), a density cluster (S..) where no stem reaches, or
-    :data:`NOISE`; and whether it is ambiguous between two stems. ``claims``: where a
-    planting grid places the stems (:func:`fieldapp.recon.grid.node_claims`); ``colors``:
-    the points' colours where they tell plant from not (:func:`_join_fragments`)."""
+    """Per point: its stem (0..S-1), a density cluster (S..) where no stem reaches, a
+    :data:`FRAGMENT` too small to be one, or :data:`NOISE`; and whether it is ambiguous
+    between two stems. ``claims``: where a planting grid places the stems
+    (:func:`fieldapp.recon.grid.node_claims`); ``colors``: the points' colours where they
+    tell plant from not (:func:`_join_fragments`)."""
     labels = np.full(len(points_m), NOISE, dtype=np.intp)
     ambiguous = np.zeros(len(points_m), dtype=bool)
     refused = np.zeros(len(points_m), dtype=bool)
@@ -562,7 +610,7 @@ def _labels(
         clusters = drop_small(
             voxel_components(points_m[rest], settings.cluster_voxel_m), settings.min_points
         )
-        labels[rest] = np.where(clusters >= 0, clusters + len(stems), NOISE)
+        labels[rest] = np.where(clusters >= 0, clusters + len(stems), FRAGMENT)
     return labels, ambiguous
 
 

@@ -164,3 +164,53 @@ def test_a_group_about_as_near_two_plants_is_dropped() -> None:
     nearer_a = between - [0.02, 0.0, 0.0]  # 2.0 cm from a, 6.4 cm from b
     assert (attach_doubtful(points, labels, nearer_a) == 1).all()
     assert (attach_doubtful(points, labels, between, margin_m=0.0) == 1).all()
+
+
+def _plant_with_a_cut_tip(gap_m: float) -> tuple[Cloud, Cloud, np.ndarray]:
+    """Two seedlings 80 cm apart (discs of 15 cm radius at 18 cm) and a piece of the first's
+    leaf tip, 60 points in two rows (too few to be a plant), ``gap_m`` on from its rim towards
+    +x, in the cloud itself: what the outlier filters left of a drooping tip after removing the
+    stretch between. Returns the cloud, an empty doubtful cloud and the piece."""
+    rng = np.random.default_rng(21)
+    plant = seedling(rng, 0.0, 0.0, 0.30, 0.30, 9000)
+    other = seedling(rng, 0.8, 0.0, 0.30, 0.30, 9000)
+    start = 0.15 + gap_m
+    piece = np.concatenate([_strip(start, start + 0.087, 0.003, y=y, z=0.16) for y in (0, 0.004)])
+    cloud = colored(np.concatenate([plant, other, piece]), LEAF_RGB)
+    return cloud, colored(np.zeros((0, 3)), LEAF_RGB), piece
+
+
+def test_a_piece_of_tip_too_small_to_be_a_plant_joins_the_plant_it_reaches() -> None:
+    """A group no stem reaches and too small to be a plant (under ``min_points``) is a
+    fragment: it joins the plant it reaches as a doubtful group does, instead of being
+    dropped as noise (an independent renderer's touching plots: tips of 40-100 points 1-6 cm
+    from their leaves, 4-5.5 cm of width each)."""
+    settings, soil = PlantSettings(), np.zeros((0, 3))
+    cloud, none, piece = _plant_with_a_cut_tip(0.6 * ATTACH_GAP_M)
+    assert len(piece) < settings.min_points
+    search = search_plants(cloud, soil, settings, 0.15, doubtful=none)
+    first, second = search.plants
+    assert first.traits.points == 9000 + len(piece) and second.traits.points == 9000
+    reach = 0.15 + 0.6 * ATTACH_GAP_M + 0.087  # the piece's far end from the first's centre
+    assert first.traits.width_m > 0.15 + reach - 0.01  # from the rim at -x to the piece's end
+    assert any("fragments too small to be plants" in m for m in search.merges)
+    # the control: beyond the gap the piece is noise, as before, and the width the disc's
+    cloud, none, piece = _plant_with_a_cut_tip(1.5 * ATTACH_GAP_M)
+    far = search_plants(cloud, soil, settings, 0.15, doubtful=none)
+    assert [p.traits.points for p in far.plants] == [9000, 9000]
+    assert far.plants[0].traits.width_m < 0.31
+    # and without doubtful points at all, the same join
+    alone = search_plants(*_plant_with_a_cut_tip(0.6 * ATTACH_GAP_M)[:1], soil, settings, 0.15)
+    assert [p.traits.points for p in alone.plants] == [9000 + len(piece), 9000]
+
+
+def test_a_tip_in_pieces_kept_and_doubtful_is_followed_through_both() -> None:
+    """The fragments and the doubtful points are searched together: a doubtful stretch
+    touching the plant leads on to a fragment beyond it."""
+    settings, soil = PlantSettings(), np.zeros((0, 3))
+    cloud, _, piece = _plant_with_a_cut_tip(3.0 * ATTACH_GAP_M)  # far beyond any gap
+    bridge = _strip(0.155, 0.15 + 3.0 * ATTACH_GAP_M - 0.003, 0.006, z=0.16)
+    search = search_plants(cloud, soil, settings, 0.15, doubtful=colored(bridge, LEAF_RGB))
+    first = search.plants[0]
+    assert search.joined == len(bridge)
+    assert first.traits.points == 9000 + len(piece) + len(bridge)
