@@ -351,28 +351,23 @@ def _with_loose(
     :data:`~fieldapp.recon.attach.ATTACH_GROUND_GAP_M`.
 
     Why the fragments: a drooping tip seen by few views, at the plant's widest extent, came
-    through as groups of 40-100 points 1-3 cm from the rest of its leaf, which density
+    through as groups of 40-100 points 1-6 cm from the rest of its leaf, which density
     clustering drops as too small to be a plant; on an independent renderer's touching plots
     that took 4-5.5 cm off the widths of the plants they ended."""
     fragments = np.flatnonzero(labels == FRAGMENT)
     labels[fragments] = NOISE
-    loose = cloud.points[fragments]
-    if doubtful is not None and len(doubtful):
-        loose = np.concatenate([loose, doubtful.points])
+    doubtful = doubtful if doubtful is not None else Cloud.empty()
+    loose = Cloud.concatenate([cloud.select(fragments), doubtful])
     if len(loose) == 0:
         return cloud, labels, ambiguous, 0
-    colors = cloud.colors[fragments]
-    if doubtful is not None and len(doubtful):
-        colors = np.concatenate([colors, doubtful.colors])
     floating = np.zeros(len(loose), dtype=bool)
     if coloured:
-        ground = local_ground_z_m(soil_m, loose[:, :2], 0.0, soil_tree)
-        clear = loose[:, 2] - ground > ON_THE_SOIL_M
-        floating = clear & (excess_green(colors) >= NOT_GREEN_EXG)
-    found = attach_doubtful(cloud.points, labels, loose, floating=floating)
+        ground = local_ground_z_m(soil_m, loose.points[:, :2], 0.0, soil_tree)
+        clear = loose.points[:, 2] - ground > ON_THE_SOIL_M
+        floating = clear & (excess_green(loose.colors) >= NOT_GREEN_EXG)
+    found = attach_doubtful(cloud.points, labels, loose.points, floating=floating)
     own, theirs = found[: len(fragments)], found[len(fragments) :]
     labels[fragments] = own
-    ambiguous[fragments[own >= 0]] = False
     if (own >= 0).any():
         merges.append(
             f"{int((own >= 0).sum())} points of fragments too small to be plants joined to the "
@@ -381,7 +376,7 @@ def _with_loose(
     joins = theirs >= 0
     if not joins.any():
         return cloud, labels, ambiguous, 0
-    joined = doubtful.select(joins)  # type: ignore[union-attr]  # theirs is empty without it
+    joined = doubtful.select(joins)
     return (
         Cloud.concatenate([cloud, joined]),
         np.concatenate([labels, theirs[joins]]),
