@@ -33,7 +33,8 @@ outright, 2-5 cm on from its leaf's kept points on this project's touching plot 
 (median 2.9 cm), 5.8-6.5 cm at the drooping tips that set the widths of an independent
 renderer's touching plants (2026-12-06, session 36; 5 cm until then). At 8 cm: the widths of
 three of that renderer's four touching plots 1.75 / 2.39 / 1.66 -> 1.62 / 1.66 / 0.76 cm, and
-the same to the digit on 32 plots of this project's two plant models and the fourth renderer.
+the same to the digit on 38 inputs of this project's two plant models, leaning plants and
+the fourth renderer (its touching 3 2.11 -> 2.10).
 The margin below is what keeps a group between two plants out; a group near the soil
 keeps :data:`ATTACH_GROUND_GAP_M`."""
 ATTACH_GROUND_GAP_M = 0.05
