@@ -38,9 +38,11 @@ the fourth renderer (its touching 3 2.11 -> 2.10).
 The margin below is what keeps a group between two plants out; a group near the soil
 keeps :data:`ATTACH_GROUND_GAP_M`."""
 ATTACH_GROUND_GAP_M = 0.05
-"""The gap for a group with a point near the soil (``floating`` false): there a group may be
-a clod or the soil beside a leaf, not a tip (a depth-only plot with 40 clods a square metre:
-at 8 cm clods joined four plants, width RMSE 0.87 -> 2.12 cm)."""
+"""The gap for a group of doubtful points with a point near the soil, or not green, or on a
+plot without colour: there a group may be a clod or the soil beside a leaf, not a tip (a
+depth-only plot with 40 clods a square metre: at 8 cm clods joined four plants, width RMSE
+0.87 -> 2.12 cm). A piece of the cloud too small to be a plant crosses no gap there
+(``plants._with_loose``): it may be a weed."""
 ATTACH_MARGIN_M = 0.01
 """A group joins the plant nearest it only where every other plant's points lie at least this
 much farther: nearer, which of two touching plants a sparse pair belongs to is a guess (the
@@ -60,16 +62,15 @@ def attach_doubtful(
     reach_m: float = ATTACH_REACH_M,
     gap_m: float = ATTACH_GAP_M,
     margin_m: float = ATTACH_MARGIN_M,
-    floating: NDArray[np.bool_] | None = None,
-    ground_gap_m: float = ATTACH_GROUND_GAP_M,
+    gaps_m: NDArray[np.float64] | None = None,
 ) -> NDArray[np.intp]:
     """(D,) the label each of ``doubtful_m`` (D, 3) takes: that of the labelled point of
     ``points_m`` (N, 3), ``labels`` (N,) (-1: in no plant), it reaches along the shortest
     path of steps of at most ``reach_m`` through doubtful points; for a group of doubtful
     points (steps of at most ``reach_m``) that reaches none so, that of the labelled point
     nearest the group, within ``gap_m``, where every other label's points lie ``margin_m``
-    farther (``ground_gap_m`` for a group with a point not ``floating`` (D,), clear of the
-    soil; every group floats when it is not given); -1 for the rest."""
+    farther; -1 for the rest. ``gaps_m``: (D,) the widest gap each point lets its group cross
+    (at most ``gap_m``; a group crosses the narrowest of its points'), where they differ."""
     d = len(doubtful_m)
     found = np.full(d, -1, dtype=np.intp)
     if d == 0:
@@ -108,8 +109,7 @@ def attach_doubtful(
         index = members[0]  # the group's point nearest a plant
         if not np.isfinite(distance[index]):
             continue
-        on_the_soil = floating is not None and not floating[alone[members]].all()
-        if on_the_soil and distance[index] > ground_gap_m:
+        if gaps_m is not None and distance[index] > gaps_m[alone[members]].min():
             continue
         label = labels[labelled[nearest[index]]]
         other = _nearest_other(points_m, labels, labelled, around, alone_m, members, label)

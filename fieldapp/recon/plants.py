@@ -20,7 +20,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from fieldapp.recon.attach import attach_doubtful
+from fieldapp.recon.attach import ATTACH_GAP_M, ATTACH_GROUND_GAP_M, attach_doubtful
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green, grey_group, not_green_group
 from fieldapp.recon.geodesic import (
@@ -344,11 +344,14 @@ def _with_loose(
     and the cloud's own :data:`FRAGMENT` points, labelled in place (:data:`NOISE` where they
     reach none). The two are searched together, so a leaf's tip the outlier filters left in
     pieces (a few points kept, a few doubtful) is followed through both. Returns the cloud, its
-    labels and doubts, and how many doubtful points joined. A group may be a clod, not a
-    tip, where a point of it lies within :data:`ON_THE_SOIL_M` of the local ground
-    (``soil_m``), is not green by its own colour, or the plot has no colour (``coloured``:
-    clods cut from the soil float too, their lower part kept as soil): it joins only within
-    :data:`~fieldapp.recon.attach.ATTACH_GROUND_GAP_M`.
+    labels and doubts, and how many doubtful points joined. A group joins across
+    :data:`~fieldapp.recon.attach.ATTACH_GAP_M` where every point of it floats: more than
+    :data:`ON_THE_SOIL_M` above the local ground (``soil_m``) and green by its own colour, on
+    a plot with colour (``coloured``). Else it may be a clod (clods cut from the soil float
+    too, their lower part kept as soil) or, a piece of the cloud on the soil, a weed: a
+    doubtful group then joins within
+    :data:`~fieldapp.recon.attach.ATTACH_GROUND_GAP_M`, a group with a piece in it only point
+    by point.
 
     Why the fragments: a drooping tip seen by few views, at the plant's widest extent, came
     through as groups of 40-100 points 1-6 cm from the rest of its leaf, which density
@@ -365,7 +368,11 @@ def _with_loose(
         ground = local_ground_z_m(soil_m, loose.points[:, :2], 0.0, soil_tree)
         clear = loose.points[:, 2] - ground > ON_THE_SOIL_M
         floating = clear & (excess_green(loose.colors) >= NOT_GREEN_EXG)
-    found = attach_doubtful(cloud.points, labels, loose.points, floating=floating)
+    # a piece on the soil may be a weed, a doubtful group there a clod (ATTACH_GROUND_GAP_M)
+    pieces = np.arange(len(loose)) < len(fragments)
+    on_soil_gap_m = np.where(pieces, 0.0, ATTACH_GROUND_GAP_M)
+    gaps_m = np.where(floating, ATTACH_GAP_M, on_soil_gap_m)
+    found = attach_doubtful(cloud.points, labels, loose.points, gaps_m=gaps_m)
     own, theirs = found[: len(fragments)], found[len(fragments) :]
     labels[fragments] = own
     if (own >= 0).any():

@@ -214,3 +214,27 @@ def test_a_tip_in_pieces_kept_and_doubtful_is_followed_through_both() -> None:
     first = search.plants[0]
     assert search.joined == len(bridge)
     assert first.traits.points == 9000 + len(piece) + len(bridge)
+
+
+def test_a_small_weed_on_the_soil_beside_a_plant_stays_out() -> None:
+    """A piece too small to be a plant standing on the soil may be a weed: it joins a plant
+    only point by point, never across a gap, where a piece of a tip floating above the soil
+    crosses it (the control: the same piece lifted clear of the soil joins). The piece stands
+    4.4-6.4 cm from the stem's side, two 2.5 cm cells from its cells, so that density
+    clustering keeps it apart."""
+    settings = PlantSettings()
+    rng = np.random.default_rng(22)
+    plant = seedling(rng, 0.0, 0.0, 0.30, 0.30, 9000)  # stem of 8 mm radius at the origin
+    other = seedling(rng, 0.8, 0.0, 0.30, 0.30, 9000)
+    soil = ground_patch(rng, 1.0, 4000)
+    x = np.arange(0.052, 0.073, 0.004)
+    # a tuft rising from the soil to 4.2 cm: its top stands clear, the tuft is one group
+    rise = np.tile(np.arange(0.002, 0.043, 0.008), len(x))
+    weed = np.column_stack([np.repeat(x, 6), np.zeros(len(rise)), rise])
+    assert len(weed) < settings.min_points
+    for lift, joins in ((0.0, False), (0.10, True)):
+        piece = weed + np.array([0.0, 0.0, lift])
+        cloud = colored(np.concatenate([plant, other, piece]), LEAF_RGB)
+        search = search_plants(cloud, soil, settings, 0.15)
+        first = search.plants[0]
+        assert first.traits.points == 9000 + (len(piece) if joins else 0), lift
