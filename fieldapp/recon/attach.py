@@ -71,6 +71,8 @@ def attach_doubtful(
     nearest the group, within ``gap_m``, where every other label's points lie ``margin_m``
     farther; -1 for the rest. ``gaps_m``: (D,) the widest gap each point lets its group cross
     (at most ``gap_m``; a group crosses the narrowest of its points'), where they differ."""
+    if gaps_m is not None:  # no search farther than the widest gap any point allows
+        gap_m = min(gap_m, float(gaps_m.max(initial=0.0)))
     d = len(doubtful_m)
     found = np.full(d, -1, dtype=np.intp)
     if d == 0:

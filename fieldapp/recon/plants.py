@@ -23,6 +23,7 @@ from scipy.spatial import cKDTree
 from fieldapp.recon.attach import ATTACH_GAP_M, ATTACH_GROUND_GAP_M, attach_doubtful
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green, grey_group, not_green_group
+from fieldapp.recon.filters import not_green
 from fieldapp.recon.geodesic import (
     UNREACHED,
     Assignment,
@@ -346,8 +347,9 @@ def _with_loose(
     pieces (a few points kept, a few doubtful) is followed through both. Returns the cloud, its
     labels and doubts, and how many doubtful points joined. A group joins across
     :data:`~fieldapp.recon.attach.ATTACH_GAP_M` where every point of it floats: more than
-    :data:`ON_THE_SOIL_M` above the local ground (``soil_m``) and green by its own colour, on
-    a plot with colour (``coloured``). Else it may be a clod (clods cut from the soil float
+    :data:`ON_THE_SOIL_M` above the local ground (``soil_m``) and green by its own colour
+    (:func:`~fieldapp.recon.filters.not_green`, the pass-through's rule), on a plot with
+    colour (``coloured``). Else it may be a clod (clods cut from the soil float
     too, their lower part kept as soil) or, a piece of the cloud on the soil, a weed: a
     doubtful group then joins within
     :data:`~fieldapp.recon.attach.ATTACH_GROUND_GAP_M`, a group with a piece in it only point
@@ -367,7 +369,7 @@ def _with_loose(
     if coloured:
         ground = local_ground_z_m(soil_m, loose.points[:, :2], 0.0, soil_tree)
         clear = loose.points[:, 2] - ground > ON_THE_SOIL_M
-        floating = clear & (excess_green(loose.colors) >= NOT_GREEN_EXG)
+        floating = clear & ~not_green(loose.colors)
     # a piece on the soil may be a weed, a doubtful group there a clod (ATTACH_GROUND_GAP_M)
     pieces = np.arange(len(loose)) < len(fragments)
     on_soil_gap_m = np.where(pieces, 0.0, ATTACH_GROUND_GAP_M)
