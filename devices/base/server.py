@@ -262,6 +262,8 @@ class ProtocolServer:
                 serving = self._authenticator_alive()
                 if router in events:
                     self._drain(router, serving)
+                    if self._frozen.is_set() or self._crashed.is_set():
+                        continue  # ... or while answering: no telemetry either
                 if serving:
                     self._tick(publisher, telemetry)
                 else:
@@ -316,6 +318,8 @@ class ProtocolServer:
 
     def _drain(self, router: zmq.Socket[bytes], serving: bool) -> None:
         for _ in range(100):
+            if self._frozen.is_set() or self._crashed.is_set():
+                return  # a fault injected between two requests: the later ones wait, unanswered
             try:
                 frames = router.recv_multipart(zmq.NOBLOCK, copy=False)
             except zmq.Again:

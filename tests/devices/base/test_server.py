@@ -449,6 +449,55 @@ def test_closing_the_client_ends_a_request_still_waiting_for_its_reply(
     client.close()  # twice is harmless
 
 
+def test_a_fault_between_two_queued_requests_leaves_the_later_one_for_after_the_thaw(
+    sim: SimulatedBase,
+    inproc_context: zmq.Context[zmq.Socket[bytes]],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A base frozen right after one reply answers nothing more, not even a request already
+    queued behind it (the CI's failure: a status sent after the fault was answered in the same
+    pass as the hello before it). Thawed, it answers that request: nothing is lost."""
+    server = sim.server
+    sim.inject_fault(SimFault.FREEZE)
+    sock = inproc_context.socket(zmq.DEALER)
+    sock.setsockopt(zmq.LINGER, 0)
+    sock.connect(sim.command_endpoint)
+    try:
+        for n in (1, 2):  # in-process: both are queued for the frozen base once sent
+            sock.send_multipart(
+                [b"", json.dumps({"v": 1, "id": f"h-{n}", "cmd": "heartbeat"}).encode()]
+            )
+        answered: list[bytes] = []
+        answer, drain = server._answer, server._drain
+        drained = threading.Event()
+
+        def answer_then_freeze(frames: list[bytes], client: Any) -> tuple[list[bytes], bytes]:
+            answered.append(frames[-1])
+            try:
+                return answer(frames, client)
+            finally:
+                server.freeze()  # the fault strikes right after this reply
+
+        def drain_and_tell(router: zmq.Socket[bytes], serving: bool) -> None:
+            drain(router, serving)
+            drained.set()
+
+        monkeypatch.setattr(server, "_answer", answer_then_freeze)
+        monkeypatch.setattr(server, "_drain", drain_and_tell)
+        sim.clear_faults()
+        assert drained.wait(timeout=20.0)
+        assert [json.loads(body)["id"] for body in answered] == ["h-1"]
+        monkeypatch.setattr(server, "_answer", answer)
+        sim.clear_faults()
+        ids = []
+        for _ in (1, 2):
+            assert sock.poll(20_000)
+            ids.append(json.loads(sock.recv_multipart()[1])["id"])
+        assert ids == ["h-1", "h-2"]
+    finally:
+        sock.close()  # else the shared context would wait for it at teardown
+
+
 def test_offline_when_nothing_listens(make_client: MakeClient) -> None:
     client = make_client("tcp://127.0.0.1:9", timing=ClientTiming(request_timeout_s=0.2, retries=1))
     with pytest.raises(BaseOffline, match=r"no reply in 2 tries over 0\.4 s"):
