@@ -21,12 +21,15 @@ From there the ribbon is continued in 1 cm steps (:func:`follow`) along the para
 arc length) to the last :data:`FIT_M` of its midrib, its width following the taper fitted there;
 each step takes the points inside it (across the ribbon within its half width, off its plane
 within :data:`PLANE_TOLERANCE_M`) and is re-centred on them, so a leaf is followed as far as it
-runs on. A leaf that really ends there (narrow, tapering) finds next to nothing. A neighbour's
+runs on, and past its width the leaf's surface out to its edges (:func:`_edges`: a blade is
+channelled, and wider than the taper fitted near its base). A leaf that really ends there
+(narrow, tapering) finds next to nothing. A neighbour's
 point that a continued ribbon runs through changes hands, unless it lies on one of the
 neighbour's own leaves where that leaf is held (traced, more than :data:`FIT_M` before its
 trace's end: a trace ends a little past where the contact begins when the contact builds up
 gradually, a leaf tip lying on it) and is not ambiguous; a point two ribbons run through goes to
-the one that reached it nearer to where its leaf was seen whole.
+the one that reached it nearer to where its leaf was seen whole. The points the steps missed
+among those they took go with them (:func:`_with_strays`).
 """
 
 from __future__ import annotations
@@ -81,6 +84,17 @@ MAX_GAP_M = 0.03
 MIN_WIDTH_M = 0.01
 MAX_REACH_M = 0.5
 """A ribbon stops after this long without points, below this width, or this far on."""
+EDGE_REACH_M = 0.02
+EDGE_GAP_M = 0.005
+"""A step also takes the points of the leaf's surface that run on past its width without a
+gap this wide, at most this far out (:func:`_edges`)."""
+STRAY_NEIGHBOURS = 12
+STRAY_SHARE = 0.75
+STRAY_REACH_M = 0.01
+STRAY_ROUNDS = 4
+"""Near the points that moved (this close to those that moved last, for at most the rounds),
+a point goes to the plant that holds this share of its nearest points of stems
+(:func:`_with_strays`)."""
 
 
 @dataclass
@@ -265,12 +279,13 @@ def _step(
     normal /= max(float(np.linalg.norm(normal)), 1e-12)
     across_dir = np.cross(normal, direction)
     half = width / 2.0 + EDGE_MARGIN_M
-    radius = float(np.sqrt(half**2 + STEP_M**2 + PLANE_TOLERANCE_M**2))
+    reach = half + EDGE_REACH_M
+    radius = float(np.sqrt(reach**2 + STEP_M**2 + PLANE_TOLERANCE_M**2))
     near = np.asarray(tree.query_ball_point(centre, radius), dtype=np.intp)
     offset = points_m[near] - centre
     along, across, off = offset @ direction, offset @ across_dir, offset @ normal
-    inside = (np.abs(along) <= STEP_M / 2) & (np.abs(off) <= PLANE_TOLERANCE_M)
-    inside &= np.abs(across) <= half
+    slab = np.abs(along) <= STEP_M / 2
+    inside = slab & (np.abs(off) <= PLANE_TOLERANCE_M) & (np.abs(across) <= half)
     if inside.sum() < MIN_STEP_POINTS:
         return None
     low, high = np.percentile(across[inside], [5.0, 95.0])
@@ -278,7 +293,41 @@ def _step(
     on_plane = inside & (np.abs(off) <= PLANE_TOLERANCE_M / 2)  # not a sheet it lies on
     lift = float(np.median(off[on_plane])) if on_plane.any() else 0.0
     moved = centre + shift * across_dir + lift * normal
-    return near[inside], float(high - low), moved
+    taken = inside | _edges(across, off, slab, inside, half)
+    return near[taken], float(high - low), moved
+
+
+def _edges(
+    across: NDArray[np.float64],
+    off: NDArray[np.float64],
+    slab: NDArray[np.bool_],
+    inside: NDArray[np.bool_],
+    half: float,
+) -> NDArray[np.bool_]:
+    """The points of a step's ``slab`` beyond its ``half`` width (``across`` the ribbon) on
+    either side that continue the leaf's surface outwards without a gap of
+    :data:`EDGE_GAP_M`, at most :data:`EDGE_REACH_M` out: the leaf is wider than the ribbon's
+    taper there (fitted near its base, never widening; a maize blade widens to its middle)
+    and its edges would stay with the neighbour, set its width. The surface is the section's
+    profile (``off`` the ribbon's plane against ``across``, a parabola fitted to the points
+    ``inside``): a blade is channelled or rolled, its edges a centimetre or more off the plane
+    where the middle lies on it; a point more than half the plane's tolerance off the profile
+    is another sheet."""
+    edge = np.zeros(len(across), dtype=bool)
+    if inside.sum() < 3 * MIN_STEP_POINTS:
+        return edge
+    profile = np.polynomial.Polynomial.fit(across[inside], off[inside], 2)
+    on_surface = slab & (np.abs(off - profile(across)) <= PLANE_TOLERANCE_M / 2)
+    for sign in (1.0, -1.0):
+        out = sign * across - half
+        beyond = np.flatnonzero(on_surface & (out > 0.0) & (out <= EDGE_REACH_M))
+        if len(beyond) == 0:
+            continue
+        order = beyond[np.argsort(out[beyond])]
+        steps = np.diff(np.concatenate([[0.0], out[order]]))
+        gaps = np.flatnonzero(steps > EDGE_GAP_M)
+        edge[order[: gaps[0] if len(gaps) else len(order)]] = True
+    return edge
 
 
 def _touching(
@@ -378,9 +427,11 @@ def follow_leaves(
     """The leaves of every plant with a point ``ambiguous`` (N,) followed across their
     contacts: ``labels`` (N,) (the stem of each point, 0..S-1 for the stems whose feet are
     ``feet_m`` (S, 3); other labels are left alone) are changed in place where a leaf's ribbon
-    runs on through a neighbour's points. Returns the points that changed hands. Every such
-    plant, not only those over the report's flag: a plant whose share of ambiguous points
-    slipped under the flag lost its ribbon, and its leaf, on a 0.1 % change."""
+    runs on through a neighbour's points, with the points its steps left among them
+    (:func:`_with_strays`). Returns
+    the points that changed hands. Every such plant, not only those over the report's flag: a
+    plant whose share of ambiguous points slipped under the flag lost its ribbon, and its
+    leaf, on a 0.1 % change."""
     stems = len(feet_m)
     on_stems = (labels >= 0) & (labels < stems)
     traced = np.flatnonzero(np.bincount(labels[on_stems & ambiguous], minlength=stems))
@@ -398,4 +449,48 @@ def follow_leaves(
         nearest[taken[better]] = past[better]
     won = np.flatnonzero(claimer >= 0)
     labels[won] = claimer[won]
-    return won
+    movable = on_stems & (~held | ambiguous)
+    return _with_strays(points_m, tree, labels, won, movable, on_stems)
+
+
+def _with_strays(
+    points_m: NDArray[np.float64],
+    tree: cKDTree,
+    labels: NDArray[np.intp],
+    won: NDArray[np.intp],
+    movable: NDArray[np.bool_],
+    on_stems: NDArray[np.bool_],
+) -> NDArray[np.intp]:
+    """``won`` and the points left scattered among the points around them: a ribbon's steps,
+    1 cm slabs across a curving leaf, miss a point here and there, and each one left to the
+    neighbour stretches the neighbour's width as far as the leaf runs. Near the points that
+    moved, a ``movable`` point goes to the plant that holds at least :data:`STRAY_SHARE` of its
+    :data:`STRAY_NEIGHBOURS` nearest points of stems (``on_stems``); repeated
+    (:data:`STRAY_ROUNDS` at most) around the points that moved. Where two plants' points meet
+    along a line, or lie in two sheets over each other, each has about half of the others'
+    neighbours, and stays. ``labels`` is changed in place."""
+    taken = np.zeros(len(points_m), dtype=bool)
+    taken[won] = True
+    fresh = won
+    for _ in range(STRAY_ROUNDS):
+        if len(fresh) == 0:
+            break
+        around = np.unique(np.concatenate(tree.query_ball_point(points_m[fresh], STRAY_REACH_M)))
+        candidates = around[movable[around] & ~taken[around]]
+        if len(candidates) == 0:
+            break
+        _, near = tree.query(points_m[candidates], k=STRAY_NEIGHBOURS + 1)
+        near = near[:, 1:]
+        counted = on_stems[near]
+        other = np.where(counted & (labels[near] != labels[candidates][:, None]), labels[near], -1)
+        best = np.full(len(candidates), -1, dtype=np.intp)
+        votes = np.zeros(len(candidates), dtype=np.intp)
+        for column in other.T:  # the plant that holds most of them
+            count = (other == column[:, None]).sum(axis=1)
+            better = (column >= 0) & (count > votes)
+            best[better], votes[better] = column[better], count[better]
+        moves = (votes > 0) & (votes >= STRAY_SHARE * counted.sum(axis=1))
+        fresh = candidates[moves]
+        labels[fresh] = best[moves]
+        taken[fresh] = True
+    return np.flatnonzero(taken)

@@ -15,9 +15,10 @@ from .test_plants_stems import NO_SOIL, own_share, width_m
 from .touching import x_pair
 
 
-def _search(sheet_aware: bool, seed: int):  # type: ignore[no-untyped-def]
+def _search(sheet_aware: bool, seed: int, follow_leaves: bool = True):  # type: ignore[no-untyped-def]
     a, b = x_pair(np.random.default_rng(seed))
-    settings = PlantSettings(stems=StemSettings(sheet_aware=sheet_aware))
+    stems = StemSettings(sheet_aware=sheet_aware, follow_leaves=follow_leaves)
+    settings = PlantSettings(stems=stems)
     search = search_plants(colored(np.concatenate([a, b]), LEAF_RGB), NO_SOIL, settings, 0.15)
     first, second = sorted(search.plants, key=lambda p: p.traits.x_m)
     return a, b, first, second
@@ -35,9 +36,21 @@ def test_a_leaf_crossing_the_neighbours_in_an_x_stays_with_its_plant(seed: int) 
 def test_with_blurred_normals_the_neighbour_takes_the_leaf_at_the_x(seed: int) -> None:
     """The reason for the sheets: with one normal per voxel, blurred from both sheets at the
     crossing, A's path pays as much going straight through the X as turning there, and B,
-    whose path reaches the X along 10 cm of its own leaf, takes A's leaf around it."""
-    _, b, _, second = _search(False, seed)
+    whose path reaches the X along 10 cm of its own leaf, takes A's leaf around it (the
+    assignment alone: the ribbons, taking a leaf's edges and the points their steps missed,
+    now take it back, below)."""
+    _, b, _, second = _search(False, seed, follow_leaves=False)
     assert second.traits.width_m > width_m(b) + 0.02
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_without_the_sheets_the_ribbons_take_the_leaf_at_the_x_back(seed: int) -> None:
+    """Two ways to the same answer: B's assignment holds A's leaf around the X, and A's
+    ribbon, run on through it, takes it back whole (before its steps took the edges and the
+    points they missed, B kept enough of it to come out 6-10 cm too wide)."""
+    a, b, first, second = _search(False, seed)
+    assert second.traits.width_m == pytest.approx(width_m(b), abs=0.01)
+    assert first.traits.width_m == pytest.approx(width_m(a), abs=0.01)
 
 
 def test_where_the_leaves_cross_a_blurred_voxel_gets_its_sheet_back() -> None:
