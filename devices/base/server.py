@@ -210,6 +210,10 @@ class ProtocolServer:
         else:
             self._frozen.clear()
 
+    def _faulted(self) -> bool:
+        """Frozen or crashed: not one more reply or message."""
+        return self._frozen.is_set() or self._crashed.is_set()
+
     def crash(self) -> None:
         """Drop both sockets at once without halting anything, like a dead process."""
         self._crashed.set()
@@ -246,7 +250,7 @@ class ProtocolServer:
                     time.sleep(self.timing.poll_period_s)
                     continue
                 events = dict(poller.poll(timeout=round(self.timing.poll_period_s * 1000)))
-                if self._frozen.is_set() or self._crashed.is_set():
+                if self._faulted():
                     continue  # a fault injected during the poll: not one more reply
                 now_s = self._clock()
                 if self._reload_asked.is_set() or now_s >= next_reload_s:
@@ -262,7 +266,7 @@ class ProtocolServer:
                 serving = self._authenticator_alive()
                 if router in events:
                     self._drain(router, serving)
-                    if self._frozen.is_set() or self._crashed.is_set():
+                    if self._faulted():
                         continue  # ... or while answering: no telemetry either
                 if serving:
                     self._tick(publisher, telemetry)
@@ -318,7 +322,7 @@ class ProtocolServer:
 
     def _drain(self, router: zmq.Socket[bytes], serving: bool) -> None:
         for _ in range(100):
-            if self._frozen.is_set() or self._crashed.is_set():
+            if self._faulted():
                 return  # a fault injected between two requests: the later ones wait, unanswered
             try:
                 frames = router.recv_multipart(zmq.NOBLOCK, copy=False)

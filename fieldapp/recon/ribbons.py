@@ -314,13 +314,14 @@ def _edges(
     where the middle lies on it; a point more than half the plane's tolerance off the profile
     is another sheet."""
     edge = np.zeros(len(across), dtype=bool)
-    if inside.sum() < 3 * MIN_STEP_POINTS:
-        return edge
+    beside = slab & (np.abs(across) > half) & (np.abs(across) <= half + EDGE_REACH_M)
+    if not beside.any() or inside.sum() < 3 * MIN_STEP_POINTS:
+        return edge  # most steps: the leaf is no wider than the ribbon
     profile = np.polynomial.Polynomial.fit(across[inside], off[inside], 2)
     on_surface = slab & (np.abs(off - profile(across)) <= PLANE_TOLERANCE_M / 2)
     for sign in (1.0, -1.0):
         out = sign * across - half
-        beyond = np.flatnonzero(on_surface & (out > 0.0) & (out <= EDGE_REACH_M))
+        beyond = np.flatnonzero(beside & on_surface & (out > 0.0))
         if len(beyond) == 0:
             continue
         order = beyond[np.argsort(out[beyond])]
@@ -475,8 +476,10 @@ def _with_strays(
     for _ in range(STRAY_ROUNDS):
         if len(fresh) == 0:
             break
-        around = np.unique(np.concatenate(tree.query_ball_point(points_m[fresh], STRAY_REACH_M)))
-        candidates = around[movable[around] & ~taken[around]]
+        around = np.zeros(len(points_m), dtype=bool)
+        balls = tree.query_ball_point(points_m[fresh], STRAY_REACH_M, return_sorted=False)
+        around[np.concatenate(balls)] = True
+        candidates = np.flatnonzero(around & movable & ~taken)
         if len(candidates) == 0:
             break
         _, near = tree.query(points_m[candidates], k=STRAY_NEIGHBOURS + 1)
