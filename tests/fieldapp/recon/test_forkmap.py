@@ -8,6 +8,8 @@ import multiprocessing
 import os
 import signal
 import threading
+import time
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -33,6 +35,33 @@ def test_results_come_in_order_from_this_process_and_the_worker() -> None:
     assert [value for value, _ in results] == [x * x for x in range(40)]
     assert results[0][1] == worker  # the worker takes the first item before anything else
     assert {pid for _, pid in results} <= {os.getpid(), worker}
+
+
+def _done_here_or_wait_for_two_there(job: tuple[str, int, int]) -> tuple[int, bool]:
+    """In the worker: item ``x`` marked done in ``folder``. Here: waits until the worker has
+    done two items (a hang guard of 60 s, not a speed check); whether it saw them."""
+    folder, parent, x = job
+    if os.getpid() != parent:
+        Path(folder, str(x)).touch()
+        return x, True
+    deadline = time.monotonic() + 60.0
+    while len(os.listdir(folder)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.001)
+    return x, len(os.listdir(folder)) >= 2
+
+
+def test_the_worker_has_its_next_item_before_it_finishes_one(tmp_path: Path) -> None:
+    """This process looks at the worker only between its own items: the worker holds the next
+    one queued, so it goes on while this process is busy (given one at a time, it waited for
+    the end of this process's item, here for ever)."""
+    with ForkedMap(2) as runner:
+        results = list(
+            runner.map(
+                _done_here_or_wait_for_two_there,
+                [(str(tmp_path), os.getpid(), x) for x in range(4)],
+            )
+        )
+    assert results == [(x, True) for x in range(4)]
 
 
 def test_one_thread_runs_every_pair_here() -> None:
@@ -127,8 +156,8 @@ def test_an_answer_no_longer_wanted_is_dropped() -> None:
     assert worker is not None
     try:
         worker.send(_square_and_pid, 3)
-        worker.send(_square_and_pid, 4)
-        assert worker.receive(60.0)[0] == 16
+        wanted = worker.send(_square_and_pid, 4)
+        assert worker.receive(wanted, 60.0)[0] == 16
     finally:
         worker.stop()
 
@@ -153,8 +182,8 @@ def test_closing_waits_for_the_worker_to_exit_not_for_a_clock_tick(
     monkeypatch.setattr(forkmap.time, "sleep", lambda s: (slept.append(s), real_sleep(s)))
     worker = _Worker.start()
     assert worker is not None
-    worker.send(_square_and_pid, 2)
-    assert worker.receive(60.0)[0] == 4
+    token = worker.send(_square_and_pid, 2)
+    assert worker.receive(token, 60.0)[0] == 4
     worker.stop()
     assert not worker._is_alive()
     assert all(s <= forkmap.EXIT_POLL_S for s in slept)
