@@ -328,7 +328,6 @@ def _serve(connection: Connection) -> None:
     stopping = threading.Event()
 
     def read() -> None:
-        job = None
         with contextlib.suppress(EOFError, OSError):
             while (job := connection.recv()) is not None:
                 jobs.put(job)

@@ -23,13 +23,13 @@ each step takes the points inside it (across the ribbon within its half width, o
 within :data:`PLANE_TOLERANCE_M`) and is re-centred on them, so a leaf is followed as far as it
 runs on, and past its width the leaf's surface out to its edges (:func:`_edges`: a blade is
 channelled, and wider than the taper fitted near its base). A leaf that really ends there
-(narrow, tapering) finds next to nothing. A neighbour's
-point that a continued ribbon runs through changes hands, unless it lies on one of the
-neighbour's own leaves where that leaf is held (traced, more than :data:`FIT_M` before its
-trace's end: a trace ends a little past where the contact begins when the contact builds up
-gradually, a leaf tip lying on it) and is not ambiguous; a point two ribbons run through goes to
-the one that reached it nearer to where its leaf was seen whole. The points the steps missed
-among those they took go with them (:func:`_with_strays`).
+(narrow, tapering) finds next to nothing. A neighbour's point that a continued ribbon runs
+through changes hands, unless it lies on one of the neighbour's own leaves where that leaf is
+held (traced, more than :data:`FIT_M` before its trace's end: a trace ends a little past where
+the contact begins when the contact builds up gradually, a leaf tip lying on it) and is not
+ambiguous; a point two ribbons run through goes to the one that reached it nearer to where its
+leaf was seen whole. The points the steps missed among those they took go with them
+(:func:`_with_strays`).
 """
 
 from __future__ import annotations
@@ -429,10 +429,9 @@ def follow_leaves(
     contacts: ``labels`` (N,) (the stem of each point, 0..S-1 for the stems whose feet are
     ``feet_m`` (S, 3); other labels are left alone) are changed in place where a leaf's ribbon
     runs on through a neighbour's points, with the points its steps left among them
-    (:func:`_with_strays`). Returns
-    the points that changed hands. Every such plant, not only those over the report's flag: a
-    plant whose share of ambiguous points slipped under the flag lost its ribbon, and its
-    leaf, on a 0.1 % change."""
+    (:func:`_with_strays`). Returns the points that changed hands. Every such plant, not only
+    those over the report's flag: a plant whose share of ambiguous points slipped under the
+    flag lost its ribbon, and its leaf, on a 0.1 % change."""
     stems = len(feet_m)
     on_stems = (labels >= 0) & (labels < stems)
     traced = np.flatnonzero(np.bincount(labels[on_stems & ambiguous], minlength=stems))
