@@ -15,7 +15,7 @@ from fieldapp.calib.board import Board
 from fieldapp.calib.intrinsics import calibrate_intrinsics, read_calibration_image
 from fieldapp.calib.observe import Observation, align_order
 from fieldapp.calib.stations import calibrate_stations
-from fieldapp.calib.views import calibrate_view_step
+from fieldapp.calib.views import ViewStepResult, calibrate_view_step
 from fieldapp.cli import main
 from fieldapp.errors import FieldappError
 from fieldapp.io.calibration import load_calibration
@@ -54,9 +54,15 @@ def test_intrinsics_from_simulated_ir_within_half_a_percent(boards_session, trut
     assert result.rms_px < 0.3
 
 
-def test_view_step_within_a_tenth_of_a_degree_and_2_mm(boards_session):
+@pytest.fixture(scope="module")
+def view_step(boards_session: Path) -> ViewStepResult:
+    """The view step calibrated from the boards (about 10 s: every view's corners found)."""
+    return calibrate_view_step(load_session(boards_session), VIEW_BOARD)
+
+
+def test_view_step_within_a_tenth_of_a_degree_and_2_mm(boards_session, view_step):
     session = load_session(boards_session)
-    result = calibrate_view_step(session, VIEW_BOARD)
+    result = view_step
     nominal = session.calibration.view_step
     assert nominal is not None
     moved_m, turned_deg = pose_error(result.T_view_k_view_k1, nominal.matrix)
@@ -65,9 +71,8 @@ def test_view_step_within_a_tenth_of_a_degree_and_2_mm(boards_session):
     assert 0.0005 < result.rmse_m < 0.005  # the feature RMSE is reported (paper: 1.8 mm)
 
 
-def test_stations_within_5_mm_and_0_3_degrees(boards_session, truth):
+def test_stations_within_5_mm_and_0_3_degrees(boards_session, truth, view_step):
     session = load_session(boards_session)
-    view_step = calibrate_view_step(session, VIEW_BOARD)
     step = session.calibration.view_step.model_copy(update={"matrix": view_step.T_view_k_view_k1})
     prior = session.calibration.stations.to_reference
     result = calibrate_stations(session, STATION_BOARD, step, 5, prior)
