@@ -43,48 +43,49 @@ def _without_leaf_ends() -> PlantSettings:
     )
 
 
-def _grounded_leaf(rng: np.random.Generator, n: int = 5000) -> NDArray[np.float64]:
-    """(n, 3) a 7 cm wide leaf from the stem at (0, 0) 15 cm up, leaving it 50 degrees from the
-    vertical and turning down (to 178 degrees by half its length) to meet the soil about 25
-    cm from the stem, its last 8 cm lying on the soil."""
+def _down_to_the_soil(
+    rng: np.random.Generator,
+    foot_xy: tuple[float, float],
+    azimuth_deg: float,
+    arc_m: float,
+    run_m: float,
+    lying_m: NDArray[np.float64],
+    n: int,
+) -> NDArray[np.float64]:
+    """(n, 3) a 7 cm wide leaf from the stem at ``foot_xy`` 15 cm up, along ``azimuth_deg``:
+    level for ``run_m``, then leaving the level 50 degrees from the vertical and turning down
+    (to 178 degrees by half of ``arc_m``) to meet the soil, then lying on it for ``lying_m``
+    (the distances past where it meets it)."""
     steps = 2000
     u = np.linspace(0.0, 1.0, steps)
     theta = np.radians(50.0 + 128.0 * np.minimum(u / 0.5, 1.0))
-    ds = 0.4 / steps
+    ds = arc_m / steps
     r = np.cumsum(np.sin(theta) * ds)
     z = 0.15 + np.cumsum(np.cos(theta) * ds)
     end = int(np.argmax(z <= 0.0))
-    lying = np.arange(1, int(0.08 / ds))
-    r = np.concatenate([r[:end], r[end - 1] + lying * ds])
-    z = np.concatenate([z[:end], np.full(len(lying), 0.004)])
+    level = np.arange(0.0, run_m, ds)
+    r = np.concatenate([level, run_m + r[:end], run_m + r[end - 1] + lying_m])
+    z = np.concatenate([np.full(len(level), 0.15), z[:end], np.full(len(lying_m), 0.004)])
     k = rng.integers(0, len(r), n)
     along = k / len(r)
     half = 0.035 * np.clip(np.minimum(along / 0.15 + 0.4, (1 - along) / 0.3), 0.05, 1.0)
     across = rng.uniform(-1.0, 1.0, n) * half
-    a = np.radians(290.0)
-    xy = r[k, None] * np.array([np.cos(a), np.sin(a)]) + across[:, None] * np.array(
-        [-np.sin(a), np.cos(a)]
+    a = np.radians(azimuth_deg)
+    xy = (
+        np.asarray(foot_xy)
+        + r[k, None] * np.array([np.cos(a), np.sin(a)])
+        + across[:, None] * np.array([-np.sin(a), np.cos(a)])
     )
     return np.column_stack([xy, z[k] + rng.normal(0.0, 0.002, n)])
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_a_leaf_come_down_to_the_soil_stays_with_its_plant(seed: int) -> None:
-    rng = np.random.default_rng(seed)
-    a = plant(rng, (0.0, 0.0), [(20.0, 0.22, 0.55, 0.15), (200.0, 0.35, 0.5, 0.12)], 0.6)
-    down = _grounded_leaf(rng)
-    b = plant(rng, (0.8, 0.0), [(180.0, 0.15, 0.60, 0.12), (0.0, 0.22, 0.40, 0.15)])
-    soil = ground_patch(rng, 1.2, 40000)
-    cloud = colored(np.concatenate([a, down, b]), (50, 110, 25))
-
-    search = search_plants(cloud, soil, PlantSettings(), 0.3)
-    assert len(search.plants) == 2
-    first = min(search.plants, key=lambda p: np.hypot(p.traits.x_m, p.traits.y_m))
-    assert np.hypot(first.traits.x_m, first.traits.y_m) < 0.03  # at its stem, not the leaf's end
-    assert len(first.cloud) >= 0.98 * (len(a) + len(down))
-    assert f"1 {MERGED}" in search.merges
-    # the control: the leaf's end is a "plant" without the rule
-    assert len(search_plants(cloud, soil, _without_leaf_ends(), 0.3).plants) == 3
+def _grounded_leaf(rng: np.random.Generator, n: int = 5000) -> NDArray[np.float64]:
+    """(n, 3) a 7 cm wide leaf from the stem at (0, 0) 15 cm up, leaving it 50 degrees from the
+    vertical and turning down (to 178 degrees by half its length) to meet the soil about 25
+    cm from the stem, its last 8 cm lying on the soil."""
+    ds = 0.4 / 2000
+    lying = np.arange(1, int(0.08 / ds)) * ds
+    return _down_to_the_soil(rng, (0.0, 0.0), 290.0, 0.4, 0.0, lying, n)
 
 
 def _two_nodes(x_m: float) -> GridNodes:
@@ -199,28 +200,8 @@ def _come_down(
     """(5000, 3) a 7 cm wide leaf from 15 cm up on the stem at ``foot_xy``: level for ``run_m``
     along ``azimuth_deg``, then arching over and down to the soil about 18 cm farther, its last
     6 cm lying on it."""
-    steps = 2000
-    u = np.linspace(0.0, 1.0, steps)
-    theta = np.radians(50.0 + 128.0 * np.minimum(u / 0.5, 1.0))
-    ds = 0.5 / steps
-    r = np.cumsum(np.sin(theta) * ds)
-    z = 0.15 + np.cumsum(np.cos(theta) * ds)
-    end = int(np.argmax(z <= 0.0))
-    level = np.arange(0.0, run_m, ds)
     lying = np.arange(1, 120) * 0.0005
-    r = np.concatenate([level, run_m + r[:end], run_m + r[end - 1] + lying])
-    z = np.concatenate([np.full(len(level), 0.15), z[:end], np.full(len(lying), 0.004)])
-    k = rng.integers(0, len(r), 5000)
-    along = k / len(r)
-    half = 0.035 * np.clip(np.minimum(along / 0.15 + 0.4, (1 - along) / 0.3), 0.05, 1.0)
-    across = rng.uniform(-1.0, 1.0, 5000) * half
-    a = np.radians(azimuth_deg)
-    xy = (
-        np.asarray(foot_xy)
-        + r[k, None] * np.array([np.cos(a), np.sin(a)])
-        + across[:, None] * np.array([-np.sin(a), np.cos(a)])
-    )
-    return np.column_stack([xy, z[k] + rng.normal(0.0, 0.002, 5000)])
+    return _down_to_the_soil(rng, foot_xy, azimuth_deg, 0.5, run_m, lying, 5000)
 
 
 def _with_one_second_stem(monkeypatch: pytest.MonkeyPatch) -> None:
