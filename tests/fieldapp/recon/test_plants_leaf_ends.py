@@ -88,6 +88,25 @@ def _grounded_leaf(rng: np.random.Generator, n: int = 5000) -> NDArray[np.float6
     return _down_to_the_soil(rng, (0.0, 0.0), 290.0, 0.4, 0.0, lying, n)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_a_leaf_come_down_to_the_soil_stays_with_its_plant(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    a = plant(rng, (0.0, 0.0), [(20.0, 0.22, 0.55, 0.15), (200.0, 0.35, 0.5, 0.12)], 0.6)
+    down = _grounded_leaf(rng)
+    b = plant(rng, (0.8, 0.0), [(180.0, 0.15, 0.60, 0.12), (0.0, 0.22, 0.40, 0.15)])
+    soil = ground_patch(rng, 1.2, 40000)
+    cloud = colored(np.concatenate([a, down, b]), (50, 110, 25))
+
+    search = search_plants(cloud, soil, PlantSettings(), 0.3)
+    assert len(search.plants) == 2
+    first = min(search.plants, key=lambda p: np.hypot(p.traits.x_m, p.traits.y_m))
+    assert np.hypot(first.traits.x_m, first.traits.y_m) < 0.03  # at its stem, not the leaf's end
+    assert len(first.cloud) >= 0.98 * (len(a) + len(down))
+    assert f"1 {MERGED}" in search.merges
+    # the control: the leaf's end is a "plant" without the rule
+    assert len(search_plants(cloud, soil, _without_leaf_ends(), 0.3).plants) == 3
+
+
 def _two_nodes(x_m: float) -> GridNodes:
     """A planting grid of one row with plants sown at x = 0 and ``x_m``."""
     return GridNodes(np.array([[0.0, 0.0], [x_m, 0.0]]), np.array([1, 1]), np.array([1, 2]))
