@@ -596,10 +596,9 @@ def leaf_ends(
         if on_the_way < bar and claims is not None and claims.off[stem]:
             # at no node: its voxels may lie on the ways to two plants (two leaves come down
             # crossing), each voxel weighed against the stem that reaches it second
-            seconds_of = runner_up[mine]
-            seconds_of = np.where(seconds_of >= 0, seconds_of, other)
+            each = np.where(runner_up[mine] >= 0, runner_up[mine], other)
             on_the_way = max(
-                on_the_way, _share_on_the_way(plain, stem, mine, seconds_of, standing, slack_m)
+                on_the_way, _share_on_the_way(plain, stem, mine, each, standing, slack_m)
             )
         if on_the_way >= bar:
             found.append((on_the_way, stem, other))

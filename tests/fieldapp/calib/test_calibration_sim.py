@@ -61,14 +61,12 @@ def view_step(boards_session: Path) -> ViewStepResult:
 
 
 def test_view_step_within_a_tenth_of_a_degree_and_2_mm(boards_session, view_step):
-    session = load_session(boards_session)
-    result = view_step
-    nominal = session.calibration.view_step
+    nominal = load_session(boards_session).calibration.view_step
     assert nominal is not None
-    moved_m, turned_deg = pose_error(result.T_view_k_view_k1, nominal.matrix)
+    moved_m, turned_deg = pose_error(view_step.T_view_k_view_k1, nominal.matrix)
     assert moved_m < 0.002
     assert turned_deg < 0.1
-    assert 0.0005 < result.rmse_m < 0.005  # the feature RMSE is reported (paper: 1.8 mm)
+    assert 0.0005 < view_step.rmse_m < 0.005  # the feature RMSE is reported (paper: 1.8 mm)
 
 
 def test_stations_within_5_mm_and_0_3_degrees(boards_session, truth, view_step):
