@@ -13,7 +13,7 @@ Every station gets a verdict (refined, coarse kept, unreliable) and an estimated
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Generator, Iterable
+from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -83,12 +83,15 @@ def register_stations(
     reference: int,
     settings: RegistrationSettings,
     threads: int = 1,
+    known: PairFits | None = None,
 ) -> RegistrationSteps:
     """Place every station; yields (fraction done, message) per registered overlap and returns
     the registrations by station.
 
     ``points_station_m``: per station, the (N, 3) points to register, in its view-0 frame.
     ``axis_point_station_m``: (3,) a point of the turntable axis in view-0 frame.
+    ``known``: the pair fits of earlier registrations of these same points (:class:`PairFits`),
+    taken from there where a pair starts as it did then, and added to.
     """
     nodes = {
         s: make_transform(np.eye(3), ground_centre_m(T, axis_point_station_m))
@@ -107,10 +110,12 @@ def register_stations(
     with ForkedMap(threads) as runner:
         each = runner.worker_threads
         # closing this generator closes map's iterator, which drops the pairs not started
-        for fit in runner.map(
-            _register_pair,
+        for fit in _fits(
+            runner.map,
             [(o, nodes[o.b][:3, 3], settings, None, each) for o in overlaps],
             _pair_costs(overlaps),
+            T_field_station_coarse,
+            known,
         ):
             fits.append(fit)
             yield len(fits) / len(overlaps), f"stations {fit.a}-{fit.b} registered"
@@ -125,12 +130,15 @@ def register_stations(
         first = _first_solution(nodes, fits, reference, settings, set(doubtful))
         guesses = _consensus_guesses(nodes, fits, first, settings)
         guesses |= ambiguity.settled(doubtful, first[1], nodes, settings)
-        again = runner.map(
-            _register_pair,
+        again = _fits(
+            runner.map,
             [
                 (overlaps[k], nodes[overlaps[k].b][:3, 3], settings, guesses[k], each)
                 for k in sorted(guesses)
             ],
+            None,
+            T_field_station_coarse,
+            known,
         )
         for k, fit in zip(sorted(guesses), again, strict=True):
             fits[k] = fit
@@ -156,15 +164,89 @@ def register_stations(
     return registrations
 
 
+PairJob = tuple[Overlap, NDArray[np.float64], RegistrationSettings, Matrix4 | None, int]
+"""One pair to register as plain data: ``(overlap, b's centre, settings, guess, threads)``."""
+
+
+class PairFits:
+    """The pair fits of one set of station points (``register_stations``' ``points_station_m``),
+    by what decides each: the two stations' starting poses (which make the overlap's points
+    and b's centre), the guess it starts from (none: the whole ladder) and the pair settings.
+    A pair's fit never depends on the arrival uncertainty (it weighs the fits, in the guards,
+    the probes and the pose graph), so the runs that ``stages.join_stations`` makes with it
+    widened, from the same starting poses, take the first pass's fits from here instead of
+    registering every pair again (a touching plot whose base erred 20 cm / 8 degrees: five
+    runs, 87 s of registration). GICP gives the same fit for the same inputs, so a fit taken
+    from here is the one registering again would give."""
+
+    def __init__(self) -> None:
+        self._fits: dict[tuple[object, ...], PairFit] = {}
+
+    @staticmethod
+    def key(job: PairJob, T_field_station: dict[int, Matrix4]) -> tuple[object, ...]:
+        """What decides the fit of ``job`` registered from the poses ``T_field_station``."""
+        overlap, _, settings, guess, _ = job
+        return (
+            overlap.a,
+            overlap.b,
+            np.asarray(T_field_station[overlap.a]).tobytes(),
+            np.asarray(T_field_station[overlap.b]).tobytes(),
+            None if guess is None else np.asarray(guess).tobytes(),
+            settings.model_dump_json(exclude=ARRIVAL_FIELDS),
+        )
+
+    def get(self, key: tuple[object, ...]) -> PairFit | None:
+        return self._fits.get(key)
+
+    def add(self, key: tuple[object, ...], fit: PairFit) -> None:
+        self._fits[key] = fit
+
+    def __len__(self) -> int:
+        return len(self._fits)
+
+
+ARRIVAL_FIELDS = {"arrival_sigma_m", "arrival_sigma_deg"}
+"""The registration settings no pair's fit depends on (:class:`PairFits`)."""
+
+
+def _fits(
+    mapper: Callable[..., Iterator[PairFit]],
+    jobs: list[PairJob],
+    costs: list[float] | None,
+    T_field_station: dict[int, Matrix4],
+    known: PairFits | None,
+) -> Iterator[PairFit]:
+    """Each job's fit, in order: from ``known`` where it has the fit, else registered by
+    ``mapper`` (a :meth:`ForkedMap.map`, lazily: closing this iterator drops the pairs not
+    started) and added to ``known``."""
+    if known is None:
+        yield from mapper(_register_pair, jobs, costs)
+        return
+    keys = [PairFits.key(job, T_field_station) for job in jobs]
+    todo = [i for i, key in enumerate(keys) if known.get(key) is None]
+    fresh = mapper(
+        _register_pair, [jobs[i] for i in todo], None if costs is None else [costs[i] for i in todo]
+    )
+    try:
+        for key in keys:
+            fit = known.get(key)
+            if fit is None:
+                fit = next(fresh)
+                known.add(key, fit)
+            yield fit
+    finally:
+        close = getattr(fresh, "close", None)
+        if close is not None:
+            close()
+
+
 def _pair_costs(overlaps: list[Overlap]) -> list[float]:
     """Each pair's expected cost: its points (a pair's time follows them, correlation 0.93-0.97
     on seeds 1 and 2)."""
     return [float(len(o.points_a_m) + len(o.points_b_m)) for o in overlaps]
 
 
-def _register_pair(
-    job: tuple[Overlap, NDArray[np.float64], RegistrationSettings, Matrix4 | None, int],
-) -> PairFit:
+def _register_pair(job: PairJob) -> PairFit:
     """:func:`register_overlap` of one ``(overlap, b's centre, settings, guess, threads)``: a
     module-level function of plain data, so a worker process can run it."""
     return register_overlap(*job)

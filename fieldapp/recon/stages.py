@@ -45,6 +45,7 @@ from fieldapp.recon.mapframe import (
 from fieldapp.recon.organ_traits import PlantOrgans, foot_m, measure_organs
 from fieldapp.recon.plants import Plant, PlantSearch, search_plants
 from fieldapp.recon.register import (
+    PairFits,
     RegistrationSteps,
     StationRegistration,
     beyond_arrival,
@@ -331,15 +332,18 @@ def join_stations(
     and registration runs again (:func:`_later_runs`): from the levelled poses moved by where
     the base reported it stopped (``moves``, :func:`starting_poses`), then, while stations are
     still left, with the arrival uncertainty ``retry_arrival_factor`` times wider each run
-    (``retry_widenings`` runs at most). The run leaving the fewest stations coarse is kept (the
-    first on a tie), with a warning saying how it was placed. Every run keeps its guards. A
+    (``retry_widenings`` runs at most); a run takes the pair fits of the runs before it where
+    a pair starts from the same poses (:class:`~fieldapp.recon.register.PairFits`). The run
+    leaving the fewest stations coarse is kept (the first on a tie), with a warning saying how
+    it was placed. Every run keeps its guards. A
     plot registered the first time is registered exactly as before: on touching canopies a
     millimetre of registration decides some leaf tips (RECONSTRUCTION.md, "Touching
     canopies"), so the first run does not change with the reports."""
     points = _registration_points(filtered, T_field_levelled, settings.include_soil)
     axis = turntable_axis_point(view_step.matrix, view_step.views_per_turn)
+    known = PairFits()  # a run from the same starting poses takes the fits made before
     registrations = yield from register_stations(
-        points, T_field_levelled, axis, reference, settings, threads
+        points, T_field_levelled, axis, reference, settings, threads, known
     )
     first, start, how_placed = _kept_coarse(registrations), T_field_levelled, ""
     moved: Staged[dict[int, Matrix4]] = Staged(T_field_levelled)
@@ -349,7 +353,7 @@ def join_stations(
         if not settings.enabled or not any(map(beyond_arrival, registrations.values())):
             break
         again = yield from _done_already(
-            register_stations(points, run_start, axis, reference, run_settings, threads),
+            register_stations(points, run_start, axis, reference, run_settings, threads, known),
             f"registering again {how}: ",
         )
         if len(_kept_coarse(again)) < len(_kept_coarse(registrations)):

@@ -109,3 +109,49 @@ def test_a_pairs_source_is_its_shared_cells_and_its_target_has_a_margin() -> Non
     assert overlap.points_b_m[:, 0].min() >= 1.0 and overlap.points_b_m[:, 0].max() < 2.0
     assert overlap.points_a_m[:, 0].min() < 1.0 - 0.5 * cell_m  # the margin, a's side
     assert overlap.points_a_m[:, 0].min() >= 1.0 - cell_m
+
+
+def _placed(steps: register.RegistrationSteps) -> dict[int, register.StationRegistration]:
+    while True:
+        try:
+            next(steps)
+        except StopIteration as done:
+            return done.value
+
+
+def test_a_run_with_a_wider_prior_from_the_same_poses_registers_no_pair_again(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``stages.join_stations`` registers again with the arrival uncertainty widened; a pair's
+    fit does not depend on it, so a run from the same starting poses takes the fits of the
+    run before, and places every station as registering each pair again would."""
+    registered: list[tuple[int, int]] = []
+    real = register._register_pair
+
+    def counted(job: register.PairJob) -> pairwise.PairFit:
+        registered.append((job[0].a, job[0].b))
+        return real(job)
+
+    monkeypatch.setattr(register, "_register_pair", counted)
+    overlap, _ = _overlap()
+    points = {1: overlap.points_a_m, 2: overlap.points_b_m}
+    coarse = {1: np.eye(4), 2: np.eye(4)}
+    settings = RegistrationSettings(min_overlap_m2=1.0)
+    wider = settings.model_copy(update={"arrival_sigma_m": 0.12, "arrival_sigma_deg": 6.0})
+    known = register.PairFits()
+
+    _placed(register.register_stations(points, coarse, np.zeros(3), 1, settings, 1, known))
+    first = len(registered)
+    assert first >= 1 and len(known) == first
+    again = _placed(register.register_stations(points, coarse, np.zeros(3), 1, wider, 1, known))
+    assert len(registered) == first  # every fit taken from the run before
+
+    alone = _placed(register.register_stations(points, coarse, np.zeros(3), 1, wider))
+    assert len(registered) > first  # without them the pair is registered again ...
+    assert again[2].verdict == alone[2].verdict == "refined"
+    np.testing.assert_array_equal(again[2].T_correction, alone[2].T_correction)  # ... the same
+
+    moved = {1: np.eye(4), 2: make_transform(rotation_z(0.5), np.array([0.01, 0.0, 0.0]))}
+    counted_before = len(registered)
+    _placed(register.register_stations(points, moved, np.zeros(3), 1, wider, 1, known))
+    assert len(registered) > counted_before  # from other starting poses, a new fit
