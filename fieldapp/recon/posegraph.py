@@ -90,38 +90,83 @@ def solve(
     """Optimise the free nodes of the graph; see the module's docstring for the steps.
     Covariances are of each node relative to ``relative_to`` when given (a free node)."""
     active = list(range(len(edges)))
-    poses = _gauss_newton(T_field_node, fixed, edges, active, None, iterations)[0]
+    stacked = _Stacked(edges)
+    poses = _gauss_newton(T_field_node, fixed, stacked, active, None, iterations)[0]
     for scale in GRADUATION:  # graduated non-convexity: wide kernel first, then narrower
         wide = Tolerance(scale * tolerance.translation_m, scale * tolerance.rotation_deg)
-        poses = _gauss_newton(poses, fixed, edges, active, wide, iterations)[0]
+        poses = _gauss_newton(poses, fixed, stacked, active, wide, iterations)[0]
     dropped: list[int] = []
     while True:
-        weights = {k: _weight(residual(edges[k], poses), tolerance) for k in active}
+        r = stacked.at(poses, active)[2]
+        weights = dict(zip(active, _weights(r, tolerance).tolist(), strict=True))
         worst = min((k for k in active if edges[k].robust), key=lambda k: weights[k], default=None)
         if worst is None or weights[worst] >= PRUNE_WEIGHT:
             break
         active.remove(worst)  # the worst first: one bad edge can make its neighbours look bad
         dropped.append(worst)
-        poses = _gauss_newton(poses, fixed, edges, active, None, iterations)[0]
-    poses, H = _gauss_newton(poses, fixed, edges, active, None, iterations)
+        poses = _gauss_newton(poses, fixed, stacked, active, None, iterations)[0]
+    poses, H = _gauss_newton(poses, fixed, stacked, active, None, iterations)
     solution = Solution(poses, active, sorted(dropped))
-    solution.residuals = {k: disagreement(residual(edges[k], poses)) for k in active}
-    _add_covariance(solution, fixed, edges, H, relative_to)
+    final = dict(zip(active, stacked.at(poses, active)[2], strict=True))
+    solution.residuals = {k: disagreement(r) for k, r in final.items()}
+    _add_covariance(solution, fixed, edges, H, relative_to, final)
     return solution
 
 
-def _weight(r: se3.Vector6, tolerance: Tolerance) -> float:
-    translation_m, rotation_deg = disagreement(r)
+def _weights(r: NDArray[np.float64], tolerance: Tolerance) -> NDArray[np.float64]:
+    """(E,) the line process's weight of each residual of ``r`` (E, 6)."""
+    translation_m = np.linalg.norm(r[:, 3:], axis=1)
+    rotation_deg = np.degrees(np.linalg.norm(r[:, :3], axis=1))
     u2 = (translation_m / tolerance.translation_m) ** 2 + (
         rotation_deg / tolerance.rotation_deg
     ) ** 2
-    return float((1.0 / (1.0 + u2)) ** 2)
+    weights: NDArray[np.float64] = (1.0 / (1.0 + u2)) ** 2
+    return weights
+
+
+class _Stacked:
+    """The edges as arrays, so that every edge's residual and Jacobian is computed at once:
+    ``Z_a_b`` inverted (E, 4, 4), the information (E, 6, 6), the end nodes and which edges
+    are robust. The same arithmetic as :func:`residual` and :func:`se3.adjoint`, edge by
+    edge (a 7 x 7 plot's graph was solved 46 times, 900 Gauss-Newton steps, in 15 s of
+    Python loops over its edges)."""
+
+    def __init__(self, edges: list[Edge]) -> None:
+        self.a = np.array([e.a for e in edges], dtype=np.int64)
+        self.b = np.array([e.b for e in edges], dtype=np.int64)
+        self.robust = np.array([e.robust for e in edges], dtype=bool)
+        self.Z_inverse = np.array([invert(e.Z_a_b) for e in edges]).reshape(-1, 4, 4)
+        self.information = np.array([e.information for e in edges]).reshape(-1, 6, 6)
+
+    def at(
+        self, poses: dict[int, Matrix4], active: list[int]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The ``active`` edges (indices) at ``poses``: each one's pose of a and of b (A, 4, 4)
+        and its residual (A, 6), :func:`residual`."""
+        k = np.asarray(active, dtype=np.intp)
+        T_a, T_b = _poses(poses, self.a[k]), _poses(poses, self.b[k])
+        return T_a, T_b, se3.logs(self.Z_inverse[k] @ _inverted(T_a) @ T_b)
+
+
+def _poses(poses: dict[int, Matrix4], nodes: NDArray[np.int64]) -> NDArray[np.float64]:
+    """(K, 4, 4) the poses of ``nodes``."""
+    return np.array([poses[int(n)] for n in nodes]).reshape(-1, 4, 4)
+
+
+def _inverted(T: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(K, 4, 4) the inverses of the rigid motions ``T`` (K, 4, 4)."""
+    out = np.zeros_like(T)
+    R_t = np.swapaxes(T[:, :3, :3], 1, 2)
+    out[:, :3, :3] = R_t
+    out[:, :3, 3] = -np.einsum("kij,kj->ki", R_t, T[:, :3, 3])
+    out[:, 3, 3] = 1.0
+    return out
 
 
 def _gauss_newton(
     poses_in: dict[int, Matrix4],
     fixed: set[int],
-    edges: list[Edge],
+    edges: _Stacked,
     active: list[int],
     tolerance: Tolerance | None,
     iterations: int,
@@ -147,39 +192,51 @@ def _gauss_newton(
 def _normal_equations(
     poses: dict[int, Matrix4],
     index: dict[int, int],
-    edges: list[Edge],
+    edges: _Stacked,
     active: list[int],
     tolerance: Tolerance | None,
 ) -> tuple[scipy.sparse.csc_matrix, NDArray[np.float64]]:
+    """The normal matrix (sparse, free nodes in ``index``'s order, 6 x 6 blocks) and the
+    gradient of the ``active`` edges at ``poses``; robust edges weighted by the line process
+    when ``tolerance`` is given. Edge b's Jacobian of the residual is the identity, edge a's
+    ``-adjoint(T_b^-1 T_a)``."""
     size = 6 * len(index)
-    blocks: dict[tuple[int, int], NDArray[np.float64]] = {}
+    k = np.asarray(active, dtype=np.intp)
+    T_a, T_b, r = edges.at(poses, active)
+    w = np.ones(len(k))
+    if tolerance is not None:
+        w = np.where(edges.robust[k], _weights(r, tolerance), 1.0)
+    information = w[:, None, None] * edges.information[k]
+    J_a = -se3.adjoints(_inverted(T_b) @ T_a)
+    J = (J_a, np.broadcast_to(np.eye(6), J_a.shape))  # each edge's Jacobian at a, at b
+    slot = (  # each end's free-node index, -1 where the node is fixed
+        np.array([index.get(int(n), -1) for n in edges.a[k]], dtype=np.intp),
+        np.array([index.get(int(n), -1) for n in edges.b[k]], dtype=np.intp),
+    )
     g = np.zeros(size)
-    for k in active:
-        edge = edges[k]
-        r = residual(edge, poses)
-        w = _weight(r, tolerance) if tolerance is not None and edge.robust else 1.0
-        jacobians = {edge.b: np.eye(6), edge.a: -se3.adjoint(invert(poses[edge.b]) @ poses[edge.a])}
-        information = w * edge.information
-        for n, Jn in jacobians.items():
-            if n not in index:
-                continue
-            g[6 * index[n] : 6 * index[n] + 6] += Jn.T @ information @ r
-            for m, Jm in jacobians.items():
-                if m in index:
-                    key = (index[n], index[m])
-                    blocks[key] = blocks.get(key, 0.0) + Jn.T @ information @ Jm
-    for i in range(len(index)):  # a node with no active edge stays where it is
-        blocks[(i, i)] = blocks.get((i, i), 0.0) + 1e-9 * np.eye(6)
-    rows, cols, data = [], [], []
     offsets = np.arange(6)
-    for (i, j), block in sorted(blocks.items()):
-        rows.append(np.repeat(6 * i + offsets, 6))
-        cols.append(np.tile(6 * j + offsets, 6))
-        data.append(np.asarray(block).ravel())
-    if not rows:
-        return scipy.sparse.csc_matrix((size, size)), g
+    rows, cols, data = [], [], []
+    for n in (0, 1):
+        Jt_info = np.swapaxes(J[n], 1, 2) @ information  # (A, 6, 6)
+        on = slot[n] >= 0
+        np.add.at(g.reshape(-1, 6), slot[n][on], np.einsum("kij,kj->ki", Jt_info[on], r[on]))
+        for m in (0, 1):
+            both = on & (slot[m] >= 0)
+            block = Jt_info[both] @ J[m][both]  # (B, 6, 6)
+            rows.append((6 * slot[n][both])[:, None] + np.repeat(offsets, 6)[None, :])
+            cols.append((6 * slot[m][both])[:, None] + np.tile(offsets, 6)[None, :])
+            data.append(block.reshape(-1, 36))
+    # a node with no active edge stays where it is
+    diagonal = 6 * np.arange(len(index))[:, None] + offsets[None, :]
+    rows.append(diagonal)
+    cols.append(diagonal)
+    data.append(np.full(diagonal.shape, 1e-9))
     H = scipy.sparse.csc_matrix(
-        (np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size)
+        (
+            np.concatenate([d.ravel() for d in data]),
+            (np.concatenate([x.ravel() for x in rows]), np.concatenate([x.ravel() for x in cols])),
+        ),
+        shape=(size, size),
     )
     return H, g
 
@@ -190,18 +247,15 @@ def _add_covariance(
     edges: list[Edge],
     H: scipy.sparse.csc_matrix,
     relative_to: int | None,
+    residuals: dict[int, se3.Vector6],
 ) -> None:
     """Covariances of the free nodes (relative to ``relative_to`` when given), scaled by the
     variance factor (the robust edges' mean squared Mahalanobis residual per degree of
-    freedom, at least 1)."""
+    freedom, at least 1; ``residuals``: each kept edge's at the solution)."""
     free = sorted(n for n in solution.T_field_node if n not in fixed)
     robust = [k for k in solution.kept if edges[k].robust]
     if robust:
-        chi2 = sum(
-            float(r @ edges[k].information @ r)
-            for k in robust
-            for r in [residual(edges[k], solution.T_field_node)]
-        )
+        chi2 = sum(float(residuals[k] @ edges[k].information @ residuals[k]) for k in robust)
         solution.variance_factor = max(1.0, chi2 / (6 * len(robust)))
     if not free:
         return
