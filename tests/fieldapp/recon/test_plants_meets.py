@@ -1,5 +1,6 @@
-"""A plant whose widest extent meets another plant is said to be maybe wider than measured:
-its width ends where it was cut from the neighbour, not where its leaf was seen to end."""
+"""A plant whose widest extent meets another plant is said to be maybe wider or narrower than
+measured: its width ends where it was cut from the neighbour, not where its leaf was seen to
+end (or on a piece of the neighbour)."""
 
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ def test_a_plant_cut_where_its_leaf_meets_the_neighbour_is_said_to_meet_it(seed:
     assert search.meets.get(first.id) == second.id
     warning = next(w for w in search.warnings(0.005) if "widest extent meets" in w)
     assert f"{first.id} (plant {second.id})" in warning
+    assert "may be wider or narrower than measured" in warning  # it may hold the other's
 
 
 def test_plants_apart_meet_nothing() -> None:

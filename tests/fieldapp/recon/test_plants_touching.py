@@ -77,7 +77,8 @@ def test_the_widths_of_a_touching_canopy_meet_issue_20s_target_or_are_cautioned(
     part past the X stays with p11 is a knife edge of the contact (1.49 or 2.74-2.81 cm over
     the plot as the input moves by 3-7 mm or 0.2 % of its points: RECONSTRUCTION.md, "Touching
     canopies"), so the whole plot's figure is asserted at 3.0 cm (above); where p11 loses the
-    part, its widest extent meets p10 and the report says it may be wider than measured."""
+    part, its widest extent meets p10 and the report says it may be wider or narrower than
+    measured."""
     e = matched_errors(touching, touching_session.truth)
     ids = [_nearest_id(touching, xy) for xy in e["xy"]]
     cautioned = np.array([i in touching.search.meets for i in ids])
@@ -105,8 +106,8 @@ def test_touching_plants_are_reported_split_and_ambiguous_ones_flagged(
 
 
 def test_a_plant_whose_widest_extent_meets_another_is_cautioned(touching: Reconstruction) -> None:
-    """Its report entry says it may be wider than measured and names the plant it meets, one
-    of its own canopy; no other plant's entry says so."""
+    """Its report entry says it may be wider or narrower than measured and names the plant it
+    meets, one of its own canopy; no other plant's entry says so."""
     meets = touching.search.meets
     assert meets  # measured on this seed: three plants
     groups = [set(group) for group in touching.search.splits]
