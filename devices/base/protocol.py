@@ -222,8 +222,11 @@ def decode_request(data: bytes) -> Request:
         raise ProtocolError(
             ErrorCode.VERSION, f"protocol version {obj['v']!r} unsupported, expected 1", request_id
         )
-    if not isinstance(obj.get("cmd"), str):
+    if "cmd" not in obj:
         raise _bad("cmd (the command's name, a string) is missing", request_id)
+    if not isinstance(obj["cmd"], str):
+        given = json.dumps(obj["cmd"])[:40]  # as the client wrote it: null, 3, [...]
+        raise _bad(f"cmd must be the command's name, a string, not {given}", request_id)
     try:
         cmd = Command(obj["cmd"])
     except ValueError:

@@ -162,3 +162,17 @@ def test_telemetry_round_trip() -> None:
     assert decode_telemetry(frames) == status
     with pytest.raises(ProtocolError):
         decode_telemetry([b"weather", b"{}"])
+
+
+@pytest.mark.parametrize(
+    ("raw", "said"),
+    [
+        (b'{"v": 1, "id": "a"}', "cmd (the command's name, a string) is missing"),
+        (b'{"v": 1, "id": "a", "cmd": 3}', "cmd must be the command's name, a string, not 3"),
+        (b'{"v": 1, "id": "a", "cmd": null}', "cmd must be the command's name, a string, not null"),
+    ],
+)
+def test_a_command_missing_and_one_not_a_name_are_told_apart(raw: bytes, said: str) -> None:
+    with pytest.raises(ProtocolError) as caught:
+        decode_request(raw)
+    assert caught.value.message == said
