@@ -4,6 +4,8 @@ and the organ traits'."""
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +67,32 @@ def register(subparsers: Any) -> None:
     )
     spheres.add_argument("--out", type=Path, help="folder for CSV and PNG (RESULTS/evaluation)")
     spheres.set_defaults(handler=run_spheres)
+
+
+def _green_only(report_path: Path) -> list[str]:
+    """A warning when the reconstruction at ``report_path`` kept only green points at some
+    station (plants told from the soil by colour): reference spheres, white or grey, were
+    filtered out there before ``cloud.ply``, and what the sphere search finds may be a plant
+    (a plot of spheres among plants, reconstructed with the defaults: a "200 mm sphere" fitted
+    to leaves, 23 % of its points within 0.5 cm, the other five not found)."""
+    from fieldapp.recon.exg import BY_COLOUR
+
+    try:
+        separation = json.loads(report_path.read_text()).get("plant_separation") or {}
+    except (OSError, ValueError, AttributeError):
+        return []  # no report (a cloud from elsewhere): nothing to say
+    by_colour = sorted(
+        (s for s, line in separation.items() if line == BY_COLOUR.describe()),
+        key=lambda s: (len(s), s),
+    )
+    if not by_colour:
+        return []
+    return [
+        f"{report_path}: station{'s' if len(by_colour) > 1 else ''} {', '.join(by_colour)} kept "
+        "only green points (plants separated by colour): reference spheres that are not green "
+        "were filtered out there, and a sphere found may be a plant. Reconstruct the session "
+        "without the excess-green filter: FIELDAPP_RECONSTRUCTION__FILTERS__EXG_THRESHOLD=-1"
+    ]
 
 
 def parse_diameters(text: str) -> list[float]:
@@ -139,6 +167,8 @@ def run_spheres(args: argparse.Namespace) -> int:
 
     diameters = parse_diameters(args.diameters_mm)
     points, _ = read_cloud(args.results / "cloud.ply")
+    for line in _green_only(args.results / "report.json"):
+        print(f"warning: {line}", file=sys.stderr)
     fits = find_spheres(points, diameters)
     for line in summary_lines(fits):
         print(line)

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
+from fieldapp.cli import main
 from fieldapp.evaluate.sphere_outputs import all_distances, spheres_csv
 from fieldapp.evaluate.spheres import bin_fractions, find_spheres, fit_sphere, within_fraction
+from fieldapp.recon.exg import BY_COLOUR, Separation
 
 from .synthetic_spheres import sphere_cloud, sphere_truth
 
@@ -63,3 +67,39 @@ def test_csv_lists_every_sphere_and_the_total(fits):
     lines = spheres_csv(fits).splitlines()
     assert len(lines) == 1 + 6 + 1
     assert lines[-1].startswith("all,6,")
+
+
+def _results(folder, separation):
+    """A results folder holding the synthetic spheres' cloud and, unless ``separation`` is
+    None, a report.json with that ``plant_separation``."""
+    from fieldapp.io.ply import write_ply
+
+    folder.mkdir()
+    points = sphere_cloud(seed=4)
+    vertices = np.empty(len(points), [("x", "f4"), ("y", "f4"), ("z", "f4")])
+    vertices["x"], vertices["y"], vertices["z"] = points.T
+    write_ply(folder / "cloud.ply", vertices)
+    if separation is not None:
+        (folder / "report.json").write_text(json.dumps({"plant_separation": separation}))
+    return folder
+
+
+def test_spheres_of_a_reconstruction_that_kept_only_green_points_are_warned_of(tmp_path, capsys):
+    """Reconstructed with the defaults, a plot of spheres among plants keeps only green points:
+    the spheres are gone from cloud.ply and the search may fit one to the leaves. The CLI says
+    so, naming the report and the stations, and how to reconstruct for the spheres."""
+    by_colour, by_geometry = BY_COLOUR.describe(), Separation("geometry", "no colour").describe()
+    folder = _results(tmp_path / "green", {"1": by_colour, "2": by_geometry, "10": by_colour})
+    assert main(["evaluate", "spheres", str(folder)]) == 0  # these spheres are all there
+    err = capsys.readouterr().err
+    assert f"{folder / 'report.json'}: stations 1, 10 kept only green points" in err
+    assert "FIELDAPP_RECONSTRUCTION__FILTERS__EXG_THRESHOLD=-1" in err
+
+
+@pytest.mark.parametrize("separation", [None, {"1": "plants separated by geometry: no colour"}])
+def test_spheres_of_a_reconstruction_that_kept_every_point_are_not_warned_of(
+    tmp_path, capsys, separation
+):
+    folder = _results(tmp_path / "all", separation)
+    assert main(["evaluate", "spheres", str(folder)]) == 0
+    assert "warning" not in capsys.readouterr().err
