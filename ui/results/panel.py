@@ -270,7 +270,11 @@ class ResultsPanel(QtWidgets.QWidget):
             (self.history, "History"),
         )
         for page, name in pages:
-            self.tabs.addTab(page, name)
+            self.tabs.setTabToolTip(self.tabs.addTab(page, name), name)  # whole where elided
+        # every tab in sight, their names elided where the window is narrow: behind a scroll
+        # arrow, History went unseen at 1500 pixels wide
+        self.tabs.setUsesScrollButtons(False)
+        self.tabs.setElideMode(QtCore.Qt.TextElideMode.ElideRight)
         splitter = self.splitter = QtWidgets.QSplitter()
         splitter.addWidget(self.table)
         splitter.addWidget(self.tabs)
@@ -298,9 +302,10 @@ class ResultsPanel(QtWidgets.QWidget):
         self.inspector.plant_selected.connect(self.select_plant)
         self.tabs.insertTab(1, self.inspector, "Plant")
         self.organ_accuracy = OrganAccuracyPanel()
-        self.tabs.insertTab(
+        accuracy = self.tabs.insertTab(
             self.tabs.indexOf(self.manual) + 1, self.organ_accuracy, "Organ accuracy"
         )
+        self.tabs.setTabToolTip(accuracy, "Organ accuracy")
         self.results_shown.connect(self.inspector.set_results)
         self.results_shown.connect(self.organ_accuracy.set_results)
 

@@ -3,6 +3,7 @@ per-station registration quality table, as Qt item models over plain records."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -124,7 +125,7 @@ def plant_search_notes(report: dict[str, Any]) -> dict[int, SearchNote]:
         cautions = [str(c) for c in entry.get("cautions") or []]
         lines.extend(cautions)
         if cautions and not entry.get("flagged"):
-            badge = "⚠ " + cautions[0].split(":")[0].split(",")[0]
+            badge = "⚠ " + _caution_badge(cautions[0])
         cell = entry.get("grid_cell")
         if cell:
             lines.append(f"planting grid row {cell[0]}, column {cell[1]}")
@@ -133,6 +134,22 @@ def plant_search_notes(report: dict[str, Any]) -> dict[int, SearchNote]:
         flagged = bool(entry.get("flagged")) or bool(cautions)
         notes[plant] = SearchNote(badge, "\n".join(lines), flagged)
     return notes
+
+
+_MEETS = re.compile(r"meets plant (\d+)$")
+"""The end of the caution of a plant whose widest extent meets another
+(``plants.MEETS_NOTE``, its wording before too)."""
+
+
+def _caution_badge(caution: str) -> str:
+    """A caution's short form for the "found" column (the whole of it in the tooltip): its
+    first clause ("may be taller than measured", "seen only from farther stations"), or "width
+    meets plant N" for a width that ends at another plant, whose first clause alone (as long
+    as the column's other badges together) would say neither which plant nor why."""
+    meets = _MEETS.search(caution)
+    if meets:
+        return f"width meets plant {meets.group(1)}"
+    return caution.split(":")[0].split(",")[0]
 
 
 def merges_text(report: dict[str, Any]) -> str:

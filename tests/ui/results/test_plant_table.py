@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from PySide6 import QtCore, QtGui
 
+from fieldapp.recon.plants import MEETS_NOTE
 from fieldapp.results.files import PlantRecord
 from ui.results.tables import FOUND_COLUMN, PLANT_COLUMNS, PlantTableModel
 
@@ -75,19 +76,23 @@ def test_a_plant_with_a_caution_is_flagged_with_it_in_its_tooltip(qtbot) -> None
                               "nearest read 1.2 m)"]},
                 {"plant": 3, "from_stem": True, "ambiguous_share": 0.0, "flagged": False,
                  "cautions": []},
+                {"plant": 4, "from_stem": True, "ambiguous_share": 0.0, "flagged": False,
+                 "cautions": [f"{MEETS_NOTE} 12"]},
             ],
         }
     }  # fmt: skip
     model = PlantTableModel()
-    model.set_plants(_records()[:3], report)
+    model.set_plants(_records()[:4], report)
     display, tip = QtCore.Qt.ItemDataRole.DisplayRole, QtCore.Qt.ItemDataRole.ToolTipRole
-    assert [_cell(model, r, display) for r in range(3)] == [
+    assert [_cell(model, r, display) for r in range(4)] == [
         "⚠ may be taller than measured",
         "⚠ 2.1 % ambiguous",  # the ambiguity badge first; the caution in the tooltip
         "stem",
+        "⚠ width meets plant 12",  # which plant, in a badge as short as the others
     ]
     assert "views reach 115 cm" in _cell(model, 0, tip)
     assert "station 9" in _cell(model, 1, tip)
+    assert f"{MEETS_NOTE} 12" in _cell(model, 3, tip)
     orange = QtGui.QColor(190, 90, 0)
-    drawn = [model.item(r, FOUND_COLUMN).foreground().color() == orange for r in range(3)]
-    assert drawn == [True, True, False]  # flagged plants in orange
+    drawn = [model.item(r, FOUND_COLUMN).foreground().color() == orange for r in range(4)]
+    assert drawn == [True, True, False, True]  # flagged plants in orange
