@@ -172,6 +172,11 @@ class PlotLayout:
         count = max(2 * (grid - 1), 1)
         return cls(rows=count, cols=count, spacing_m=station_spacing_m / 2)
 
+    @property
+    def half_extent_m(self) -> float:
+        """Half the side of the square the plants' feet stand in (the origin at its centre)."""
+        return (max(self.rows, self.cols) - 1) * self.spacing_m / 2 + self.jitter_m
+
     def positions(self, rng: np.random.Generator) -> NDArray[np.float64]:
         """(rows * cols, 2) plant positions, row by row."""
         ys = (np.arange(self.rows) - (self.rows - 1) / 2) * self.spacing_m

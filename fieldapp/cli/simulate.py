@@ -23,6 +23,7 @@ from fieldapp.errors import FieldappError
 if TYPE_CHECKING:
     from devices.camera.frames import Intrinsics
     from devices.sim.rig import RigGeometry, StopErrors
+    from devices.sim.scene import PlotLayout
     from devices.sim.survey import SimCapture
     from devices.sim.world import SimWorld
     from fieldapp.io.calibration import Calibration
@@ -48,6 +49,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "sunlight": _ON_THE_RIG,
     "color_noise": (*_ON_THE_RIG, "turntable"),
     "camera": _ON_THE_RIG,
+    "station_spacing": ("plot", "spheres", "soil"),
     "stations": _ON_THE_RIG,
     "stage": ("plot",),
     "plant_model": ("plot",),
@@ -158,6 +160,15 @@ def register(subparsers: Any) -> None:
         help="the rig's camera: height of its optical centre above the ground in metres and "
         "pitch below the horizontal in degrees (default 1.3,45, the paper's rig)",
     )
+    parser.add_argument(
+        "--station-spacing",
+        default=None,
+        metavar="M",
+        help="the stations this far apart in metres (0.6..2.4; default 1.6, the paper's plan); "
+        "the plants stay where the default plan has them (4 x 4 at 0.8 m on a 3 x 3 plan), "
+        "so with stations nearer together the outer plants stand farther beyond the outer "
+        "stations",
+    )
     parser.add_argument("--seed", default="0", help="world seed (same seed, same plants)")
     parser.add_argument("--day", default="0", help="days since the first scan (plants grow)")
     parser.add_argument(
@@ -253,6 +264,7 @@ def parse_list(name: str, text: str, low: int, high: int) -> list[int]:
 
 
 CAMERA_HEIGHTS_M = (0.6, 2.5)
+STATION_SPACINGS_M = (0.6, 2.4)
 CAMERA_PITCHES_DEG = (20.0, 80.0)
 
 
@@ -370,6 +382,9 @@ def run(args: argparse.Namespace) -> int:
         )
     grid, camera = parse_int("grid", args.grid, 2, MAX_GRID), parse_camera(args.camera)
     rig = RigGeometry(grid=grid)
+    spacing = parse_number("--station-spacing", args.station_spacing, *STATION_SPACINGS_M, "metres")
+    if spacing is not None:
+        rig = replace(rig, station_spacing_m=spacing)
     if camera:
         rig = replace(rig, camera_height_m=camera["camera_height_m"], pitch_deg=camera["pitch_deg"])
     last = rig.grid**2
@@ -469,6 +484,8 @@ def run(args: argparse.Namespace) -> int:
                 about["lens_distortion"] = list(KINECT_V2_DISTORTION)
             if camera:  # absent: the paper's rig (sessions unchanged)
                 about["camera"] = camera
+            if spacing is not None:  # absent: the paper's plan (sessions unchanged)
+                about["station_spacing_m"] = spacing
             plan = simulated_plan(rig, sown=args.scene == "plot")
             count = write_session(args.out, world, stations, views, seed, about, errors, plan)
         if args.scene == "checkerboard" and shots:
@@ -519,7 +536,6 @@ def build_world(
     from devices.sim.calibration_scenes import checkerboard_scene
     from devices.sim.render import SensorModel
     from devices.sim.scene import (
-        PlotLayout,
         bare_soil_scene,
         plot_scene,
         soil_for_plot,
@@ -528,8 +544,8 @@ def build_world(
     from devices.sim.sensor import FULL_SUN_IR
     from devices.sim.world import SimWorld
 
-    layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
-    soil = soil_for_plot(rig.plot_half_extent_m)
+    layout = plant_layout(rig)
+    soil = soil_for_plot(max(rig.plot_half_extent_m, layout.half_extent_m))
     if scene_name == "plot":
         scene = plot_scene(
             seed,
@@ -563,14 +579,21 @@ def build_world(
     return SimWorld(scene, rig, intrinsics, seed=seed, sensor=sensor)
 
 
+def plant_layout(rig: RigGeometry) -> PlotLayout:
+    """Where the plants of ``rig``'s plot stand: as on the default plan of its grid (stations
+    1.6 m apart), wherever its stations stand (``--station-spacing``)."""
+    from devices.sim.rig import RigGeometry
+    from devices.sim.scene import PlotLayout
+
+    return PlotLayout.for_stations(rig.grid, RigGeometry().station_spacing_m)
+
+
 def simulated_plan(rig: RigGeometry, sown: bool = True) -> dict[str, Any]:
     """The session's ``plan`` as a mission would write it (session-format spec, map frame): the
     stations' nominal map poses, the views, and (``sown``) the planting grid the plot was sown
     on (rows along the map's x axis, row 1 column 1 at the plants' lowest x and y; the
     simulated plants stand within a few cm of its nodes)."""
     import numpy as np
-
-    from devices.sim.scene import PlotLayout
 
     stations = [
         {"number": s, "x_m": p.x_m, "y_m": p.y_m, "yaw_deg": p.yaw_deg}
@@ -582,7 +605,7 @@ def simulated_plan(rig: RigGeometry, sown: bool = True) -> dict[str, Any]:
     }
     if not sown:
         return plan
-    layout = PlotLayout.for_stations(rig.grid, rig.station_spacing_m)
+    layout = plant_layout(rig)
     T_map_field = np.linalg.inv(rig.T_field_map)
     first_field = -np.array([layout.cols - 1, layout.rows - 1]) * layout.spacing_m / 2
     origin = T_map_field[:2, :2] @ first_field + T_map_field[:2, 3]
