@@ -128,12 +128,19 @@ def _within_radius(
 def rig_crop(crop: CropSettings, calibration: Calibration) -> CropSettings:
     """``crop`` with its radius scaled to the rig (``CropSettings.scale_to_rig``): the radius
     that keeps, on the ground, as many station spacings around each camera as ``radius_m``
-    keeps on the paper's rig, to the centimetre (the paper's rig keeps 2.25 m). The cameras'
+    keeps on the paper's rig, and never less ground than it keeps there (the paper's rig keeps
+    2.25 m: 1.84 m of ground, 1.15 of its 1.6 m spacings), to the centimetre. The cameras'
     height is the median of the stations' view-0 optical centres above the ground in the field
     frame of the calibration's ground transform, the spacing the median distance from each to
     the nearest other. ``crop`` as it is when the calibration has no ground transform or fewer
     than two stations (nothing to scale by), or when the radius does not reach the paper's
-    ground."""
+    ground.
+
+    Stations farther apart need more ground for their clouds to overlap. Stations nearer
+    together do not make the plot smaller: the outer plants stand as far beyond the outer
+    stations, and their leaves reach out as far, so the ground kept is not cut below the
+    paper's (an independent renderer's stations 0.8 m apart: 1.68 m kept 0.92 m of ground and
+    cut the corner plants' outer leaves, 5-9 cm of width)."""
     stations = calibration.stations
     if not crop.scale_to_rig or calibration.ground is None or stations is None:
         return crop
@@ -146,6 +153,7 @@ def rig_crop(crop: CropSettings, calibration: Calibration) -> CropSettings:
     height, spacing = float(np.median(centres[:, 2])), float(np.median(apart.min(axis=1)))
     if height <= 0.0 or spacing <= 0.0:
         return crop
-    reach = np.sqrt(crop.radius_m**2 - PAPER_CAMERA_HEIGHT_M**2) / PAPER_STATION_SPACING_M
-    radius = round(float(np.hypot(height, reach * spacing)), 2)
+    ground_m = np.sqrt(crop.radius_m**2 - PAPER_CAMERA_HEIGHT_M**2)  # on the paper's rig
+    reach = max(ground_m, ground_m / PAPER_STATION_SPACING_M * spacing)
+    radius = round(float(np.hypot(height, reach)), 2)
     return crop.model_copy(update={"radius_m": radius})

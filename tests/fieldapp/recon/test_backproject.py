@@ -115,8 +115,21 @@ def test_the_crop_keeps_the_papers_reach_in_station_spacings_on_any_rig() -> Non
     reach = np.sqrt(2.25**2 - 1.3**2) / 1.6
     assert rig_crop(crop, _calibration(1.6, 1.6)).radius_m == round(np.hypot(1.6, reach * 1.6), 2)
     assert rig_crop(crop, _calibration(1.6, 1.6)).radius_m == 2.44
-    assert rig_crop(crop, _calibration(1.3, 1.2)).radius_m == round(np.hypot(1.3, reach * 1.2), 2)
+    assert rig_crop(crop, _calibration(1.3, 2.0)).radius_m == round(np.hypot(1.3, reach * 2.0), 2)
     assert rig_crop(crop, _calibration(1.0, 1.6)).radius_m == 2.09
+
+
+def test_stations_nearer_together_keep_the_papers_ground() -> None:
+    """Stations nearer together than the paper's do not make the plot smaller: the outer
+    plants stand as far beyond the outer stations, their leaves reach out as far. An
+    independent renderer's stations 0.8 m apart had 1.68 m (0.92 m of ground), which cut the
+    corner plants' outer leaves."""
+    crop = CropSettings()
+    ground = np.sqrt(2.25**2 - 1.3**2)  # 1.84 m
+    assert rig_crop(crop, _calibration(1.3, 1.2)).radius_m == 2.25
+    assert rig_crop(crop, _calibration(1.3, 0.8)).radius_m == 2.25
+    assert rig_crop(crop, _calibration(1.41, 0.8)).radius_m == round(np.hypot(1.41, ground), 2)
+    assert rig_crop(crop, _calibration(1.0, 1.2)).radius_m == 2.09  # lower: the same ground
 
 
 def test_the_crop_is_the_set_radius_when_the_rig_cannot_tell_or_scaling_is_off() -> None:
