@@ -33,7 +33,9 @@ def test_a_fragment_between_two_plants_goes_to_the_nearer_as_a_guess() -> None:
     """Plant 0's leaf ends at x = 0.40 m, plant 1's at 0.60; the fragment between them (a leaf
     cut off from its base) touches both: each point goes to the nearer, and is a guess where
     the other lies less than the margin farther."""
-    a, b, fragment = _line(0.0, 0.40), _line(0.60, 1.0), _line(0.412, 0.59)  # no tie
+    # the plants' leaves long enough that the fragment's halves are under 5 % of either
+    # (JOINED_SHARE: more, and every joined point of the plant would count ambiguous)
+    a, b, fragment = _line(-2.0, 0.40), _line(0.60, 3.0), _line(0.412, 0.59)  # no tie
     _, labels, guessed = _joined([(a, 0), (b, 1), (fragment, UNREACHED)])
     part = slice(len(a) + len(b), None)
     x = fragment[:, 0]
@@ -48,7 +50,7 @@ def test_a_fragment_beside_one_plant_of_a_shared_cluster_is_sure() -> None:
     """Plants 0 and 1 in one cluster (their leaves meet at x = 0.5 m), a fragment 1 cm past
     the far end of plant 0's other leaf: plant 1 is more than the margin farther."""
     a, b = _line(-0.40, 0.50), _line(0.505, 1.0)
-    fragment = _line(-0.58, -0.41)
+    fragment = _line(-0.45, -0.41)  # 5 % of plant 0: a tip, not a part of it (JOINED_SHARE)
     _, labels, guessed = _joined([(a, 0), (b, 1), (fragment, UNREACHED)])
     part = slice(len(a) + len(b), None)
     assert (labels[part] == 0).all() and not guessed.any()
@@ -69,6 +71,27 @@ def test_another_stem_across_air_does_not_make_a_join_a_guess() -> None:
     in plant 0's cluster the only other plant is 45-60 cm farther: the join is sure."""
     a, b = _line(0.0, 0.40), _line(0.405, 0.8)
     c, d = _line(-0.2, -0.01, y=0.06), _line(0.0, 0.3, y=0.06)
-    fragment = _line(-0.15, -0.01)
+    fragment = _line(-0.025, -0.01)  # under 5 % of plant 0 (JOINED_SHARE)
     _, labels, guessed = _joined([(a, 0), (b, 1), (c, 2), (d, 3), (fragment, UNREACHED)])
     assert (labels[-len(fragment) :] == 0).all() and not guessed.any()
+
+
+def test_a_plant_that_took_a_large_part_of_a_shared_canopy_so_is_flagged() -> None:
+    """Plants 0 and 1 share a cluster; a stretch past plant 1's far end that no stem reached
+    (its own plant's body cut from its stem, say) goes to plant 1, plant 0 far beyond the
+    margin, so no single point is a guess; but a quarter of plant 1 is then points no stem
+    reached (JOINED_SHARE): all of them are counted ambiguous, so that it is flagged. With
+    no other plant in the cluster the same stretch is plant 1's without doubt."""
+    a, b, stretch = _line(0.0, 0.30), _line(0.305, 1.5), _line(1.505, 1.9)
+    merges: list[str] = []
+    points = np.concatenate([a, b, stretch])
+    labels = np.repeat([0, 1, UNREACHED], [len(a), len(b), len(stretch)]).astype(np.intp)
+    guessed, _ = _join_fragments(points, labels, VOXEL_M, MARGIN_M, merges)
+    part = slice(len(a) + len(b), None)
+    assert (labels[part] == 1).all() and guessed[part].all()
+    assert not guessed[: len(a) + len(b)].any()  # points reached along a plant are not touched
+    assert any("1 plants with more than 5 % of their points joined" in m for m in merges)
+    alone = np.concatenate([b, stretch])
+    labels = np.repeat([1, UNREACHED], [len(b), len(stretch)]).astype(np.intp)
+    guessed, _ = _join_fragments(alone, labels, VOXEL_M, MARGIN_M, [])
+    assert (labels == 1).all() and not guessed.any()
