@@ -57,6 +57,37 @@ def sigma_m_deg(covariance: NDArray[np.float64]) -> tuple[float, float]:
     return translation, float(np.degrees(rotation))
 
 
+PARTS = (
+    ("tilt", slice(0, 2), "deg", "registration.level_sigma_deg"),
+    ("turn about the vertical", slice(2, 3), "deg", "registration.arrival_sigma_deg"),
+    ("horizontal shift", slice(3, 5), "mm", "registration.arrival_sigma_m"),
+    ("height", slice(5, 6), "mm", "registration.level_sigma_m"),
+)
+"""A correction's parts (rows of the twist, field axes: rotation x y z, translation x y z),
+their units in messages and the setting that says how far each is expected to go."""
+
+
+def most_out(correction: se3.Vector6, covariance: NDArray[np.float64], sigmas: float) -> str:
+    """Which part of the (6,) ``correction`` lies farthest out of what ``covariance`` expects
+    of it (:data:`PARTS`, each part's own Mahalanobis distance), its size, the size ``sigmas``
+    standard deviations of that part would be, and the setting to widen if the base errs so:
+    a correction turned down for its tilt said only "limit 177 mm / 8.49 deg", the horizontal
+    and yaw limits, which its 119 mm and 4.98 deg were under."""
+
+    def distance(part: slice) -> float:
+        return mahalanobis(correction[part], covariance[part, part])
+
+    name, part, unit, setting = max(PARTS, key=lambda p: distance(p[1]))
+    size = float(np.linalg.norm(correction[part]))
+    spread = float(np.sqrt(max(np.linalg.eigvalsh(covariance[part, part]).max(), 0.0)))
+    if unit == "deg":
+        size, spread = np.degrees(size), np.degrees(spread)
+        shown = f"{size:.2f} deg where {sigmas:g} sigma is {sigmas * spread:.2f} deg"
+    else:
+        shown = f"{1000 * size:.0f} mm where {sigmas:g} sigma is {1000 * sigmas * spread:.0f} mm"
+    return f"most of all its {name}: {shown} ({setting})"
+
+
 def mahalanobis(correction: se3.Vector6, covariance: NDArray[np.float64]) -> float:
     """How many standard deviations of ``covariance`` the (6,) ``correction`` is."""
     return float(np.sqrt(correction @ np.linalg.solve(covariance, correction)))

@@ -523,11 +523,11 @@ class _Plot:
         if sigmas <= self.settings.guard_sigmas:
             return None
         shift_m, turn_deg = posegraph.disagreement(twist)
-        limit_m, limit_deg = self.limits(station)
         return sigmas, (
             f"correction {1000 * shift_m:.0f} mm / {turn_deg:.2f} deg is {sigmas:.1f} sigma "
-            f"of the expected arrival error (limit {self.settings.guard_sigmas:g} sigma: "
-            f"about {1000 * limit_m:.0f} mm / {limit_deg:.2f} deg here)"
+            f"of the expected arrival error, its six components together (limit "
+            f"{self.settings.guard_sigmas:g} sigma); "
+            + guards.most_out(twist, self.priors[station], self.settings.guard_sigmas)
         )
 
     def agreement(self, station: int) -> tuple[float, float]:

@@ -144,6 +144,26 @@ def test_a_correction_beyond_the_expected_arrival_error_keeps_the_coarse_pose() 
     assert all(r.verdict in ("coarse kept", "reference") for r in off.values())
 
 
+def test_a_correction_turned_down_names_the_part_of_it_farthest_out() -> None:
+    """A correction is judged on its six components together: 50 mm and 3 degrees may pass
+    as a shift and a turn about the vertical, not as a tilt, which levelling leaves within a
+    degree. The reason says which part it was, its size against that part's own limit, and
+    the setting that sets it."""
+    settings = RegistrationSettings()
+    covariance = guards.prior_covariance(make_transform(np.eye(3), np.r_[1.6, 0, 0]), np.eye(4),
+                                         settings)  # fmt: skip
+    tilted = np.r_[np.radians(3.0), 0.0, 0.0, 0.05, 0.0, 0.0]
+    said = guards.most_out(tilted, covariance, 4.0)
+    assert said.startswith("most of all its tilt: 3.00 deg where 4 sigma is ")
+    assert "registration.level_sigma_deg" in said
+    tilt_sigma = np.degrees(np.sqrt(np.linalg.eigvalsh(covariance[:2, :2]).max()))
+    assert f"{4 * tilt_sigma:.2f} deg" in said
+    shifted = np.r_[0.0, 0.0, np.radians(1.0), 0.25, 0.0, 0.0]
+    said = guards.most_out(shifted, covariance, 4.0)
+    assert said.startswith("most of all its horizontal shift: 250 mm where 4 sigma is ")
+    assert "registration.arrival_sigma_m" in said
+
+
 def test_overlaps_are_the_side_and_diagonal_neighbours() -> None:
     points, coarse, _, _ = _plot(0, 3, 0.0, 0.0)
     field = {s: transform_points(coarse[s], p) for s, p in points.items()}
