@@ -139,21 +139,47 @@ def rig_crop(crop: CropSettings, calibration: Calibration) -> CropSettings:
     Stations farther apart need more ground for their clouds to overlap. Stations nearer
     together do not make the plot smaller: the outer plants stand as far beyond the outer
     stations, and their leaves reach out as far, so the ground kept is not cut below the
-    paper's (an independent renderer's stations 0.8 m apart: 1.68 m kept 0.92 m of ground and
-    cut the corner plants' outer leaves, 5-9 cm of width)."""
+    paper's (an independent renderer's stations 0.8 m apart: 1.62-1.73 m kept 0.92 m of
+    ground and cut the outer plants' leaves; its touching plots' width RMSE 2.6-27 cm, 2.4-3.5
+    cm with the paper's ground). The registration need not see so far:
+    :func:`overlap_radius`."""
+    rig = _rig(crop, calibration)
+    if rig is None:
+        return crop
+    height, spacing, ground_m = rig
+    reach = max(ground_m, ground_m / PAPER_STATION_SPACING_M * spacing)
+    return crop.model_copy(update={"radius_m": round(float(np.hypot(height, reach)), 2)})
+
+
+def overlap_radius(crop: CropSettings, calibration: Calibration) -> float | None:
+    """The radius (m) around each view's optical centre within which a station's points are
+    registered, where it is less than :func:`rig_crop`'s: the paper's reach in station spacings
+    alone, where stations stand nearer together than the paper's. Each station then overlaps
+    its neighbours as on the paper's rig; with the whole of the paper's ground every station of
+    a plot 0.8 m apart overlapped every other, and registration cost three times the CPU
+    (`docs/RECONSTRUCTION.md`, "A sixth independent renderer"). ``None``: the whole crop."""
+    rig = _rig(crop, calibration)
+    if rig is None:
+        return None
+    height, spacing, ground_m = rig
+    if spacing >= PAPER_STATION_SPACING_M:
+        return None
+    return round(float(np.hypot(height, ground_m / PAPER_STATION_SPACING_M * spacing)), 2)
+
+
+def _rig(crop: CropSettings, calibration: Calibration) -> tuple[float, float, float] | None:
+    """(the cameras' height, the stations' spacing, the ground the set radius keeps on the
+    paper's rig) in metres, or ``None`` where the crop is not scaled (:func:`rig_crop`)."""
     stations = calibration.stations
     if not crop.scale_to_rig or calibration.ground is None or stations is None:
-        return crop
+        return None
     if len(stations.to_reference) < 2 or crop.radius_m <= PAPER_CAMERA_HEIGHT_M:
-        return crop
+        return None
     T_field_reference = calibration.ground.matrix
     centres = np.array([(T_field_reference @ T)[:3, 3] for T in stations.to_reference.values()])
     apart = np.linalg.norm(centres[:, None, :2] - centres[None, :, :2], axis=2)
     np.fill_diagonal(apart, np.inf)
     height, spacing = float(np.median(centres[:, 2])), float(np.median(apart.min(axis=1)))
     if height <= 0.0 or spacing <= 0.0:
-        return crop
-    ground_m = np.sqrt(crop.radius_m**2 - PAPER_CAMERA_HEIGHT_M**2)  # on the paper's rig
-    reach = max(ground_m, ground_m / PAPER_STATION_SPACING_M * spacing)
-    radius = round(float(np.hypot(height, reach)), 2)
-    return crop.model_copy(update={"radius_m": radius})
+        return None
+    return height, spacing, float(np.sqrt(crop.radius_m**2 - PAPER_CAMERA_HEIGHT_M**2))

@@ -20,7 +20,7 @@ from fieldapp.io.calibration import Stations, ViewStep
 from fieldapp.io.session import Session
 from fieldapp.recon import stages
 from fieldapp.recon.arrival import BaseMoves, base_moves
-from fieldapp.recon.backproject import ray_table, rig_crop
+from fieldapp.recon.backproject import overlap_radius, ray_table, rig_crop
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.early import EarlyStations, StationRead, read_arguments
 from fieldapp.recon.filters import FilteredStation
@@ -84,7 +84,14 @@ def reconstruct(
     del local  # the station clouds are no longer needed
     # 5. Stations joined: one pose graph of every overlap, the levelled poses as its prior.
     joined = yield from _registration(
-        filtered, levelled.value, base_moves(session), view_step, reference.value, settings, timer
+        filtered,
+        levelled.value,
+        base_moves(session),
+        view_step,
+        reference.value,
+        settings,
+        timer,
+        overlap_radius(settings.crop, session.calibration),
     )
     # 6. One cloud of the plot; outliers removed where every station's view is together.
     with timer.stage("outlier removal"):
@@ -271,6 +278,7 @@ def _registration(
     reference: int,
     settings: ReconstructionSettings,
     timer: StageTimer,
+    overlap_radius_m: float | None = None,
 ) -> Generator[Progress, None, stages.Staged[dict[int, StationRegistration]]]:
     """Step 5, a progress event per pair of stations registered and one when all are placed."""
     steps = stages.join_stations(
@@ -281,6 +289,7 @@ def _registration(
         settings.registration,
         settings.threads,
         moves,
+        overlap_radius_m,
     )
     joined = yield from _timed_steps(timer, "registration", steps)
     yield progress("registration", 1.0, f"{len(joined.value)} stations placed")

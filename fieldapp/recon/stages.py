@@ -320,6 +320,7 @@ def join_stations(
     settings: RegistrationSettings,
     threads: int,
     moves: BaseMoves | None = None,
+    overlap_radius_m: float | None = None,
 ) -> Generator[tuple[float, str], None, Staged[dict[int, StationRegistration]]]:
     """Step 5: one pose graph of every overlapping pair, the levelled poses as its prior;
     yields (fraction done, message) per pair registered. A warning per station whose
@@ -339,7 +340,9 @@ def join_stations(
     plot registered the first time is registered exactly as before: on touching canopies a
     millimetre of registration decides some leaf tips (RECONSTRUCTION.md, "Touching
     canopies"), so the first run does not change with the reports."""
-    points = _registration_points(filtered, T_field_levelled, settings.include_soil)
+    points = _registration_points(
+        filtered, T_field_levelled, settings.include_soil, view_step, overlap_radius_m
+    )
     axis = turntable_axis_point(view_step.matrix, view_step.views_per_turn)
     known = PairFits()  # a run from the same starting poses takes the fits made before
     registrations = yield from register_stations(
@@ -445,16 +448,36 @@ def _registration_points(
     filtered: dict[int, FilteredStation],
     T_field_levelled: dict[int, Matrix4],
     include_soil: bool,
+    view_step: ViewStep | None = None,
+    radius_m: float | None = None,
 ) -> dict[int, NDArray[np.float64]]:
     """Per station, the (N, 3) points ICP aligns (plants, and soil when ``include_soil``, at
     their blocks' median depths where read so: ``FilteredStation.registration_points``), in
-    its view-0 frame."""
-    return {
+    its view-0 frame; with ``radius_m``, only those within it of one of the station's views'
+    optical centres (``view_step``; :func:`~fieldapp.recon.backproject.overlap_radius`)."""
+    points = {
         station: transform_points(
             invert(T_field_levelled[station]), result.registration_points(include_soil)
         )
         for station, result in filtered.items()
     }
+    if radius_m is None or view_step is None:
+        return points
+    centres = np.array(
+        [view_step.T_view0_view(view)[:3, 3] for view in range(view_step.views_per_turn)]
+    )
+    return {station: _within(p, centres, radius_m) for station, p in points.items()}
+
+
+def _within(
+    points_m: NDArray[np.float64], centres_m: NDArray[np.float64], radius_m: float
+) -> NDArray[np.float64]:
+    """The (N, 3) ``points_m`` within ``radius_m`` of one of the (V, 3) ``centres_m``."""
+    near = np.zeros(len(points_m), dtype=bool)
+    for centre in centres_m:
+        near |= np.einsum("ij,ij->i", points_m - centre, points_m - centre) <= radius_m**2
+    kept: NDArray[np.float64] = points_m[near]
+    return kept
 
 
 def fuse(

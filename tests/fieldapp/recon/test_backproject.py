@@ -3,7 +3,13 @@ import numpy as np
 import pytest
 
 from devices.camera.frames import KINECT_V2_PAPER, Intrinsics
-from fieldapp.recon.backproject import backproject, backproject_pixels, ray_table, rig_crop
+from fieldapp.recon.backproject import (
+    backproject,
+    backproject_pixels,
+    overlap_radius,
+    ray_table,
+    rig_crop,
+)
 from fieldapp.recon.settings import CropSettings
 
 
@@ -130,6 +136,13 @@ def test_stations_nearer_together_keep_the_papers_ground() -> None:
     assert rig_crop(crop, _calibration(1.3, 0.8)).radius_m == 2.25
     assert rig_crop(crop, _calibration(1.41, 0.8)).radius_m == round(np.hypot(1.41, ground), 2)
     assert rig_crop(crop, _calibration(1.0, 1.2)).radius_m == 2.09  # lower: the same ground
+    # registered within the paper's reach in spacings only, so that each station overlaps its
+    # neighbours as on the paper's rig, not every station of the plot
+    reach = ground / 1.6
+    assert overlap_radius(crop, _calibration(1.41, 0.8)) == round(np.hypot(1.41, reach * 0.8), 2)
+    assert overlap_radius(crop, _calibration(1.3, 1.6)) is None  # the paper's rig: the crop
+    assert overlap_radius(crop, _calibration(1.6, 2.0)) is None  # farther apart: the crop
+    assert overlap_radius(CropSettings(scale_to_rig=False), _calibration(1.3, 0.8)) is None
 
 
 def test_the_crop_is_the_set_radius_when_the_rig_cannot_tell_or_scaling_is_off() -> None:
