@@ -56,6 +56,12 @@ class RigGeometry:
     station_spacing_m: float = 1.6
     wheelbase_m: float = 0.5
     grid: int = 3
+    max_tilt_deg: float = 0.0
+    """Rough ground under the wheels: at each stop every wheel stands on a clod or in a rut,
+    up or down by as much as tilts the base this far about each axis at most (uniform, drawn
+    per stop from ``tilt_seed`` and where it stopped), on top of the soil's own slope. 0: the
+    soil's slope alone (a degree or less on the simulated soil)."""
+    tilt_seed: int = 0
 
     def __post_init__(self) -> None:
         if not 2 <= self.grid <= MAX_GRID:
@@ -116,8 +122,19 @@ class RigGeometry:
         T_map_base = make_transform(rotation_z(pose.yaw_deg), np.array([pose.x_m, pose.y_m, 0.0]))
         T = self.T_field_map @ T_map_base
         if soil is not None:
-            T = T @ _settle(T, soil, self.wheelbase_m)
+            T = T @ _settle(T, soil, self.wheelbase_m, self._wheel_bumps_m(pose))
         return T
+
+    def _wheel_bumps_m(self, pose: Pose2D) -> NDArray[np.float64]:
+        """(4,) how far each wheel (front, back, left, right) stands above the soil's surface
+        where the base stopped at ``pose`` (:attr:`max_tilt_deg`)."""
+        if self.max_tilt_deg <= 0.0:
+            return np.zeros(4)
+        where = (self.tilt_seed, round(pose.x_m * 1000), round(pose.y_m * 1000))
+        rng = np.random.default_rng([abs(v) for v in where] + [int(v < 0) for v in where])
+        bump = self.wheelbase_m * np.tan(np.radians(self.max_tilt_deg)) / 2
+        bumps: NDArray[np.float64] = rng.uniform(-bump, bump, 4)
+        return bumps
 
     def T_field_camera(
         self, pose: Pose2D, table_angle_deg: float, soil: Soil | None = None
@@ -127,12 +144,20 @@ class RigGeometry:
         return self.T_field_base(pose, soil) @ turn @ self.T_table_camera()
 
 
-def _settle(T_field_base: Matrix4, soil: Soil, wheelbase_m: float) -> Matrix4:
-    """``T_level_settled``: the base lifted to the ground and tilted to its local slope."""
+def _settle(
+    T_field_base: Matrix4,
+    soil: Soil,
+    wheelbase_m: float,
+    bumps_m: NDArray[np.float64] | None = None,
+) -> Matrix4:
+    """``T_level_settled``: the base lifted to the ground and tilted to its local slope, each
+    wheel (front, back, left, right) ``bumps_m`` above the soil's surface."""
     half = wheelbase_m / 2
     local = np.array([[half, 0, 0], [-half, 0, 0], [0, half, 0], [0, -half, 0], [0, 0, 0.0]])
     points = local @ T_field_base[:3, :3].T + T_field_base[:3, 3]
     z = soil.height_m(points[:, 0], points[:, 1])
+    if bumps_m is not None:
+        z = z + np.r_[bumps_m, 0.0]
     slope_x = (z[0] - z[1]) / wheelbase_m
     slope_y = (z[2] - z[3]) / wheelbase_m
     normal = np.array([-slope_x, -slope_y, 1.0])

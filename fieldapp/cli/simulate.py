@@ -50,6 +50,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "color_noise": (*_ON_THE_RIG, "turntable"),
     "camera": _ON_THE_RIG,
     "station_spacing": ("plot", "spheres", "soil"),
+    "base_tilt": ("plot", "spheres", "soil"),
     "stations": _ON_THE_RIG,
     "stage": ("plot",),
     "plant_model": ("plot",),
@@ -169,6 +170,14 @@ def register(subparsers: Any) -> None:
         "so with stations nearer together the outer plants stand farther beyond the outer "
         "stations",
     )
+    parser.add_argument(
+        "--base-tilt",
+        default=None,
+        metavar="DEG",
+        help="rough ground under the wheels: at each stop every wheel on a clod or in a rut, "
+        "tilting the base up to DEG degrees about each axis beyond the soil's own slope "
+        "(0..10; default: the soil's slope alone, a degree or less)",
+    )
     parser.add_argument("--seed", default="0", help="world seed (same seed, same plants)")
     parser.add_argument("--day", default="0", help="days since the first scan (plants grow)")
     parser.add_argument(
@@ -265,6 +274,7 @@ def parse_list(name: str, text: str, low: int, high: int) -> list[int]:
 
 CAMERA_HEIGHTS_M = (0.6, 2.5)
 STATION_SPACINGS_M = (0.6, 2.4)
+MAX_BASE_TILT_DEG = 10.0
 CAMERA_PITCHES_DEG = (20.0, 80.0)
 
 
@@ -385,6 +395,9 @@ def run(args: argparse.Namespace) -> int:
     spacing = parse_number("--station-spacing", args.station_spacing, *STATION_SPACINGS_M, "metres")
     if spacing is not None:
         rig = replace(rig, station_spacing_m=spacing)
+    tilt = parse_number("--base-tilt", args.base_tilt, 0.0, MAX_BASE_TILT_DEG, "degrees")
+    if tilt is not None:
+        rig = replace(rig, max_tilt_deg=tilt, tilt_seed=seed)
     if camera:
         rig = replace(rig, camera_height_m=camera["camera_height_m"], pitch_deg=camera["pitch_deg"])
     last = rig.grid**2
@@ -486,6 +499,8 @@ def run(args: argparse.Namespace) -> int:
                 about["camera"] = camera
             if spacing is not None:  # absent: the paper's plan (sessions unchanged)
                 about["station_spacing_m"] = spacing
+            if tilt is not None:  # absent: the soil's slope alone (sessions unchanged)
+                about["max_base_tilt_deg"] = tilt
             plan = simulated_plan(rig, sown=args.scene == "plot")
             count = write_session(args.out, world, stations, views, seed, about, errors, plan)
         if args.scene == "checkerboard" and shots:
