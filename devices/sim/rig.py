@@ -148,16 +148,14 @@ def _settle(
     T_field_base: Matrix4,
     soil: Soil,
     wheelbase_m: float,
-    bumps_m: NDArray[np.float64] | None = None,
+    bumps_m: NDArray[np.float64],
 ) -> Matrix4:
     """``T_level_settled``: the base lifted to the ground and tilted to its local slope, each
     wheel (front, back, left, right) ``bumps_m`` above the soil's surface."""
     half = wheelbase_m / 2
     local = np.array([[half, 0, 0], [-half, 0, 0], [0, half, 0], [0, -half, 0], [0, 0, 0.0]])
     points = local @ T_field_base[:3, :3].T + T_field_base[:3, 3]
-    z = soil.height_m(points[:, 0], points[:, 1])
-    if bumps_m is not None:
-        z = z + np.r_[bumps_m, 0.0]
+    z = soil.height_m(points[:, 0], points[:, 1]) + np.r_[bumps_m, 0.0]
     slope_x = (z[0] - z[1]) / wheelbase_m
     slope_y = (z[2] - z[3]) / wheelbase_m
     normal = np.array([-slope_x, -slope_y, 1.0])

@@ -52,9 +52,13 @@ def prior_covariance(
 
 def sigma_m_deg(covariance: NDArray[np.float64]) -> tuple[float, float]:
     """(translation m, rotation deg): the largest standard deviation of each part."""
-    translation = float(np.sqrt(max(np.linalg.eigvalsh(covariance[3:, 3:]).max(), 0.0)))
-    rotation = float(np.sqrt(max(np.linalg.eigvalsh(covariance[:3, :3]).max(), 0.0)))
-    return translation, float(np.degrees(rotation))
+    return _largest_sigma(covariance[3:, 3:]), float(np.degrees(_largest_sigma(covariance[:3, :3])))
+
+
+def _largest_sigma(covariance: NDArray[np.float64]) -> float:
+    """The largest standard deviation of a (K, K) ``covariance`` (its largest eigenvalue's
+    square root)."""
+    return float(np.sqrt(max(np.linalg.eigvalsh(covariance).max(), 0.0)))
 
 
 PARTS = (
@@ -78,8 +82,7 @@ def most_out(correction: se3.Vector6, covariance: NDArray[np.float64], sigmas: f
         return mahalanobis(correction[part], covariance[part, part])
 
     name, part, unit, setting = max(PARTS, key=lambda p: distance(p[1]))
-    size = float(np.linalg.norm(correction[part]))
-    spread = float(np.sqrt(max(np.linalg.eigvalsh(covariance[part, part]).max(), 0.0)))
+    size, spread = float(np.linalg.norm(correction[part])), _largest_sigma(covariance[part, part])
     if unit == "deg":
         size, spread = np.degrees(size), np.degrees(spread)
         shown = f"{size:.2f} deg where {sigmas:g} sigma is {sigmas * spread:.2f} deg"

@@ -156,8 +156,8 @@ def test_a_correction_turned_down_names_the_part_of_it_farthest_out() -> None:
     said = guards.most_out(tilted, covariance, 4.0)
     assert said.startswith("most of all its tilt: 3.00 deg where 4 sigma is ")
     assert "registration.level_sigma_deg" in said
-    tilt_sigma = np.degrees(np.sqrt(np.linalg.eigvalsh(covariance[:2, :2]).max()))
-    assert f"{4 * tilt_sigma:.2f} deg" in said
+    # the station's own tilt and the reference's, carried over unturned: sqrt(2) x 1 degree
+    assert f"{4 * np.sqrt(2) * settings.level_sigma_deg:.2f} deg" in said  # 5.66
     shifted = np.r_[0.0, 0.0, np.radians(1.0), 0.25, 0.0, 0.0]
     said = guards.most_out(shifted, covariance, 4.0)
     assert said.startswith("most of all its horizontal shift: 250 mm where 4 sigma is ")
