@@ -465,19 +465,45 @@ def grown_into_uncoloured(
     read as not green, it was lost (a touching plot's tallest plant 2.5 cm low). The leaf's
     surface goes on from its green part into the black: grown along it. The black soil beside
     a leaf lies far behind the leaf's edge and is not grown into; soil that continues a stem's
-    foot lies on the local ground, where the pass-through drops it."""
-    far = edges.far_m
-    tolerance = CONTINUOUS_SHARE * far
-    grown = green.copy()
+    foot lies on the local ground, where the pass-through drops it.
+
+    Each step judges only the pixels without colour beside one grown at the step before (a few
+    thousand at most of a frame's 217 088), against the nearest and the farthest of their
+    grown neighbours: the same pixels as an erosion and a dilation of the whole frame at every
+    step, which took 8-10 ms a frame (0.6-0.7 s of CPU on a 72-frame session; every frame
+    libfreenect2 registers has black rows), 1.4-5 ms now."""
+    # on a one-pixel frame of pixels neither grown nor without colour, a neighbour is one
+    # constant step away in the flat image wherever a pixel is
+    far = np.pad(edges.far_m, 1, constant_values=NOT_MEASURED_M).reshape(-1)
+    grown = np.pad(green, 1).reshape(-1)
+    without = np.pad(uncoloured, 1).reshape(-1)
+    padded = (green.shape[0] + 2, green.shape[1] + 2)
+    steps = np.array([dr * padded[1] + dc for dr, dc in _EIGHT])
+    beside = cv2.dilate(grown.reshape(padded).view(np.uint8), _NEIGHBOURS).view(bool)
+    frontier = np.flatnonzero(without & beside.reshape(-1) & ~grown)
     for _ in range(UNCOLOURED_REACH_PX):
-        nearest = cv2.erode(np.where(grown, far, NOT_MEASURED_M).astype(np.float32), _NEIGHBOURS)
-        farthest = cv2.dilate(np.where(grown, far, 0.0).astype(np.float32), _NEIGHBOURS)
-        continues = (np.abs(far - nearest) <= tolerance) | (np.abs(far - farthest) <= tolerance)
-        wider = grown | (uncoloured & continues)
-        if np.array_equal(wider, grown):
+        if len(frontier) == 0:
             break
-        grown = wider
-    return grown
+        own = far[frontier]
+        around = frontier[:, None] + steps  # (F, 8); each has a grown neighbour
+        besides, depths = grown[around], far[around]
+        nearest = np.where(besides, depths, NOT_MEASURED_M).min(axis=1)
+        farthest = np.where(besides, depths, 0.0).max(axis=1)
+        tolerance = CONTINUOUS_SHARE * own
+        continues = (np.abs(own - nearest) <= tolerance) | (np.abs(own - farthest) <= tolerance)
+        added = frontier[continues]
+        if len(added) == 0:
+            break
+        grown[added] = True
+        # only a pixel beside one just grown has a new grown neighbour to be judged against
+        near = (added[:, None] + steps).reshape(-1)
+        near = np.sort(near[without[near] & ~grown[near]])
+        frontier = near[np.r_[True, near[1:] != near[:-1]]] if len(near) else near
+    return grown.reshape(padded)[1:-1, 1:-1].copy()
+
+
+_EIGHT = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
+"""The eight neighbours of a pixel, as (row, column) steps."""
 
 
 def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame | str:

@@ -18,7 +18,15 @@ from fieldapp.cli import main
 from fieldapp.io.images import read_color
 from fieldapp.io.session import Capture, CaptureImages
 from fieldapp.recon.exg import NO_COLOUR, exg_keys, exg_tally, exg_values, otsu_threshold
-from fieldapp.recon.scans import DepthEdges, _separation, frame_of, grown_into_uncoloured
+from fieldapp.recon.scans import (
+    CONTINUOUS_SHARE,
+    NOT_MEASURED_M,
+    UNCOLOURED_REACH_PX,
+    DepthEdges,
+    _separation,
+    frame_of,
+    grown_into_uncoloured,
+)
 
 SOIL, LEAF = (120, 90, 60), (50, 140, 30)
 
@@ -134,3 +142,46 @@ def test_black_through_a_jpeg_is_still_no_colour() -> None:
     assert otsu_threshold(*exg_values(tally)) == pytest.approx(
         otsu_threshold(*exg_values(whole)), abs=0.05
     )
+
+
+def _grown_by_filters(
+    green: NDArray[np.bool_], uncoloured: NDArray[np.bool_], edges: DepthEdges
+) -> NDArray[np.bool_]:
+    """The straightforward growth: at each step an erosion and a dilation of the whole frame
+    give every pixel its nearest and farthest grown neighbour."""
+    import cv2
+
+    far = edges.far_m
+    tolerance = CONTINUOUS_SHARE * far
+    grown = green.copy()
+    square = np.ones((3, 3), np.uint8)
+    for _ in range(UNCOLOURED_REACH_PX):
+        nearest = cv2.erode(np.where(grown, far, NOT_MEASURED_M).astype(np.float32), square)
+        farthest = cv2.dilate(np.where(grown, far, 0.0).astype(np.float32), square)
+        continues = (np.abs(far - nearest) <= tolerance) | (np.abs(far - farthest) <= tolerance)
+        wider = grown | (uncoloured & continues)
+        if np.array_equal(wider, grown):
+            break
+        grown = wider
+    return grown
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_growing_into_black_takes_the_pixels_filters_over_the_whole_frame_take(seed: int) -> None:
+    """Surfaces at steps of 1-10 % of their distance (some continuous, some not), pixels
+    unmeasured, green and black at random up to the frame's edges: the growth that judges
+    only the pixels beside the last grown ones takes the same pixels, bit for bit."""
+    rng = np.random.default_rng(seed)
+    shape = (70, 90)
+    blocks = rng.choice([1.0, 1.02, 1.05, 1.1], size=(7, 9))
+    depth = (1.6 * np.kron(blocks, np.ones((10, 10)))).astype(np.float32)
+    depth += rng.normal(0.0, 0.004, shape).astype(np.float32)
+    measured = rng.random(shape) > 0.05
+    green = (rng.random(shape) < 0.08) & measured
+    uncoloured = (rng.random(shape) < 0.6) & measured & ~green
+    edges = DepthEdges.of(depth, measured)
+    expected = _grown_by_filters(green, uncoloured, edges)
+    grown = grown_into_uncoloured(green, uncoloured, edges)
+    assert grown.shape == shape and np.array_equal(grown, expected)
+    assert expected.sum() > green.sum() + 100  # it grew, and stopped somewhere
+    assert not expected[uncoloured].all()
