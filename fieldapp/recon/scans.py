@@ -486,9 +486,9 @@ def grown_into_uncoloured(
             break
         own = far[frontier]
         around = frontier[:, None] + steps  # (F, 8); each has a grown neighbour
-        besides, depths = grown[around], far[around]
-        nearest = np.where(besides, depths, NOT_MEASURED_M).min(axis=1)
-        farthest = np.where(besides, depths, 0.0).max(axis=1)
+        grown_there, depths = grown[around], far[around]
+        nearest = np.where(grown_there, depths, NOT_MEASURED_M).min(axis=1)
+        farthest = np.where(grown_there, depths, 0.0).max(axis=1)
         tolerance = CONTINUOUS_SHARE * own
         continues = (np.abs(own - nearest) <= tolerance) | (np.abs(own - farthest) <= tolerance)
         added = frontier[continues]
