@@ -278,7 +278,7 @@ def _registration(
     reference: int,
     settings: ReconstructionSettings,
     timer: StageTimer,
-    overlap_radius_m: float | None = None,
+    overlap_radius_m: float | None,
 ) -> Generator[Progress, None, stages.Staged[dict[int, StationRegistration]]]:
     """Step 5, a progress event per pair of stations registered and one when all are placed."""
     steps = stages.join_stations(

@@ -448,20 +448,21 @@ def _registration_points(
     filtered: dict[int, FilteredStation],
     T_field_levelled: dict[int, Matrix4],
     include_soil: bool,
-    view_step: ViewStep | None = None,
-    radius_m: float | None = None,
+    view_step: ViewStep,
+    radius_m: float | None,
 ) -> dict[int, NDArray[np.float64]]:
     """Per station, the (N, 3) points ICP aligns (plants, and soil when ``include_soil``, at
     their blocks' median depths where read so: ``FilteredStation.registration_points``), in
     its view-0 frame; with ``radius_m``, only those within it of one of the station's views'
-    optical centres (``view_step``; :func:`~fieldapp.recon.backproject.overlap_radius`)."""
+    optical centres (``view_step``; :func:`~fieldapp.recon.backproject.overlap_radius`; None:
+    all of them)."""
     points = {
         station: transform_points(
             invert(T_field_levelled[station]), result.registration_points(include_soil)
         )
         for station, result in filtered.items()
     }
-    if radius_m is None or view_step is None:
+    if radius_m is None:
         return points
     centres = np.array(
         [view_step.T_view0_view(view)[:3, 3] for view in range(view_step.views_per_turn)]

@@ -121,7 +121,8 @@ def test_the_crop_keeps_the_papers_reach_in_station_spacings_on_any_rig() -> Non
     reach = np.sqrt(2.25**2 - 1.3**2) / 1.6
     assert rig_crop(crop, _calibration(1.6, 1.6)).radius_m == round(np.hypot(1.6, reach * 1.6), 2)
     assert rig_crop(crop, _calibration(1.6, 1.6)).radius_m == 2.44
-    assert rig_crop(crop, _calibration(1.3, 2.0)).radius_m == round(np.hypot(1.3, reach * 2.0), 2)
+    # 2.0 m apart: 1.15 spacings are 2.30 m of ground, seen from 1.3 m up
+    assert rig_crop(crop, _calibration(1.3, 2.0)).radius_m == 2.64
     assert rig_crop(crop, _calibration(1.0, 1.6)).radius_m == 2.09
 
 
@@ -131,15 +132,14 @@ def test_stations_nearer_together_keep_the_papers_ground() -> None:
     independent renderer's stations 0.8 m apart had 1.68 m (0.92 m of ground), which cut the
     corner plants' outer leaves."""
     crop = CropSettings()
-    ground = np.sqrt(2.25**2 - 1.3**2)  # 1.84 m
     assert rig_crop(crop, _calibration(1.3, 1.2)).radius_m == 2.25
     assert rig_crop(crop, _calibration(1.3, 0.8)).radius_m == 2.25
-    assert rig_crop(crop, _calibration(1.41, 0.8)).radius_m == round(np.hypot(1.41, ground), 2)
+    assert rig_crop(crop, _calibration(1.41, 0.8)).radius_m == 2.32  # 1.84 m from 1.41 m up
     assert rig_crop(crop, _calibration(1.0, 1.2)).radius_m == 2.09  # lower: the same ground
     # registered within the paper's reach in spacings only, so that each station overlaps its
     # neighbours as on the paper's rig, not every station of the plot
-    reach = ground / 1.6
-    assert overlap_radius(crop, _calibration(1.41, 0.8)) == round(np.hypot(1.41, reach * 0.8), 2)
+    # 1.15 spacings of 0.8 m are 0.92 m of ground, seen from 1.41 m up
+    assert overlap_radius(crop, _calibration(1.41, 0.8)) == 1.68
     assert overlap_radius(crop, _calibration(1.3, 1.6)) is None  # the paper's rig: the crop
     assert overlap_radius(crop, _calibration(1.6, 2.0)) is None  # farther apart: the crop
     assert overlap_radius(CropSettings(scale_to_rig=False), _calibration(1.3, 0.8)) is None
