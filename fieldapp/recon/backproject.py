@@ -74,24 +74,31 @@ def backproject_pixels(
     rays: NDArray[np.float64],
     crop_radius_m: float,
     min_depth_m: float = 0.0,
+    mixed: NDArray[np.bool_] | None = None,
 ) -> Cloud:
     """Some pixels of one frame as a coloured cloud in the camera frame: the same points, in
     the same order, as :func:`backproject` of a mask holding those pixels.
 
     ``index``: (M,) the pixels' flat (row-major) indices, ascending; ``depth_m``: (M,) their
-    depth in metres, measured (finite); ``colors``: (M, 3) uint8 RGB. Only the pixels picked
-    are gathered and multiplied, so a frame's few plant pixels cost little.
+    depth in metres, measured (finite); ``colors``: (M, 3) uint8 RGB; ``mixed``: (M,) which are
+    mixed pixels (:attr:`Cloud.mixed`). Only the pixels picked are gathered and multiplied, so
+    a frame's few plant pixels cost little.
     """
     z = np.asarray(depth_m, dtype=np.float64)
     near = z > max(min_depth_m, 0.0)
     if not near.all():
         index, z, colors = index[near], z[near], colors[near]
+        mixed = None if mixed is None else mixed[near]
     ray = np.take(rays.reshape(-1, 3), index, axis=0)  # three times faster than rays[index]
     points = ray * z[:, None]
     inside = _within_radius(ray, z, crop_radius_m)
     if inside.all():
-        return Cloud(points, colors)
-    return Cloud(np.compress(inside, points, axis=0), np.compress(inside, colors, axis=0))
+        return Cloud(points, colors, mixed)
+    return Cloud(
+        np.compress(inside, points, axis=0),
+        np.compress(inside, colors, axis=0),
+        None if mixed is None else mixed[inside],
+    )
 
 
 def backproject_pixels_twice(
@@ -102,6 +109,7 @@ def backproject_pixels_twice(
     rays: NDArray[np.float64],
     crop_radius_m: float,
     min_depth_m: float = 0.0,
+    mixed: NDArray[np.bool_] | None = None,
 ) -> tuple[Cloud, Cloud]:
     """:func:`backproject_pixels` of the same pixels at two depths each (a frame's own and
     its blocks' medians, ``other_depth_m``), keeping a pixel in both clouds where the crop
@@ -115,7 +123,8 @@ def backproject_pixels_twice(
     keep &= _within_radius(ray, z, crop_radius_m) & _within_radius(ray, other, crop_radius_m)
     if not keep.all():
         ray, z, other, colors = ray[keep], z[keep], other[keep], colors[keep]
-    return Cloud(ray * z[:, None], colors), Cloud(ray * other[:, None], colors)
+        mixed = None if mixed is None else mixed[keep]
+    return Cloud(ray * z[:, None], colors, mixed), Cloud(ray * other[:, None], colors, mixed)
 
 
 def _within_radius(

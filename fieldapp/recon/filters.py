@@ -104,7 +104,8 @@ def voxel_keys(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.int64]
 
 
 def voxel_mean(cloud: Cloud, voxel_m: float) -> Cloud:
-    """One point per occupied voxel: the mean position and mean colour of its points."""
+    """One point per occupied voxel: the mean position and mean colour of its points, a mixed
+    pixel (:attr:`Cloud.mixed`) where all of them are."""
     if len(cloud) == 0:
         return cloud
     _, inverse, counts = np.unique(
@@ -113,7 +114,10 @@ def voxel_mean(cloud: Cloud, voxel_m: float) -> Cloud:
     inverse = inverse.ravel()
     points = _group_means(inverse, cloud.points, counts)
     colors = np.rint(_group_means(inverse, cloud.colors, counts)).astype(np.uint8)
-    return Cloud(points, colors)
+    mixed = None
+    if cloud.mixed is not None:
+        mixed = np.bincount(inverse, weights=cloud.mixed, minlength=len(counts)) == counts
+    return Cloud(points, colors, mixed)
 
 
 def _group_means(

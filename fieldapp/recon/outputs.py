@@ -68,6 +68,7 @@ _PLY_BASE = [
     ("blue", "u1"),
 ]
 _PLY_LABELS = [("plant_id", "<i4"), ("organ", "u1"), ("leaf_id", "u1")]
+_PLY_MIXED = [("mixed", "u1")]
 
 
 @dataclass(frozen=True)
@@ -118,9 +119,12 @@ class PointLabels:
 
 
 def ply_bytes(cloud: Cloud, labels: PointLabels | None = None) -> bytes:
-    """A binary little-endian PLY of ``cloud``: float x, y, z, uchar red, green, blue and, with
-    ``labels``, int plant_id, uchar organ, uchar leaf_id."""
+    """A binary little-endian PLY of ``cloud``: float x, y, z, uchar red, green, blue; with
+    ``labels``, int plant_id, uchar organ, uchar leaf_id; where the cloud's mixed pixels were
+    looked for (:attr:`~fieldapp.recon.cloud.Cloud.mixed`), uchar mixed (1: a mixed pixel,
+    which does not set its plant's width)."""
     fields = _PLY_BASE + (_PLY_LABELS if labels is not None else [])
+    fields += _PLY_MIXED if cloud.mixed is not None else []
     vertices = np.empty(len(cloud), dtype=np.dtype(fields))
     for axis, name in enumerate("xyz"):
         vertices[name] = cloud.points[:, axis]
@@ -129,6 +133,8 @@ def ply_bytes(cloud: Cloud, labels: PointLabels | None = None) -> bytes:
     if labels is not None:
         for name, _ in _PLY_LABELS:
             vertices[name] = getattr(labels, name)
+    if cloud.mixed is not None:
+        vertices["mixed"] = cloud.mixed
     return ply.ply_bytes(vertices, ["fieldapp reconstruction, field frame, m"])
 
 
@@ -151,7 +157,8 @@ def read_labelled_ply(path: Path) -> tuple[Cloud, PointLabels | None]:
             vertices["organ"].astype(np.uint8),
             vertices["leaf_id"].astype(np.uint8),
         )
-    return Cloud(ply.points_of(vertices, str(path)), colors), labels
+    mixed = vertices["mixed"] != 0 if "mixed" in (vertices.dtype.names or ()) else None
+    return Cloud(ply.points_of(vertices, str(path)), colors, mixed), labels
 
 
 def csv_text(rows: list[PlantRow], grid: bool | None = None) -> str:

@@ -21,7 +21,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fieldapp.recon.attach import ATTACH_GAP_M, ATTACH_GROUND_GAP_M, attach_doubtful
-from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.cloud import Cloud, width_points
 from fieldapp.recon.exg import NOT_GREEN_EXG, excess_green, grey_group, not_green_group
 from fieldapp.recon.filters import not_green
 from fieldapp.recon.geodesic import (
@@ -815,6 +815,7 @@ def _measured(
             ground_radius_m,
             settings.top_support_points,
             settings.top_support_radius_m,
+            width_points(plant),
         )
         low = _foreign(plant, traits) if label >= stem_count and coloured else None
         if low is not None:

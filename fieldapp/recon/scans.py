@@ -404,6 +404,49 @@ class DepthEdges:
         return cls(far, behind, measured)
 
 
+MIXED_REACH_PX = 1
+"""How far (pixels) on each side :func:`mixed_pixels` looks for the two surfaces a mixed pixel
+lies between: the pixels beside it. A veil two or more deep is still found (each of its pixels
+has a nearer one on one side and a farther one on the other), while a surface two or more
+pixels wide between a nearer and a farther one (a lower leaf's tip seen between an upper leaf
+and the soil, in touching canopies) continues itself on one side and is not taken (two pixels
+on each side took such tips on an independent renderer's touching plots: widths 0.5-3 cm
+narrower where its views had seen them)."""
+
+
+def mixed_pixels(edges: DepthEdges, pixels: NDArray[np.intp]) -> NDArray[np.bool_]:
+    """(P,) which of ``pixels`` (P,) (row-major indices into the frame) lie between two
+    surfaces: along a row, a column or a diagonal, a measured pixel within
+    :data:`MIXED_REACH_PX` on one side nearer than it and one on the other side farther, each
+    by more than :data:`CONTINUOUS_SHARE` of its distance.
+
+    A time-of-flight pixel across a depth edge returns a depth between the two surfaces it sees:
+    a point in the air between a leaf's edge and the soil or leaf behind it, off every surface
+    (a veil of them along the view's rays). A leaf's own edge pixel is continuous with the leaf
+    on one side, and a stem or a thin tip seen against the soil has the soil farther on both
+    sides: neither is between two surfaces."""
+    far = edges.far_m
+    height, width = far.shape
+    reach = MIXED_REACH_PX
+    padded = np.full((height + 2 * reach, width + 2 * reach), np.nan, np.float32)
+    padded[reach:-reach, reach:-reach] = np.where(edges.measured, far, np.nan)
+    flat = padded.reshape(-1)
+    row, column = np.divmod(pixels, width)
+    at = (row + reach) * padded.shape[1] + column + reach
+    own = flat[at]
+    step = CONTINUOUS_SHARE * own
+    between = np.zeros(len(pixels), dtype=bool)
+    with np.errstate(invalid="ignore"):  # NaN, not measured, is neither nearer nor farther
+        for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            for k in range(1, reach + 1):
+                offset = k * (dr * padded.shape[1] + dc)
+                before, after = flat[at - offset], flat[at + offset]
+                between |= ((before < own - step) & (after > own + step)) | (
+                    (after < own - step) & (before > own + step)
+                )
+    return between
+
+
 def grown_over_edges(
     green: NDArray[np.bool_], edges: DepthEdges, reach_px: int = REGISTRATION_PX
 ) -> NDArray[np.bool_]:
@@ -589,6 +632,7 @@ def _green_and_soil(
     the raw and the median clouds."""
     if frame.measured.shape != rays.shape[:2]:
         raise ValueError(f"depth {frame.measured.shape} does not match the camera {rays.shape[:2]}")
+    mixed = None
     if separation.by_geometry or frame.keys is None:
         measured = frame.measured.reshape(-1)
         green, soil = np.flatnonzero(measured), grid[measured[grid]]
@@ -603,6 +647,12 @@ def _green_and_soil(
         mask = grown_over_edges(grown, edges, rim_px).reshape(-1)
         green = np.flatnonzero(mask)
         soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
+        if frame.uncoloured:
+            # the green pixels with no colour of their own that lie between two surfaces:
+            # kept (they hold a plant together), but they do not set its width
+            dark = np.flatnonzero(np.take(uncoloured_keys(), frame.keys[green]))
+            mixed = np.zeros(len(green), dtype=bool)
+            mixed[dark] = mixed_pixels(edges, green[dark])
 
     depth = frame.images.depth_m
     green_m, soil_m = depth.reshape(-1)[green], depth.reshape(-1)[soil]
@@ -636,7 +686,7 @@ def _green_and_soil(
     # the green point for point at its own depth and its block's: the pass-through takes
     # both (filters.filter_station), or in the sun green soil stood clear of its ground
     green_cloud, green_steady = backproject_pixels_twice(
-        green, green_m, green_median, green_rgb, rays, crop.radius_m, crop.min_depth_m
+        green, green_m, green_median, green_rgb, rays, crop.radius_m, crop.min_depth_m, mixed
     )
     return (
         green_cloud,

@@ -21,7 +21,7 @@ from devices.geometry import Matrix4, invert, transform_points
 from fieldapp.io.calibration import Calibration, T_view0_view, ViewStep
 from fieldapp.io.session import Capture, Session
 from fieldapp.recon.arrival import BaseMoves, move_coarse
-from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.cloud import Cloud, joined_mixed
 from fieldapp.recon.coverage import (
     ViewLimits,
     cut_tops,
@@ -503,7 +503,8 @@ def _joined(
     soil samples ((M, 3) float64). Its own function so that the stations' moved copies are
     freed before the outlier removal's neighbour search, the pipeline's largest."""
     total = sum(len(f.plants) for f in filtered.values())
-    plants = Cloud(np.empty((total, 3)), np.empty((total, 3), dtype=np.uint8))
+    mixed = joined_mixed([f.plants for f in filtered.values()])
+    plants = Cloud(np.empty((total, 3)), np.empty((total, 3), dtype=np.uint8), mixed)
     at = 0
     for station, f in filtered.items():  # moved into place: no second copy of the plot
         rows = slice(at, at + len(f.plants))

@@ -15,7 +15,7 @@ import numpy as np
 
 from devices.geometry import Matrix4, transform_points
 from fieldapp.io.calibration import T_view0_view
-from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.cloud import Cloud, joined_mixed
 
 __all__ = ["MAX_ANGLE_OFF_DEG", "T_view0_reached", "T_view0_view", "angle_off_deg", "station_cloud"]
 
@@ -67,4 +67,4 @@ def station_cloud(
         points[start:end] = transform_points(T, cloud.points)  # one view's copy at a time
         colors[start:end] = cloud.colors
         start = end
-    return Cloud(points, colors)
+    return Cloud(points, colors, joined_mixed([views[view] for view in sorted(views)]))

@@ -225,12 +225,16 @@ def measure_plant(
     ground_radius_m: float,
     top_support_points: int,
     top_support_radius_m: float,
+    width_points_m: NDArray[np.float64] | None = None,
 ) -> PlantTraits:
-    """Traits of one plant from its points (N, 3) and the soil around it (M, 3), field frame."""
+    """Traits of one plant from its points (N, 3) and the soil around it (M, 3), field frame;
+    its width from ``width_points_m`` (K, 3) where given (its points less the mixed pixels,
+    :func:`~fieldapp.recon.cloud.width_points`), else from all of them."""
     base = base_xy_m(points_m, base_slice_m)
     ground_z = local_ground_z_m(soil_m, base, ground_radius_m)
     top_z = robust_top_z_m(points_m, top_support_points, top_support_radius_m)
-    circle = smallest_enclosing_circle(points_m[:, :2])
+    spread = points_m if width_points_m is None else width_points_m
+    circle = smallest_enclosing_circle(spread[:, :2])
     return PlantTraits(
         x_m=float(base[0]),
         y_m=float(base[1]),

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from fieldapp.errors import FormatError, Problem
 from fieldapp.io.durable import write_bytes_durably
-from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.cloud import Cloud, width_points
 from fieldapp.recon.organ_traits import PlantOrgans, foot_m, measure_organs
 from fieldapp.recon.outputs import (
     LeafRow,
@@ -143,6 +143,7 @@ def measure_again(state: PlotState, plant: int, settings: ReconstructionSettings
         settings.ground.local_ground_radius_m,
         p.top_support_points,
         p.top_support_radius_m,
+        width_points(state.cloud.select(index)),  # as the reconstruction measured it
     )
     organs = _organs(points, foot_m(traits)) if state.organs else None
     state.labels.organ[index] = 0 if organs is None else organs.organs.organ
