@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -24,6 +25,7 @@ from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.depth_only import read_scan_capture
 from fieldapp.recon.exg import MIXED_SHARE, mixed_pixel_threshold, otsu_threshold
 from fieldapp.recon.filters import filter_station
+from fieldapp.recon.outputs import read_ply
 from fieldapp.recon.scans import (
     MIXED_RIM_REACH_PX,
     REGISTRATION_PX,
@@ -174,6 +176,20 @@ def test_jpeg_colour_with_black_bands_in_the_sun_keeps_the_soil_out(
     capsys.readouterr()
     assert rmse["height"] <= 0.8  # measured 0.53
     assert rmse["width"] <= 1.2  # measured 0.58
+    # the black mixed pixels kept as plant are flagged in the plant files, and no width rests
+    # on them: each plant's width is OpenCV's enclosing circle of its other points
+    out = tmp_path / "out"
+    with (out / "plants.csv").open() as f:
+        widths_cm = {row["plant"]: float(row["width_cm"]) for row in csv.DictReader(f)}
+    flagged = 0
+    for plant, width_cm in widths_cm.items():
+        cloud = read_ply(out / "plants" / f"{plant}.ply")
+        assert cloud.mixed is not None
+        flagged += int(cloud.mixed.sum())
+        solid = cloud.points[~cloud.mixed, :2].astype(np.float32)
+        _, radius = cv2.minEnclosingCircle(solid)
+        assert 200 * radius == pytest.approx(width_cm, abs=0.05)
+    assert flagged > 0
 
 
 @pytest.mark.slow

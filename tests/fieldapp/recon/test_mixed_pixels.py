@@ -18,9 +18,14 @@ from fieldapp.recon.backproject import backproject_pixels_twice, ray_table
 from fieldapp.recon.cloud import Cloud, joined_mixed, width_points
 from fieldapp.recon.filters import voxel_mean
 from fieldapp.recon.outputs import PointLabels, ply_bytes, read_labelled_ply, read_ply
+from fieldapp.recon.plants import find_plants
 from fieldapp.recon.scans import DepthEdges, mixed_pixels
+from fieldapp.recon.settings import PlantSettings, ReconstructionSettings
 from fieldapp.recon.station import station_cloud
 from fieldapp.recon.traits import measure_plant
+from fieldapp.results.correction_plot import PlotState, measure_again
+
+from .synthetic import LEAF_RGB, seedling
 
 SOIL_M, LOWER_M, UPPER_M = 1.6, 1.0, 0.7
 
@@ -157,3 +162,36 @@ def test_the_plant_files_keep_the_flags_and_files_without_them_read_as_before(
     (tmp_path / "plain.ply").write_bytes(ply_bytes(plain))
     assert b"mixed" not in (tmp_path / "plain.ply").read_bytes()[:400]  # the same file as before
     assert read_ply(tmp_path / "plain.ply").mixed is None
+
+
+def test_the_plants_step_keeps_a_veil_in_its_plant_and_out_of_its_width() -> None:
+    """A seedling whose leaf's edge trails a veil of mixed pixels down and out along the rays
+    of a camera above it: the veil stays part of the plant; its width is the leaf's."""
+    rng = np.random.default_rng(3)
+    leaf = seedling(rng, 0.0, 0.0, 0.30, 0.30, 6000)
+    steps = np.linspace(0.004, 0.06, 15)[:, None]  # 4 mm apart, out to 6 cm past the edge
+    veil = np.array([0.15, 0.0, 0.18]) + steps * np.array([0.8, 0.0, -0.6])
+    points = np.concatenate([leaf, veil])
+    colors = np.tile(np.array(LEAF_RGB, np.uint8), (len(points), 1))
+    flags = np.concatenate([np.zeros(len(leaf), bool), np.ones(len(veil), bool)])
+    (plant,) = find_plants(Cloud(points, colors, flags), np.zeros((0, 3)), PlantSettings(), 0.15)
+    assert plant.traits.points == len(points)  # the veil is the plant's
+    assert plant.traits.width_m == pytest.approx(0.30, abs=1e-6)
+    (unflagged,) = find_plants(Cloud(points, colors), np.zeros((0, 3)), PlantSettings(), 0.15)
+    assert unflagged.traits.width_m > 0.33
+
+
+def test_a_corrected_plant_is_measured_again_without_its_mixed_points() -> None:
+    rng = np.random.default_rng(4)
+    leaf = seedling(rng, 0.0, 0.0, 0.30, 0.30, 6000)
+    veil = np.array([0.15, 0.0, 0.18]) + np.linspace(0.004, 0.06, 15)[:, None] * [0.8, 0, -0.6]
+    points = np.concatenate([leaf, veil])
+    n = len(points)
+    flags = np.concatenate([np.zeros(len(leaf), bool), np.ones(len(veil), bool)])
+    cloud = Cloud(points, np.tile(np.array(LEAF_RGB, np.uint8), (n, 1)), flags)
+    labels = PointLabels(np.ones(n, np.int32), np.zeros(n, np.uint8), np.zeros(n, np.uint8))
+    ground = np.array([[0.0, 0.0, 0.0]])
+    state = PlotState(cloud, labels, {}, {}, ground, organs=False, grid=False)
+    measure_again(state, 1, ReconstructionSettings())
+    assert state.rows[1].width_cm == pytest.approx(30.0, abs=1e-4)
+    assert state.rows[1].points == n
