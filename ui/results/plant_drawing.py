@@ -7,8 +7,9 @@ The height line stands at the plant's foot, from the local ground up to the high
 point (the point :func:`fieldapp.recon.traits.robust_top_z_m` finds, with the reconstruction's
 settings); the local ground is that top less the height. The width circle is the smallest
 circle enclosing the plant's projection (:func:`fieldapp.recon.traits.smallest_enclosing_circle`),
-drawn on the local ground. SciPy (which those use) is imported when a plant is first drawn,
-not with the GUI (``tests/ui/test_startup.py``).
+its mixed pixels left out as the reconstruction leaves them out
+(:func:`fieldapp.recon.cloud.width_points`), drawn on the local ground. SciPy (which those
+use) is imported when a plant is first drawn, not with the GUI (``tests/ui/test_startup.py``).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fieldapp.errors import FieldappError
-from fieldapp.recon.cloud import Cloud
+from fieldapp.recon.cloud import Cloud, width_points
 from fieldapp.recon.outputs import read_labelled_ply
 from fieldapp.recon.settings import PlantSettings
 from ui.results.data import PlotResults
@@ -136,10 +137,11 @@ def plant_drawing(
 
     settings = settings or PlantSettings()
     record = results.plant(plant)
-    points, organ, leaf = _labelled_points(results, plant)
+    cloud, organ, leaf = _labelled_points(results, plant)
+    points = cloud.points
     top_z = robust_top_z_m(points, settings.top_support_points, settings.top_support_radius_m)
     ground_z = top_z - record.height_cm / 100.0
-    circle = smallest_enclosing_circle(points[:, :2])
+    circle = smallest_enclosing_circle(width_points(cloud)[:, :2])  # as it was measured
     angles = np.linspace(0.0, 2.0 * np.pi, CIRCLE_VERTICES + 1)
     centre = np.array([circle.centre_x_m, circle.centre_y_m, ground_z])
     ring = centre + circle.radius_m * np.c_[np.cos(angles), np.sin(angles), 0.0 * angles]
@@ -167,7 +169,7 @@ def plant_drawing(
 
 def _labelled_points(
     results: PlotResults, plant: int
-) -> tuple[NDArray[np.float64], NDArray[np.uint8], NDArray[np.uint8]]:
+) -> tuple[Cloud, NDArray[np.uint8], NDArray[np.uint8]]:
     path: Path = results.results_dir / "plants" / f"{plant}.ply"
     labels = None
     if path.is_file():
@@ -177,6 +179,6 @@ def _labelled_points(
     if len(cloud) == 0:
         raise FieldappError(f"plant {plant} has no points ({path} missing or empty)")
     if labels is not None:
-        return cloud.points, labels.organ, labels.leaf_id
+        return cloud, labels.organ, labels.leaf_id
     none = np.zeros(len(cloud), np.uint8)
-    return cloud.points, none, none
+    return cloud, none, none

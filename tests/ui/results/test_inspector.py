@@ -3,6 +3,7 @@ simulated plot reconstructed once for this module (about 2.5 s of CPU)."""
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,9 @@ import pytest
 
 from fieldapp.cli import main
 from fieldapp.evaluate.organ_files import evaluate_organ_references
+from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_STEM
+from fieldapp.recon.outputs import PointLabels, ply_bytes, read_labelled_ply
 from fieldapp.results.organ_tables import read_table
 from ui.results.data import load_results_dir
 from ui.results.plant_drawing import DIM, STEM_RGB, leaf_rgb, plant_drawing
@@ -208,3 +211,33 @@ def test_an_export_carries_the_organ_accuracy(tmp_path: Path) -> None:
     html = (tmp_path / "e" / "report.html").read_text()
     assert "Organ accuracy against the reference" in html
     assert "Leaf count exact on 1 of 1 plants" in html
+
+
+def test_the_circle_drawn_leaves_out_the_mixed_points_as_the_width_does(
+    plot_results: Path, tmp_path: Path
+) -> None:
+    """A plant file whose points carry mixed flags (a session with black pixels): a veil
+    point far off the plant is drawn, but the circle is plants.csv's width."""
+    folder = Path(shutil.copytree(plot_results, tmp_path / "results"))
+    record = load_results_dir(folder).plants[0]
+    path = folder / "plants" / f"{record.plant}.ply"
+    cloud, labels = read_labelled_ply(path)
+    assert labels is not None
+    veil = cloud.points.mean(axis=0) + np.array([[0.5, 0.0, 0.0]])
+    one = np.ones(1, np.uint8)
+    flagged = Cloud(
+        np.concatenate([cloud.points, veil]),
+        np.concatenate([cloud.colors, np.zeros((1, 3), np.uint8)]),
+        np.concatenate([np.zeros(len(cloud), bool), [True]]),
+    )
+    more = PointLabels(
+        np.concatenate([labels.plant_id, [record.plant]]).astype(np.int32),
+        np.concatenate([labels.organ, 0 * one]),
+        np.concatenate([labels.leaf_id, 0 * one]),
+    )
+    path.write_bytes(ply_bytes(flagged, more))
+    d = plant_drawing(load_results_dir(folder), record.plant)
+    assert len(d.points_m) == len(cloud) + 1
+    centre = d.width_circle_m[:-1].mean(axis=0)
+    radii = np.linalg.norm(d.width_circle_m[:, :2] - centre[:2], axis=1)
+    assert 200 * radii == pytest.approx(record.width_cm, abs=0.01)
