@@ -406,12 +406,13 @@ class DepthEdges:
 
 MIXED_REACH_PX = 1
 """How far (pixels) on each side :func:`mixed_pixels` looks for the two surfaces a mixed pixel
-lies between: the pixels beside it. A veil two or more deep is still found (each of its pixels
-has a nearer one on one side and a farther one on the other), while a surface two or more
-pixels wide between a nearer and a farther one (a lower leaf's tip seen between an upper leaf
-and the soil, in touching canopies) continues itself on one side and is not taken (two pixels
-on each side took such tips on an independent renderer's touching plots: widths 0.5-3 cm
-narrower where its views had seen them)."""
+lies between: the pixels beside it. A veil two or more deep is still found where each of its
+steps is over :data:`CONTINUOUS_SHARE`, while a surface two or more pixels wide between a
+nearer and a farther one (a lower leaf's tip seen between an upper leaf and the soil, in
+touching canopies) continues itself on one side and is not taken (two pixels on each side
+took such tips on an independent renderer's touching plots: widths 0.5-3 cm narrower where its
+views had seen them). A veil two deep whose two pixels are within that share of each other
+is, in depth alone, such a surface, and is not taken either."""
 
 
 def mixed_pixels(edges: DepthEdges, pixels: NDArray[np.intp]) -> NDArray[np.bool_]:
