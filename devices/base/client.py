@@ -98,6 +98,7 @@ class BaseClient:
         self._counter = itertools.count(1)
         self._base_session: str | None = None
         self._active_goal: str | None = None
+        self._sent_goals: set[str] = set()
         self._link_error: BaseError | None = None
         self._closed = threading.Event()
         self._goal_event = threading.Event()
@@ -153,6 +154,7 @@ class BaseClient:
         """
         if self._base_session is None:
             self.hello()
+        self._sent_goals.add(goal_id)  # before sending: a request may arrive after all
         self._request(Command.GOTO, {"goal_id": goal_id, **goal.to_json()})
         self._begin_goal(goal_id)
         if not wait:
@@ -180,6 +182,12 @@ class BaseClient:
                     f"goal {goal_id} not reached within {timeout_s:g} s: cancelled"
                 )
             time.sleep(self.timing.status_poll_period_s)
+
+    def sent_goal(self, goal_id: str) -> bool:
+        """Whether this client sent a ``goto`` with ``goal_id``, answered or not: a request
+        whose reply was lost (the base hung, the link dropped) may still have reached the
+        base and started it, after the client had given up on it."""
+        return goal_id in self._sent_goals
 
     def cancel(self, goal_id: str) -> bool:
         cancelled = bool(self._request(Command.CANCEL, {"goal_id": goal_id}).get("cancelled"))

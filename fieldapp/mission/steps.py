@@ -21,11 +21,12 @@ from devices.base import (
     BaseClient,
     BaseError,
     BaseOffline,
+    BaseRequestRejected,
     BaseStopped,
     LinkClosed,
     NavigationFailed,
 )
-from devices.base.protocol import BaseState, Pose, Status
+from devices.base.protocol import BaseState, ErrorCode, Pose, Status
 from devices.camera import CameraError, CameraTimeout, DepthCamera, Frame
 from devices.camera.quality import QualityReport, QualityThresholds, assess
 from devices.table import GrblTable, TableAlarm, TableException, TableMissedTarget
@@ -61,7 +62,7 @@ def drive_to(
         attempt += 1
         goal_id = f"s{station.number:02d}-{uuid.uuid4().hex[:8]}"
         try:
-            base.goto(goal_id, goal, wait=False)
+            _goto(base, goal_id, goal)
             *_, status = base.follow_goal(goal_id, plan.navigation_timeout_s)
             return status, attempt
         except NavigationFailed as error:
@@ -100,6 +101,28 @@ def drive_to(
             yield MissionWarning(f"{what}; resuming ({choice.value})", station.number)
         gate.sleep(plan.retries.base_link_wait_s if kind is IncidentKind.LOST_LINK else 0.0)
         _ready_for_goal(base, gate)
+
+
+def _goto(base: BaseClient, goal_id: str, goal: Pose) -> None:
+    """Send the base to ``goal``. Refused ``busy`` because a goal this client sent earlier is
+    moving (a station's request the link lost that reached the base after the station was
+    given up, after :func:`_ready_for_goal` had found the base at rest), that goal is
+    cancelled and ``goal`` sent again, once; a goal the client did not send is left alone
+    and the refusal stands."""
+    try:
+        base.goto(goal_id, goal, wait=False)
+        return
+    except BaseRequestRejected as error:
+        if error.code != ErrorCode.BUSY.value:
+            raise
+        status = base.status()
+        late = status.goal_id
+        if status.state is BaseState.MOVING and (late is None or not base.sent_goal(late)):
+            raise
+        if status.state is BaseState.MOVING and late is not None:
+            log.warning("goal %s of an earlier attempt reached the base late: cancelled", late)
+            base.cancel(late)
+    base.goto(goal_id, goal, wait=False)
 
 
 def _incident_choice(

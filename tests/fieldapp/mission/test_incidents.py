@@ -6,16 +6,16 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from devices.base import SimFault
-from devices.base.protocol import Command
+from devices.base import SimFault, open_base
+from devices.base.protocol import BaseState, Command, Pose
 from fieldapp.cli.mission import _with_incident_policy, register
 from fieldapp.mission import MissionResult, MissionSetup
 from fieldapp.mission.folder import read_plan
 from fieldapp.mission.incidents import Choice, Incident, IncidentKind
-from fieldapp.mission.plan import RetryLimits, default_plan
+from fieldapp.mission.plan import RetryLimits, default_plan, grid_stations
 from fieldapp.settings import IncidentPolicy
 
-from .conftest import small_plan
+from .conftest import HANG_S, small_plan
 
 Opener = Callable[..., MissionSetup]
 
@@ -143,3 +143,39 @@ def test_the_command_line_resumes_only_when_told() -> None:
         plan, _cli("--on-lost-link", "resume", "--on-blocked-path", "skip")
     )
     assert (told.incidents.lost_link, told.incidents.blocked_path) == ("resume", "skip")
+
+
+def test_a_goal_the_link_lost_that_reaches_the_base_late_is_superseded(
+    open_mission: Opener,
+) -> None:
+    """A station's request whose replies the link lost reached the base after all, after the
+    mission had given that station up and found the base at rest: the base is on its way
+    there when the next station's goal comes, and refuses it as busy. The late goal is this
+    client's own, so it is cancelled and the station's goal sent again; another client's goal
+    would be left alone (``test_command_semantics``)."""
+    setup = open_mission(small_plan(stations=(5,), views=1), realtime=True)
+    sim = setup.rig.sim_base
+    assert sim is not None
+    far = next(s for s in grid_stations() if s.number == 1)  # 2.3 m away: seconds of driving
+    setup.rig.base.goto("s04-late", Pose(far.x_m, far.y_m, far.yaw_deg), wait=False)
+    assert setup.rig.base.sent_goal("s04-late") and not setup.rig.base.sent_goal("s05")
+    result = setup.runner().start().wait(HANG_S)
+    assert result is not None and result.complete, result
+    assert sim.executed[Command.CANCEL] == 1
+    assert sim.status().state is BaseState.ARRIVED and sim.status().goal_id != "s04-late"
+
+
+def test_another_client_s_goal_is_not_cancelled_by_the_mission(open_mission: Opener) -> None:
+    setup = open_mission(small_plan(stations=(5,), views=1), realtime=True)
+    sim = setup.rig.sim_base
+    assert sim is not None
+    other = open_base(sim.command_endpoint, None)
+    try:
+        far = next(s for s in grid_stations() if s.number == 1)
+        other.goto("teleop", Pose(far.x_m, far.y_m, far.yaw_deg), wait=False)
+        result = setup.runner().start().wait(HANG_S)
+        assert result is not None and result.fault is not None, result
+        assert "busy" in result.fault.what
+        assert sim.executed[Command.CANCEL] == 0
+    finally:
+        other.close()
