@@ -912,11 +912,13 @@ def widest_meets(plants: list[Plant], splits: list[list[int]], reach_m: float) -
     it was cut from its neighbour, not where a leaf was seen to end: an unflagged plant 11 cm
     too narrow, whose leaf tip past a 4 cm gap went to the stem it touched, ended 2 cm from
     that plant (an unseen touching plot; over the touching bench, 9 of the 23 plants more than
-    3 cm too narrow, and 30 of the 429 within 2 cm, RECONSTRUCTION.md)."""
+    3 cm too narrow, and 30 of the 429 within 2 cm, RECONSTRUCTION.md). The points a width
+    is measured on, on both sides: a mixed pixel (:attr:`Cloud.mixed`) is in the air past a
+    leaf's edge, neither where it ends nor a neighbour's leaf."""
     by_id = {plant.id: plant for plant in plants}
     meets: dict[int, int] = {}
     for group in splits:
-        clouds = [by_id[plant_id].cloud.points for plant_id in group]
+        clouds = [width_points(by_id[plant_id].cloud) for plant_id in group]
         owner = np.repeat(np.array(group), [len(cloud) for cloud in clouds])
         tree = cKDTree(np.concatenate(clouds))
         for plant_id, points in zip(group, clouds, strict=True):

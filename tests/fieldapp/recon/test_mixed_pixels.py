@@ -18,7 +18,7 @@ from fieldapp.recon.backproject import backproject_pixels_twice, ray_table
 from fieldapp.recon.cloud import Cloud, joined_mixed, width_points
 from fieldapp.recon.filters import voxel_mean
 from fieldapp.recon.outputs import PointLabels, ply_bytes, read_labelled_ply, read_ply
-from fieldapp.recon.plants import find_plants
+from fieldapp.recon.plants import Plant, find_plants, widest_meets
 from fieldapp.recon.scans import DepthEdges, mixed_pixels
 from fieldapp.recon.settings import PlantSettings, ReconstructionSettings
 from fieldapp.recon.station import station_cloud
@@ -195,3 +195,29 @@ def test_a_corrected_plant_is_measured_again_without_its_mixed_points() -> None:
     measure_again(state, 1, ReconstructionSettings())
     assert state.rows[1].width_cm == pytest.approx(30.0, abs=1e-4)
     assert state.rows[1].points == n
+
+
+def test_a_veil_reaching_a_neighbour_does_not_make_the_plants_meet() -> None:
+    """Two seedlings 10 cm apart at their leaves' edges, one trailing a veil of mixed pixels
+    across the gap to within 1 cm of the other: neither plant's widest extent meets the
+    other, since the veil is in the air (it would, were its points surface)."""
+    rng = np.random.default_rng(5)
+    steps = np.linspace(0.004, 0.09, 20)[:, None]
+    veil = np.array([0.15, 0.0, 0.18]) + steps * np.array([1.0, 0.0, -0.05])
+    a_points = np.concatenate([seedling(rng, 0.0, 0.0, 0.30, 0.30, 6000), veil])
+    b_points = seedling(rng, 0.40, 0.0, 0.30, 0.30, 6000)
+    soil = np.array([[x, y, 0.0] for x in (-0.3, 0.7) for y in (-0.3, 0.3)])
+
+    def plants(flagged: bool) -> list[Plant]:
+        found = []
+        for number, points in ((1, a_points), (2, b_points)):
+            mixed = np.zeros(len(points), bool)
+            if number == 1 and flagged:
+                mixed[-len(veil) :] = True
+            cloud = Cloud(points, np.zeros((len(points), 3), np.uint8), mixed)
+            traits = measure_plant(points, soil, 0.02, 0.3, 3, 0.02, width_points(cloud))
+            found.append(Plant(number, traits, cloud))
+        return found
+
+    assert widest_meets(plants(True), [[1, 2]], 0.025) == {}
+    assert widest_meets(plants(False), [[1, 2]], 0.025) == {1: 2, 2: 1}
