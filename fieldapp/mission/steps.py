@@ -113,16 +113,22 @@ def _goto(base: BaseClient, goal_id: str, goal: Pose) -> None:
         base.goto(goal_id, goal, wait=False)
         return
     except BaseRequestRejected as error:
-        if error.code != ErrorCode.BUSY.value:
+        if error.code != ErrorCode.BUSY.value or not _cancel_own_goal(base, base.status()):
             raise
-        status = base.status()
-        late = status.goal_id
-        if status.state is BaseState.MOVING and (late is None or not base.sent_goal(late)):
-            raise
-        if status.state is BaseState.MOVING and late is not None:
-            log.warning("goal %s of an earlier attempt reached the base late: cancelled", late)
-            base.cancel(late)
     base.goto(goal_id, goal, wait=False)
+
+
+def _cancel_own_goal(base: BaseClient, status: Status) -> bool:
+    """Cancel the goal ``status`` shows moving when this client sent it (a request of an
+    earlier attempt that reached the base after all); False, and nothing cancelled, when the
+    goal moving is another client's (an operator driving the base by hand)."""
+    if status.state is not BaseState.MOVING or not status.goal_id:
+        return True
+    if not base.sent_goal(status.goal_id):
+        return False
+    log.warning("goal %s of an earlier attempt is moving the base: cancelled", status.goal_id)
+    base.cancel(status.goal_id)
+    return True
 
 
 def _incident_choice(
@@ -142,15 +148,15 @@ def _incident_choice(
 def _ready_for_goal(base: BaseClient, gate: Gate) -> None:
     """Before another goal: after a lost link the base is latched (stopped by its watchdog),
     so the latch is cleared; a goal of an earlier attempt still moving (its request arrived
-    after all) is cancelled. A STOP that came meanwhile is never undone (see
+    after all) is cancelled, another client's is not (:func:`_cancel_own_goal`: the next goto
+    is refused with the reason). A STOP that came meanwhile is never undone (see
     :func:`_reset_unless_stopped`)."""
     try:
         status = base.status()
     except BaseOffline:
         return  # the next goto says so
-    if status.state is BaseState.MOVING and status.goal_id:
-        log.info("cancelling goal %s of an earlier attempt", status.goal_id)
-        base.cancel(status.goal_id)
+    if status.state is BaseState.MOVING:
+        _cancel_own_goal(base, status)
     elif status.state is BaseState.STOPPED and status.error == "link lost":
         log.info("base latched after a lost link: resetting before the next goal")
         _reset_unless_stopped(base, gate)

@@ -47,7 +47,7 @@ class Cloud:
         """This cloud (in the source frame) expressed in the target frame."""
         return Cloud(transform_points(T_target_source, self.points), self.colors, self.mixed)
 
-    def mixed_or_none(self) -> NDArray[np.bool_]:
+    def mixed_mask(self) -> NDArray[np.bool_]:
         """(N,) which points are mixed pixels; none where none were looked for."""
         return np.zeros(len(self), dtype=bool) if self.mixed is None else self.mixed
 
@@ -67,7 +67,7 @@ def joined_mixed(clouds: list[Cloud]) -> NDArray[np.bool_] | None:
     when no cloud has them."""
     if all(c.mixed is None for c in clouds):
         return None
-    return np.concatenate([c.mixed_or_none() for c in clouds])
+    return np.concatenate([c.mixed_mask() for c in clouds])
 
 
 def width_points(cloud: Cloud) -> NDArray[np.float64]:

@@ -642,16 +642,17 @@ def _green_and_soil(
         strong, weak = (np.take(key, frame.keys).reshape(shape) for key in green_keys)  # 2 x
         edges = DepthEdges.of(frame.images.depth_m, frame.measured)
         grown = grown_into_weak_green(strong, weak, edges)
+        uncoloured = None
         if frame.uncoloured:
             uncoloured = np.take(uncoloured_keys(), frame.keys).reshape(shape)
             grown = grown_into_uncoloured(grown, uncoloured, edges)
         mask = grown_over_edges(grown, edges, rim_px).reshape(-1)
         green = np.flatnonzero(mask)
         soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
-        if frame.uncoloured:
+        if uncoloured is not None:
             # the green pixels with no colour of their own that lie between two surfaces:
             # kept (they hold a plant together), but they do not set its width
-            dark = np.flatnonzero(np.take(uncoloured_keys(), frame.keys[green]))
+            dark = np.flatnonzero(uncoloured.reshape(-1)[green])
             mixed = np.zeros(len(green), dtype=bool)
             mixed[dark] = mixed_pixels(edges, green[dark])
 

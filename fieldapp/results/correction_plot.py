@@ -134,7 +134,8 @@ def measure_again(state: PlotState, plant: int, settings: ReconstructionSettings
     """Measure ``plant`` again from its points: traits, and organs when the result has them
     (blank when they cannot be measured); its row's grid cell is kept."""
     index = state.members(plant)
-    points = state.cloud.points[index]
+    cloud = state.cloud.select(index)
+    points = cloud.points
     p = settings.plants
     traits = measure_plant(
         points,
@@ -143,7 +144,7 @@ def measure_again(state: PlotState, plant: int, settings: ReconstructionSettings
         settings.ground.local_ground_radius_m,
         p.top_support_points,
         p.top_support_radius_m,
-        width_points(state.cloud.select(index)),  # as the reconstruction measured it
+        width_points(cloud),  # as the reconstruction measured it
     )
     organs = _organs(points, foot_m(traits)) if state.organs else None
     state.labels.organ[index] = 0 if organs is None else organs.organs.organ
