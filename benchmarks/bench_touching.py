@@ -3,8 +3,10 @@
 ``prepare`` simulates sessions (``fieldapp simulate --stage touching`` and seedling plots, of
 the default plant model or of ``--plant-model``; keep each model in its own ``--dir``),
 reconstructs each up to the plants step once and pickles that step's inputs (the plot cloud,
-its doubtful points and soil in the map frame, the local ground radius; inputs prepared before
-the doubtful points were kept run without them). ``run`` then runs only the plants step
+its doubtful points and soil in the map frame, the points' mixed-pixel flags, the local ground
+radius; inputs prepared before the doubtful points or the flags were kept run without them).
+Any session with a ``truth.json`` may be put in ``--dir`` as ``t<N>`` or ``s<N>`` (a link to
+another renderer's session): it is prepared as it is, not simulated. ``run`` then runs only the plants step
 (without a grid prior) and its traits on every pickled input, and on perturbed copies of it
 (a random share of the points dropped), and prints per session: plants found / phantoms,
 height and width RMSE and MAPE, flagged plants, the worst plant and its width error (matched
@@ -57,10 +59,12 @@ def _keeper(target: Path) -> Any:
         inputs = {
             "points": placed.cloud.points,
             "colors": placed.cloud.colors,
+            "mixed": placed.cloud.mixed,
             "soil_m": placed.soil_m,
             "ground_radius_m": ground_radius_m,
             "doubtful_points": placed.doubtful.points,
             "doubtful_colors": placed.doubtful.colors,
+            "doubtful_mixed": placed.doubtful.mixed,
         }
         target.write_bytes(pickle.dumps(inputs))
         raise _Stop
@@ -125,10 +129,13 @@ def evaluate(inputs: dict[str, Any], truth_path: Path, settings: Any) -> dict[st
     from fieldapp.recon.plants import search_plants
     from fieldapp.results.identity import match_positions
 
-    cloud = Cloud(inputs["points"], inputs["colors"])
-    doubtful = None  # inputs prepared before the doubtful points have none
+    # inputs prepared before the doubtful points, or the mixed pixels' flags, have none
+    cloud = Cloud(inputs["points"], inputs["colors"], inputs.get("mixed"))
+    doubtful = None
     if "doubtful_points" in inputs:
-        doubtful = Cloud(inputs["doubtful_points"], inputs["doubtful_colors"])
+        doubtful = Cloud(
+            inputs["doubtful_points"], inputs["doubtful_colors"], inputs.get("doubtful_mixed")
+        )
     start = time.process_time()
     search = search_plants(
         cloud, inputs["soil_m"], settings, inputs["ground_radius_m"], None, doubtful
@@ -179,7 +186,13 @@ def _perturbed(inputs: dict[str, Any], seed: int) -> dict[str, Any]:
     """A random 3 % of the points dropped (``seed`` 1, 2, ...)."""
     rng = np.random.default_rng(seed)
     keep = rng.random(len(inputs["points"])) >= DROP_SHARE
-    return {**inputs, "points": inputs["points"][keep], "colors": inputs["colors"][keep]}
+    mixed = inputs.get("mixed")
+    return {
+        **inputs,
+        "points": inputs["points"][keep],
+        "colors": inputs["colors"][keep],
+        "mixed": None if mixed is None else mixed[keep],
+    }
 
 
 SHIFTS_MM = ((3.0, 0.0, 0.0), (0.0, 3.0, 0.0), (5.0, 5.0, 0.0), (0.0, 0.0, 3.0), (7.0, 2.0, 5.0))
