@@ -1,8 +1,11 @@
 """Point clouds with per-point scalar fields: LAZ 1.4 (laspy) and binary PLY.
 
-Every point of ``cloud.ply`` gets the id of the plant whose ``plants/<id>.ply`` holds it (0:
-none) and an organ label. Organs are not segmented yet (issue 21): every point's ``organ`` is
-0, "unknown"; the field is there so files keep their layout when organs come.
+Every point of ``cloud.ply`` carries what the results folder records of it: the id of its
+plant (0: none), its organ (:mod:`fieldapp.recon.organs` codes: 0 none, 1 stem, 2 leaf, 3 whorl),
+its leaf (0: not a leaf) and whether it was read from a mixed pixel (1: a depth between a leaf's
+edge and what lies behind it, kept in its plant but not used for its width). These come from
+``cloud.ply``'s own labels; a cloud written without them (organs not measured, an imported
+cloud) gets its plant ids from ``plants/<id>.ply`` and 0 for the rest.
 """
 
 from __future__ import annotations
@@ -17,10 +20,14 @@ from numpy.typing import NDArray
 from fieldapp.errors import FieldappError
 from fieldapp.io.durable import write_bytes_durably
 from fieldapp.io.ply import ply_bytes
-from fieldapp.recon.outputs import read_ply
+from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_NONE, ORGAN_STEM, ORGAN_WHORL
+from fieldapp.recon.outputs import read_labelled_ply, read_ply
 
-ORGANS = {0: "unknown", 1: "stem", 2: "leaf", 3: "soil"}
-"""Organ codes of the ``organ`` field (only 0 is written until organs are segmented)."""
+ORGANS = {ORGAN_NONE: "none", ORGAN_STEM: "stem", ORGAN_LEAF: "leaf", ORGAN_WHORL: "whorl"}
+"""Organ codes of the ``organ`` field: those of the organ step (0 where organs were not
+measured, or the point is no plant's)."""
+ORGAN_CODES_TEXT = "0 none 1 stem 2 leaf 3 whorl"
+"""The codes as the files describe them (a LAS extra dimension's description: 32 bytes)."""
 LAS_LOW_VEGETATION = 3
 LAS_UNCLASSIFIED = 1
 
@@ -28,12 +35,15 @@ LAS_UNCLASSIFIED = 1
 @dataclass(frozen=True)
 class LabelledCloud:
     """``points`` (N, 3) float64 m, field frame; ``colors`` (N, 3) uint8; ``plant_id`` (N,)
-    uint32 (0: no plant); ``organ`` (N,) uint8 (codes of :data:`ORGANS`)."""
+    uint32 (0: no plant); ``organ`` (N,) uint8 (codes of :data:`ORGANS`); ``leaf_id`` (N,)
+    uint8 (0: not a leaf); ``mixed`` (N,) uint8 (1: read from a mixed pixel)."""
 
     points: NDArray[np.float64]
     colors: NDArray[np.uint8]
     plant_id: NDArray[np.uint32]
     organ: NDArray[np.uint8]
+    leaf_id: NDArray[np.uint8]
+    mixed: NDArray[np.uint8]
 
 
 def _keys(points: NDArray[np.float64]) -> NDArray[np.void]:
@@ -43,15 +53,26 @@ def _keys(points: NDArray[np.float64]) -> NDArray[np.void]:
 
 
 def labelled_cloud(results: Path) -> LabelledCloud:
-    """``cloud.ply`` of a results folder with each point's plant id from ``plants/``."""
+    """``cloud.ply`` of a results folder with each point's labels (module docstring)."""
     path = results / "cloud.ply"
     if not path.is_file():
         raise FieldappError(f"{path}: file is missing (is this a results folder?)")
     try:
-        cloud = read_ply(path)
+        cloud, labels = read_labelled_ply(path)
     except ValueError as error:
         raise FieldappError(f"{path}: not a fieldapp cloud ({error})") from None
-    plant_id = np.zeros(len(cloud), np.uint32)
+    n = len(cloud)
+    mixed = cloud.mixed_mask().astype(np.uint8)
+    if labels is not None:
+        return LabelledCloud(
+            cloud.points,
+            cloud.colors,
+            labels.plant_id.astype(np.uint32),
+            labels.organ,
+            labels.leaf_id,
+            mixed,
+        )
+    plant_id = np.zeros(n, np.uint32)
     keys = _keys(cloud.points)
     order = np.argsort(keys)
     for plant_path in sorted((results / "plants").glob("*.ply")):
@@ -62,20 +83,23 @@ def labelled_cloud(results: Path) -> LabelledCloud:
         at = np.clip(at, 0, len(keys) - 1)
         found = keys[order][at] == plant_keys
         plant_id[order[at[found]]] = int(plant_path.stem)
-    return LabelledCloud(cloud.points, cloud.colors, plant_id, np.zeros(len(cloud), np.uint8))
+    zeros = np.zeros(n, np.uint8)
+    return LabelledCloud(cloud.points, cloud.colors, plant_id, zeros, zeros.copy(), mixed)
 
 
 def write_laz(path: Path, cloud: LabelledCloud) -> None:
-    """LAS 1.4, point format 7 (xyz, RGB), ``plant_id`` (uint32) and ``organ`` (uint8) extra
-    dimensions, plant points classified 3 (low vegetation); compressed when ``path`` ends in
-    ``.laz``. Coordinates to 0.1 mm, in the local field frame (no CRS)."""
+    """LAS 1.4, point format 7 (xyz, RGB), ``plant_id`` (uint32), ``organ``, ``leaf_id`` and
+    ``mixed`` (uint8) extra dimensions, plant points classified 3 (low vegetation); compressed
+    when ``path`` ends in ``.laz``. Coordinates to 0.1 mm, in the local field frame (no CRS)."""
     import laspy  # type: ignore[import-untyped, import-not-found, unused-ignore]
 
     header = laspy.LasHeader(point_format=7, version="1.4")
     header.add_extra_dims(
         [
             laspy.ExtraBytesParams("plant_id", np.uint32, "plant id (0: none)"),
-            laspy.ExtraBytesParams("organ", np.uint8, "0 unknown 1 stem 2 leaf 3 soil"),
+            laspy.ExtraBytesParams("organ", np.uint8, ORGAN_CODES_TEXT),
+            laspy.ExtraBytesParams("leaf_id", np.uint8, "leaf from the bottom (0: none)"),
+            laspy.ExtraBytesParams("mixed", np.uint8, "1: mixed pixel, not in width"),
         ]
     )
     header.scales = np.array([0.0001, 0.0001, 0.0001])
@@ -89,6 +113,8 @@ def write_laz(path: Path, cloud: LabelledCloud) -> None:
     las.classification = np.where(cloud.plant_id > 0, LAS_LOW_VEGETATION, LAS_UNCLASSIFIED)
     las.plant_id = cloud.plant_id
     las.organ = cloud.organ
+    las.leaf_id = cloud.leaf_id
+    las.mixed = cloud.mixed
     buffer = io.BytesIO()
     las.write(buffer, do_compress=path.suffix.lower() == ".laz")
     write_bytes_durably(path, buffer.getvalue())
@@ -104,21 +130,30 @@ _PLY_VERTEX = np.dtype(
         ("blue", "u1"),
         ("scalar_plant_id", "<u4"),
         ("scalar_organ", "u1"),
+        ("scalar_leaf_id", "u1"),
+        ("scalar_mixed", "u1"),
     ]
 )
 
 
 def ply_with_fields(cloud: LabelledCloud) -> bytes:
     """Binary little-endian PLY: x, y, z (float), RGB (uchar), ``scalar_plant_id`` (uint),
-    ``scalar_organ`` (uchar). The ``scalar_`` prefix is CloudCompare's own: it loads them as
-    scalar fields named ``plant_id`` and ``organ`` without asking (checked with CloudCompare
-    2.11's command line); other readers see the properties as they are named."""
+    ``scalar_organ``, ``scalar_leaf_id`` and ``scalar_mixed`` (uchar). The ``scalar_`` prefix
+    is CloudCompare's own: it loads them as scalar fields named ``plant_id``, ``organ``,
+    ``leaf_id`` and ``mixed`` without asking (checked with CloudCompare 2.11's command line
+    for ``plant_id`` and ``organ``, before the other two were added); other readers see the
+    properties as they are named."""
     vertices = np.empty(len(cloud.points), _PLY_VERTEX)
     for i, name in enumerate("xyz"):
         vertices[name] = cloud.points[:, i]
     for i, name in enumerate(("red", "green", "blue")):
         vertices[name] = cloud.colors[:, i]
     vertices["scalar_plant_id"], vertices["scalar_organ"] = cloud.plant_id, cloud.organ
+    vertices["scalar_leaf_id"], vertices["scalar_mixed"] = cloud.leaf_id, cloud.mixed
     return ply_bytes(
-        vertices, ["fieldapp export: field frame, metres; organ 0 unknown 1 stem 2 leaf 3 soil"]
+        vertices,
+        [
+            f"fieldapp export: field frame, metres; organ {ORGAN_CODES_TEXT}; "
+            "leaf_id 0 none; mixed 1 = mixed pixel, not in the width"
+        ],
     )

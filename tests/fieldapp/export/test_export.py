@@ -1,4 +1,5 @@
-"""``fieldapp export``: LAZ 1.4 and PLY with per-point plant ids, CSVs with units, BrAPI v2
+"""``fieldapp export``: LAZ 1.4 and PLY with per-point plant, organ, leaf and mixed-pixel
+fields, CSVs with units, BrAPI v2
 JSON, a MIAPPE ISA-Tab bundle (checked structurally: the ISA tools do not install here)."""
 
 from __future__ import annotations
@@ -15,15 +16,21 @@ from fieldapp.cli import main
 from fieldapp.errors import FieldappError
 from fieldapp.export.clouds import labelled_cloud
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.outputs import PlantRow, write_outputs
+from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_STEM
+from fieldapp.recon.outputs import PlantRow, PointLabels, write_outputs
 
 PLANTS = {1: (0.5, 1.0, 21.5, 12.25), 2: (1.25, 1.0, 18.0, 10.5), 3: (2.0, 1.1, 25.75, 14.0)}
 """plant -> x_m, y_m, height_cm, width_cm."""
 
 
-def results_folder(folder: Path, seed: int, grid: bool = False, scale: float = 1.0) -> Path:
+def results_folder(
+    folder: Path, seed: int, grid: bool = False, scale: float = 1.0, organs: bool = False
+) -> Path:
     """A results folder as `fieldapp reconstruct` writes it: three plants of 400 points each
-    and 300 points that belong to no plant; with ``grid``, row and column columns too."""
+    and 300 points that belong to no plant; with ``grid``, row and column columns too; with
+    ``organs``, as a run that measured organs and looked for mixed pixels writes it: per-point
+    labels in ``cloud.ply`` (each plant's first 100 points stem, the rest two leaves) and a
+    mixed flag on every tenth point."""
     rng = np.random.default_rng(seed)
     clouds = {
         p: Cloud(rng.normal([x, y, 0.1], 0.03, (400, 3)), rng.integers(0, 255, (400, 3), np.uint8))
@@ -34,7 +41,17 @@ def results_folder(folder: Path, seed: int, grid: bool = False, scale: float = 1
     order = rng.permutation(len(whole))
     rows = [PlantRow(p, x, y, h * scale, w * scale, 400) for p, (x, y, h, w) in PLANTS.items()]
     report = {"format": "x", "session": f"{folder.name}-session", "warnings": []}
-    write_outputs(folder, rows, whole.select(order), clouds, report)
+    labels = None
+    if organs:
+        plant = np.repeat([*PLANTS, 0], [400, 400, 400, 300]).astype(np.int32)
+        within = np.concatenate([np.arange(400)] * 3 + [np.zeros(300, np.intp)])
+        organ = np.where(plant == 0, 0, np.where(within < 100, ORGAN_STEM, ORGAN_LEAF))
+        leaf = np.where(organ == ORGAN_LEAF, 1 + (within >= 250), 0)
+        labels = PointLabels(
+            plant[order], organ[order].astype(np.uint8), leaf[order].astype(np.uint8)
+        )
+        whole = Cloud(whole.points, whole.colors, np.arange(len(whole)) % 10 == 0)
+    write_outputs(folder, rows, whole.select(order), clouds, report, labels=labels)
     if grid:
         table = list(csv.DictReader(io.StringIO((folder / "plants.csv").read_text())))
         with (folder / "plants.csv").open("w", newline="") as handle:
@@ -61,7 +78,46 @@ def test_plant_ids_of_every_point(tmp_path):
     for plant, (x, y, _, _) in PLANTS.items():
         centre = cloud.points[cloud.plant_id == plant].mean(axis=0)
         assert np.hypot(centre[0] - x, centre[1] - y) < 0.01
-    assert not cloud.organ.any()
+    assert not cloud.organ.any()  # a cloud without labels: organs not measured
+    assert not cloud.leaf_id.any() and not cloud.mixed.any()
+
+
+def test_organs_leaves_and_mixed_pixels_of_every_point(tmp_path):
+    """A run that measured organs writes each point's labels into cloud.ply; the export
+    carries them (it once wrote organ 0 for every point, the organs measured or not)."""
+    results = results_folder(tmp_path / "r", 2, organs=True)
+    cloud = labelled_cloud(results)
+    assert np.bincount(cloud.plant_id).tolist() == [300, 400, 400, 400]
+    assert np.bincount(cloud.organ).tolist() == [300, 300, 900]
+    assert np.bincount(cloud.leaf_id).tolist() == [600, 450, 450]
+    assert cloud.mixed.sum() == 150
+    for plant, (x, y, _, _) in PLANTS.items():
+        centre = cloud.points[cloud.plant_id == plant].mean(axis=0)
+        assert np.hypot(centre[0] - x, centre[1] - y) < 0.01
+    out = tmp_path / "export"
+    assert main(["export", str(results), "--formats", "laz,ply", "--out", str(out)]) == 0
+    import laspy
+
+    las = laspy.read(out / "cloud.laz")
+    assert {"plant_id", "organ", "leaf_id", "mixed"} <= set(las.point_format.extra_dimension_names)
+    from scipy.spatial import cKDTree
+
+    distance, source = cKDTree(cloud.points).query(np.column_stack([las.x, las.y, las.z]))
+    assert distance.max() < 1e-4 and len(np.unique(source)) == len(cloud.points)
+    for name in ("plant_id", "organ", "leaf_id", "mixed"):
+        np.testing.assert_array_equal(las[name], getattr(cloud, name)[source], err_msg=name)
+    data = (out / "cloud.ply").read_bytes()
+    header, _, body = data.partition(b"end_header\n")
+    assert b"property uchar scalar_leaf_id" in header
+    assert b"property uchar scalar_mixed" in header
+    assert b"organ 0 none 1 stem 2 leaf 3 whorl" in header
+    vertex = np.dtype(
+        [("xyz", "<f4", 3), ("rgb", "u1", 3), ("plant_id", "<u4"), ("organ", "u1"),
+         ("leaf_id", "u1"), ("mixed", "u1")]
+    )  # fmt: skip
+    vertices = np.frombuffer(body, vertex)
+    assert np.bincount(vertices["organ"]).tolist() == [300, 300, 900]
+    assert vertices["mixed"].sum() == 150
 
 
 def test_laz_1_4_with_plant_id_and_organ_dimensions(exported):
@@ -89,7 +145,10 @@ def test_ply_with_scalar_fields_reads_back(exported):
     header, _, body = data.partition(b"end_header\n")
     assert b"property uint scalar_plant_id" in header  # CloudCompare: scalar field plant_id
     assert b"property uchar scalar_organ" in header
-    vertex = np.dtype([("xyz", "<f4", 3), ("rgb", "u1", 3), ("plant_id", "<u4"), ("organ", "u1")])
+    vertex = np.dtype(
+        [("xyz", "<f4", 3), ("rgb", "u1", 3), ("plant_id", "<u4"), ("organ", "u1"),
+         ("leaf_id", "u1"), ("mixed", "u1")]
+    )  # fmt: skip
     vertices = np.frombuffer(body, vertex)
     assert np.bincount(vertices["plant_id"]).tolist() == [300, 400, 400, 400]
     import open3d as o3d
