@@ -57,9 +57,10 @@ def run(args: argparse.Namespace) -> int:
     written = export(data, args.out, formats, dt.date.today())
     for note in data.notes:
         print(f"note: {note}")
+    leaves = f", {len(data.leaves)} leaves" if data.leaves else ""
     print(
-        f"{len(data.plant_ids)} plants, {len(data.dates)} date(s), {len(data.variables)} "
-        f"variables -> {len(written)} files in {args.out}"
+        f"{len(data.plant_ids)} plants{leaves}, {len(data.dates)} date(s), "
+        f"{len(data.variables)} variables -> {len(written)} files in {args.out}"
     )
     return 0
 

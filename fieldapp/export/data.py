@@ -1,8 +1,9 @@
 """What is exported: the plants of one or more dates, each with its traits, and the clouds.
 
-From results folders (``plants.csv``, ``plants/``, ``cloud.ply`` of ``fieldapp reconstruct``
-or ``fieldapp import cloud``), one date each; or from the results database, every date of a
-plot with plant ids that hold all season.
+From results folders (``plants.csv``, ``leaves.csv`` where organs were measured, ``plants/``,
+``cloud.ply`` of ``fieldapp reconstruct`` or ``fieldapp import cloud``), one date each; or from
+the results database, every date of a plot with plant ids that hold all season (plants only:
+the database keeps no leaves).
 """
 
 from __future__ import annotations
@@ -31,6 +32,17 @@ class PlantObservation:
     """plants.csv column -> value, for the columns that are variables."""
 
 
+@dataclass(frozen=True)
+class LeafObservation:
+    """One leaf of a plant on one date: ``leaf_id`` from the bottom, as in ``leaves.csv``, and
+    its traits (``leaves.csv`` column -> value; NaN where blank)."""
+
+    plant_id: int
+    date: dt.date
+    leaf_id: int
+    values: dict[str, float]
+
+
 @dataclass
 class ExportData:
     study: str
@@ -39,6 +51,8 @@ class ExportData:
     results_dirs: list[Path] = field(default_factory=list)
     """Results folders whose clouds are exported (the latest date's)."""
     notes: list[str] = field(default_factory=list)
+    leaves: list[LeafObservation] = field(default_factory=list)
+    """Every leaf of every date whose results folder has ``leaves.csv``."""
 
     @property
     def dates(self) -> list[dt.date]:
@@ -105,14 +119,32 @@ def _grid(row: dict[str, str], names: tuple[str, ...], path: Path, line: int) ->
     return None
 
 
+def read_leaves_csv(path: Path, date: dt.date) -> list[LeafObservation]:
+    """The leaves of a results folder's ``leaves.csv`` (none when the folder has no such file:
+    organs not measured); raises naming the file, row and column of a bad cell."""
+    if not path.is_file():
+        return []
+    from fieldapp.results.organ_tables import LEAF_TRAITS, read_table
+
+    leaves = []
+    for row in read_table(path, ("plant_id", "leaf_id")):
+        if row["plant_id"] is None or row["leaf_id"] is None:
+            raise FieldappError(f"{path}: a row without plant_id or leaf_id: {row}")
+        values = {c: math.nan if row.get(c) is None else float(row[c]) for c in LEAF_TRAITS}
+        leaves.append(LeafObservation(int(row["plant_id"]), date, int(row["leaf_id"]), values))
+    return leaves
+
+
 def from_results_dirs(folders: list[Path], dates: list[dt.date], study: str) -> ExportData:
     """One date per folder (``dates`` in the same order)."""
     observations: list[PlantObservation] = []
     variables: dict[str, Variable] = {}
+    leaves: list[LeafObservation] = []
     for folder, date in zip(folders, dates, strict=True):
         rows, found = read_plants_csv(folder / "plants.csv", date)
         observations += rows
         variables.update({v.column: v for v in found})
+        leaves += read_leaves_csv(folder / "leaves.csv", date)
     measured = [  # a column blank on every plant and date (not measured) is no variable
         v
         for v in variables.values()
@@ -121,7 +153,7 @@ def from_results_dirs(folders: list[Path], dates: list[dt.date], study: str) -> 
     for o in observations:  # a folder without a column that another has: not measured there
         for v in measured:
             o.values.setdefault(v.column, math.nan)
-    data = ExportData(study, observations, measured, list(folders))
+    data = ExportData(study, observations, measured, list(folders), leaves=leaves)
     if len(folders) > 1:
         data.notes.append(
             "plant ids are those of each results folder; for ids that hold all season record "

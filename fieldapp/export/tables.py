@@ -1,5 +1,5 @@
 """CSVs with units in their headers: one row per plant and date (wide), one row per
-observation (long, with unit and method)."""
+observation (long, with unit and method), one row per leaf and date."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import csv
 import io
 
 from fieldapp.export.data import ExportData
+from fieldapp.results.organ_tables import LEAF_TRAITS
 
 
 def _format(value: float) -> str:
@@ -47,4 +48,22 @@ def observations_csv(data: ExportData) -> str:
             writer.writerow(
                 [o.plant_id, o.date.isoformat(), v.name, value, v.unit, v.trait, v.method]
             )
+    return buffer.getvalue()
+
+
+def leaves_csv(data: ExportData) -> str:
+    """``plant_id,date,leaf_id,length_cm,...``: every leaf of every date, ``leaves.csv``'s
+    columns (units in their names) with the date after the plant."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["plant_id", "date", "leaf_id", *LEAF_TRAITS])
+    for leaf in sorted(data.leaves, key=lambda o: (o.date, o.plant_id, o.leaf_id)):
+        writer.writerow(
+            [
+                leaf.plant_id,
+                leaf.date.isoformat(),
+                leaf.leaf_id,
+                *(_format(leaf.values[c]) for c in LEAF_TRAITS),
+            ]
+        )
     return buffer.getvalue()

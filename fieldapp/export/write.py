@@ -42,6 +42,8 @@ def export(data: ExportData, out: Path, formats: list[str], today: dt.date) -> l
     if "csv" in formats:
         written.append(_text(out / "plants.csv", tables.plants_csv(data)))
         written.append(_text(out / "observations.csv", tables.observations_csv(data)))
+        if data.leaves:
+            written.append(_text(out / "leaves.csv", tables.leaves_csv(data)))
     if "isa" in formats:
         for name, text in isatab.bundle(data, today).items():
             written.append(_text(out / "isa" / name, text))

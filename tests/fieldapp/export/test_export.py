@@ -17,7 +17,7 @@ from fieldapp.errors import FieldappError
 from fieldapp.export.clouds import labelled_cloud
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_STEM
-from fieldapp.recon.outputs import PlantRow, PointLabels, write_outputs
+from fieldapp.recon.outputs import LeafRow, PlantRow, PointLabels, write_outputs
 
 PLANTS = {1: (0.5, 1.0, 21.5, 12.25), 2: (1.25, 1.0, 18.0, 10.5), 3: (2.0, 1.1, 25.75, 14.0)}
 """plant -> x_m, y_m, height_cm, width_cm."""
@@ -41,8 +41,13 @@ def results_folder(
     order = rng.permutation(len(whole))
     rows = [PlantRow(p, x, y, h * scale, w * scale, 400) for p, (x, y, h, w) in PLANTS.items()]
     report = {"format": "x", "session": f"{folder.name}-session", "warnings": []}
-    labels = None
+    labels, leaves = None, None
     if organs:
+        leaves = [
+            LeafRow(p, leaf, 30.0 * scale + leaf, 5.5, 120.0 + p, 40.0, 90.0 * leaf, 10.0 * leaf)
+            for p in PLANTS
+            for leaf in (1, 2)
+        ]
         plant = np.repeat([*PLANTS, 0], [400, 400, 400, 300]).astype(np.int32)
         within = np.concatenate([np.arange(400)] * 3 + [np.zeros(300, np.intp)])
         organ = np.where(plant == 0, 0, np.where(within < 100, ORGAN_STEM, ORGAN_LEAF))
@@ -51,7 +56,7 @@ def results_folder(
             plant[order], organ[order].astype(np.uint8), leaf[order].astype(np.uint8)
         )
         whole = Cloud(whole.points, whole.colors, np.arange(len(whole)) % 10 == 0)
-    write_outputs(folder, rows, whole.select(order), clouds, report, labels=labels)
+    write_outputs(folder, rows, whole.select(order), clouds, report, leaves, labels=labels)
     if grid:
         table = list(csv.DictReader(io.StringIO((folder / "plants.csv").read_text())))
         with (folder / "plants.csv").open("w", newline="") as handle:
@@ -276,6 +281,41 @@ def test_formats_and_dates_are_chosen(tmp_path, capsys):
     assert wide[0]["row"] == "" and wide[0]["column"] == ""
     assert main(["export", str(folder), "--formats", "las", "--out", str(out)]) == 1
     assert "choose among csv, laz, ply, isa, brapi" in capsys.readouterr().err
+
+
+def test_every_leaf_of_every_date(tmp_path):
+    """Each date's leaves.csv becomes one table, the date after the plant; a date without
+    organs measured adds no leaf."""
+    first = results_folder(tmp_path / "r1", 0, organs=True)
+    second = results_folder(tmp_path / "r2", 1, scale=1.5, organs=True)
+    third = results_folder(tmp_path / "r3", 2)  # organs not measured
+    out = tmp_path / "export"
+    args = ["export", str(first), str(second), str(third), "--formats", "csv", "--out", str(out)]
+    dates = ["--date", "2026-06-01", "--date", "2026-06-08", "--date", "2026-06-15"]
+    assert main([*args, *dates]) == 0
+    rows = list(csv.DictReader(io.StringIO((out / "leaves.csv").read_text())))
+    assert list(rows[0]) == [
+        "plant_id", "date", "leaf_id", "length_cm", "max_width_cm", "area_cm2",
+        "angle_from_stem_deg", "azimuth_deg", "insertion_height_cm",
+    ]  # fmt: skip
+    assert len(rows) == 2 * 3 * 2  # dates x plants x leaves
+    assert {r["date"] for r in rows} == {"2026-06-01", "2026-06-08"}
+    second_leaf = [r for r in rows if r["date"] == "2026-06-08" and r["plant_id"] == "3"][1]
+    assert second_leaf["leaf_id"] == "2" and second_leaf["length_cm"] == "47"
+    assert second_leaf["area_cm2"] == "123" and second_leaf["azimuth_deg"] == "180"
+
+
+def test_a_broken_leaves_csv_is_named_with_its_field(tmp_path):
+    import datetime as dt
+
+    from fieldapp.export.data import from_results_dirs
+
+    folder = results_folder(tmp_path / "r", 4, organs=True)
+    text = (folder / "leaves.csv").read_text().splitlines()
+    text[3] = text[3].replace("5.50", "wide")
+    (folder / "leaves.csv").write_text("\n".join(text) + "\n")
+    with pytest.raises(FieldappError, match=r"leaves\.csv.*4.*max_width_cm.*wide"):
+        from_results_dirs([folder], [dt.date(2026, 6, 1)], "plot")
 
 
 def test_a_broken_plants_csv_is_named_with_its_field(tmp_path):
