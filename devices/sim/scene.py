@@ -272,10 +272,11 @@ def plot_scene(
     clods_per_m2: float = 0.0,
     grounded_leaves: float = 0.0,
     late_plants: float = 0.0,
+    clod_size_m: float | None = None,
 ) -> Scene:
     """The paper's plot: 16 maize plants at 0.8 m on uneven soil (seedlings by default; or
     ``layout``; plants of ``plant_model``, leaning up to ``max_lean_deg``, leaf blades
-    ``leaf_width`` times the model's width; ``clods_per_m2``: :func:`add_clods`;
+    ``leaf_width`` times the model's width; ``clods_per_m2``, ``clod_size_m``: :func:`add_clods`;
     ``grounded_leaves``, ``late_plants``: :func:`add_plot`)."""
     scene = empty_scene(seed, soil)
     add_plot(
@@ -291,7 +292,7 @@ def plot_scene(
         late_plants,
     )
     if clods_per_m2 > 0.0:
-        add_clods(scene, seed, clods_per_m2)
+        add_clods(scene, seed, clods_per_m2, clod_size_m)
     return scene
 
 
@@ -302,28 +303,35 @@ CLOD_REACH_M = 2.0
 """Clods lie out to this far inside the soil's edge (the soil reaches 3 m past the stations)."""
 
 
-def add_clods(scene: Scene, seed: int, per_m2: float) -> None:
+def add_clods(
+    scene: Scene, seed: int, per_m2: float, largest_across_m: float | None = None
+) -> None:
     """Clods and stones on the soil, ``per_m2`` of them per square metre (a tilled seedbed:
-    10-40): partly buried ellipsoids 2.4-8 cm across standing 1-4.5 cm out of the soil, darker
-    than it (their shaded and moist sides), none within 7 cm of a stem. Bodies of kind
-    ``"soil"`` (shadows fall on them; no trait is theirs), one mesh for all."""
+    10-40): partly buried ellipsoids 2.4-8 cm across (up to ``largest_across_m``: a coarse
+    seedbed's) standing 1-4.5 cm out of the soil, darker than it (their shaded and moist
+    sides), none within 7 cm of a stem. Bodies of kind ``"soil"`` (shadows fall on them; no
+    trait is theirs), one mesh for all. The default draws the same clods as before the size
+    could be chosen."""
     if scene.soil is None:
         raise ValueError("clods need soil")
     rng = np.random.default_rng([seed, 23])
+    radii = CLOD_RADIUS_M
+    if largest_across_m is not None:
+        radii = (CLOD_RADIUS_M[0], largest_across_m / 2.0)
     half = scene.soil.spec.half_extent_m - CLOD_REACH_M
     count = round(per_m2 * (2 * half) ** 2)
     xy = rng.uniform(-half, half, (count, 2))
     stems = np.array([[p.x_m, p.y_m] for p in scene.plants]).reshape(-1, 2)
     if len(stems):
         nearest = np.min(np.linalg.norm(xy[:, None, :] - stems[None, :, :], axis=2), axis=1)
-        xy = xy[nearest > CLOD_CLEAR_OF_STEMS_M + CLOD_RADIUS_M[1]]
+        xy = xy[nearest > CLOD_CLEAR_OF_STEMS_M + radii[1]]
     unit = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=5)
     unit_vertices = np.asarray(unit.vertices)
     unit_triangles = np.asarray(unit.triangles, dtype=np.int32)
     grounds = scene.soil.height_m(xy[:, 0], xy[:, 1])
     vertices, triangles, shade = [], [], []
     for i, ((x, y), ground) in enumerate(zip(xy, grounds, strict=True)):
-        rx, ry = rng.uniform(*CLOD_RADIUS_M, 2)
+        rx, ry = rng.uniform(*radii, 2)
         out = min(rng.uniform(*CLOD_PROTRUSION_M), 1.2 * max(rx, ry))
         rz = out * rng.uniform(0.9, 1.6)
         turn = rng.uniform(0.0, 2 * np.pi)

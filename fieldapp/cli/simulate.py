@@ -155,6 +155,13 @@ def register(subparsers: Any) -> None:
         "it, none within 7 cm of a stem (default: none)",
     )
     parser.add_argument(
+        "--clod-size",
+        default=None,
+        metavar="CM",
+        help="with --clods: the largest clods this many centimetres across (8..16; default 8): "
+        "a coarse seedbed's clods, whose tops low leaves rest on",
+    )
+    parser.add_argument(
         "--camera",
         default=None,
         metavar="M,DEG",
@@ -424,6 +431,9 @@ def run(args: argparse.Namespace) -> int:
     sunlight = parse_number("--sunlight", args.sunlight, 0.0, 1.0, "of a clear midday sun")
     color_noise = parse_number("--color-noise", args.color_noise, 0.0, 10.0, "levels")
     clods = parse_number("--clods", args.clods, 0.0, 60.0, "per square metre")
+    clod_size = parse_number("--clod-size", args.clod_size, 8.0, 16.0, "centimetres")
+    if clod_size is not None and not clods:
+        raise FieldappError("--clod-size: give --clods too (how many clods a square metre)")
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
     if localisation is not None:
         errors = replace(errors, locate_m=localisation[0], locate_deg=localisation[1])
@@ -454,6 +464,7 @@ def run(args: argparse.Namespace) -> int:
                 args.lens_distortion,
                 color_noise=color_noise,
                 clods_per_m2=clods,
+                clod_size_m=None if clod_size is None else clod_size / 100.0,
                 grounded_leaves=grounded,
                 late_plants=late,
             )
@@ -485,6 +496,8 @@ def run(args: argparse.Namespace) -> int:
                 about["color_noise_levels"] = color_noise
             if clods is not None:  # absent: no clods (sessions unchanged)
                 about["clods_per_m2"] = clods
+            if clod_size is not None:  # absent: clods up to 8 cm across (sessions unchanged)
+                about["clod_size_cm"] = clod_size
             if grounded is not None:  # absent: no leaf down to the soil (sessions unchanged)
                 about["grounded_leaves"] = grounded
             if late is not None:  # absent: every plant came up with the others (unchanged)
@@ -545,6 +558,7 @@ def build_world(
     *,
     color_noise: float | None = None,
     clods_per_m2: float | None = None,
+    clod_size_m: float | None = None,
     grounded_leaves: float | None = None,
     late_plants: float | None = None,
 ) -> SimWorld:
@@ -574,6 +588,7 @@ def build_world(
             clods_per_m2 or 0.0,
             grounded_leaves or 0.0,
             late_plants or 0.0,
+            clod_size_m,
         )
     elif scene_name == "spheres":
         scene = spheres_scene(seed, day, plants, layout, soil)

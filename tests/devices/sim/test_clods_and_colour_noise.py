@@ -36,3 +36,24 @@ def test_colour_noise_is_each_channel_s_own() -> None:
     per_channel = _to_srgb8(grey, np.random.default_rng(0), 4.0).astype(int)
     spread = np.std(per_channel[..., 1] - per_channel[..., 0])
     assert 4.0 * np.sqrt(2) * 0.9 < spread < 4.0 * np.sqrt(2) * 1.1
+
+
+def _widest_across_m(clods) -> float:
+    """The widest clod's plan extent (each clod: 42 vertices of a unit sphere's mesh)."""
+    xy = clods.vertices_m[:, :2].reshape(-1, 42, 2)
+    return float((xy.max(axis=1) - xy.min(axis=1)).max())
+
+
+def test_a_coarse_seedbed_has_larger_clods_and_the_default_is_unchanged() -> None:
+    """``--clod-size 14``: clods up to 14 cm across, as a coarse seedbed's (an independent
+    renderer's reach 10 cm), whose tops low leaves rest on; without it, the clods of before."""
+    default = plot_scene(1, clods_per_m2=20).bodies[-1]
+    same = plot_scene(1, clods_per_m2=20, clod_size_m=0.08).bodies[-1]
+    coarse = plot_scene(1, clods_per_m2=20, clod_size_m=0.14).bodies[-1]
+    assert _widest_across_m(default) <= 0.08 < _widest_across_m(coarse) <= 0.14
+    np.testing.assert_array_equal(default.vertices_m, same.vertices_m)
+    scene = plot_scene(1, clods_per_m2=20, clod_size_m=0.14)
+    stems = np.array([[p.x_m, p.y_m] for p in scene.plants])
+    xy = coarse.vertices_m[:, :2]
+    nearest = np.min(np.linalg.norm(xy[:, None] - stems[None], axis=2), axis=1)
+    assert nearest.min() >= CLOD_CLEAR_OF_STEMS_M
