@@ -637,6 +637,11 @@ def _green_and_soil(
     if separation.by_geometry or frame.keys is None:
         measured = frame.measured.reshape(-1)
         green, soil = np.flatnonzero(measured), grid[measured[grid]]
+        if separation.by_geometry:
+            # without colour every pixel is one without colour of its own: those between two
+            # surfaces hold a plant together but do not set its width, as in the colour's
+            # black (RECONSTRUCTION.md, "Depth-only captures")
+            mixed = mixed_pixels(DepthEdges.of(frame.images.depth_m, frame.measured), green)
     else:
         shape = frame.measured.shape
         strong, weak = (np.take(key, frame.keys).reshape(shape) for key in green_keys)  # 2 x
@@ -677,9 +682,12 @@ def _green_and_soil(
         medians[green] = block_median_depths(depth, green)
         (green_cloud, green_steady), (soil_cloud, soil_steady) = (
             backproject_pixels_twice(
-                pixels, own, medians[pixels], rgb, rays, crop.radius_m, crop.min_depth_m
+                pixels, own, medians[pixels], rgb, rays, crop.radius_m, crop.min_depth_m, flags
             )
-            for pixels, own, rgb in ((green, green_m, green_rgb), (soil, soil_m, soil_rgb))
+            for pixels, own, rgb, flags in (
+                (green, green_m, green_rgb, mixed),
+                (soil, soil_m, soil_rgb, None),
+            )
         )
         return green_cloud, soil_cloud, green_steady, soil_steady
     soil_median = block_median_depths(depth, soil)

@@ -211,6 +211,17 @@ def test_a_coarse_seedbed_s_clods_under_low_leaves_do_not_widen_the_plants(tmp_p
     assert np.sqrt(np.mean(errors["dh_cm"] ** 2)) <= 1.0  # measured 0.42
     assert np.sqrt(np.mean(errors["dw_cm"] ** 2)) <= 2.0  # measured 1.48 (5.41 before)
     assert np.abs(errors["dw_cm"]).max() <= 5.0  # measured 3.0 (20.7 before)
+    # without colour every pixel between two surfaces is flagged: it holds its plant together
+    # but its width is the enclosing circle of the other points
+    flagged = 0
+    for plant in result.plants:
+        assert plant.cloud.mixed is not None
+        flagged += int(plant.cloud.mixed.sum())
+        unflagged = plant.cloud.points[~plant.cloud.mixed, :2].astype(np.float32)
+        assert 200 * cv2.minEnclosingCircle(unflagged)[1] == pytest.approx(
+            100 * plant.traits.width_m, abs=0.05
+        )
+    assert flagged > 100
 
 
 @pytest.mark.slow
