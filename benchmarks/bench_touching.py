@@ -6,9 +6,10 @@ reconstructs each up to the plants step once and pickles that step's inputs (the
 its doubtful points and soil in the map frame, the points' mixed-pixel flags, the local ground
 radius; inputs prepared before the doubtful points or the flags were kept run without them).
 Any session with a ``truth.json`` may be put in ``--dir`` as ``t<N>`` or ``s<N>`` (a link to
-another renderer's session): it is prepared as it is, not simulated. ``run`` then runs only the plants step
-(without a grid prior) and its traits on every pickled input, and on perturbed copies of it
-(a random share of the points dropped), and prints per session: plants found / phantoms,
+another renderer's session): it is prepared as it is, not simulated. ``run`` then runs only
+the plants step (without a grid prior) and its traits on every pickled input, and on perturbed
+copies of it (a random share of the points dropped), and prints per session: plants found /
+phantoms,
 height and width RMSE and MAPE, flagged plants, the worst plant and its width error (matched
 to ``truth.json`` within 12 cm in the map frame), the plants step's CPU time, and the spread
 of width RMSE over the perturbations (``--shift``: also over rigid shifts of a few mm, which
