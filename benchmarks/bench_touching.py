@@ -9,11 +9,10 @@ Any session with a ``truth.json`` may be put in ``--dir`` as ``t<N>`` or ``s<N>`
 another renderer's session): it is prepared as it is, not simulated. ``run`` then runs only
 the plants step (without a grid prior) and its traits on every pickled input, and on perturbed
 copies of it (a random share of the points dropped), and prints per session: plants found /
-phantoms,
-height and width RMSE and MAPE, flagged plants, the worst plant and its width error (matched
-to ``truth.json`` within 12 cm in the map frame), the plants step's CPU time, and the spread
-of width RMSE over the perturbations (``--shift``: also over rigid shifts of a few mm, which
-move only where the voxel grid cuts the plants):
+phantoms, height and width RMSE and MAPE, flagged plants, the worst plant and its width error
+(matched to ``truth.json`` within 12 cm in the map frame), the plants step's CPU time, and the
+spread of width RMSE over the perturbations (``--shift``: also over rigid shifts of a few mm,
+which move only where the voxel grid cuts the plants):
 
     .venv/bin/python benchmarks/bench_touching.py prepare --dir /tmp/touching \
         --touching 0-8 --seedling 0-2 [--plant-model irregular] [--lean 20]
