@@ -59,6 +59,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "grounded_leaves": ("plot",),
     "late_plants": ("plot",),
     "clods": ("plot",),
+    "clod_size": ("plot",),
     "plants": ("spheres",),
     "intrinsics_images": ("checkerboard",),
 }

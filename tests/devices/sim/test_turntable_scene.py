@@ -87,6 +87,7 @@ def test_cli_writes_a_depth_only_plot_session(
         ("turntable", ["--grid", "4"], "plot, spheres, soil and checkerboard"),
         ("turntable", ["--stage", "touching"], "plot"),
         ("soil", ["--lean", "10"], "plot"),
+        ("spheres", ["--clod-size", "12"], "plot"),
         ("plot", ["--plants"], "spheres"),
         ("plot", ["--intrinsics-images", "5"], "checkerboard"),
     ],
