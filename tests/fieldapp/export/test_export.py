@@ -19,6 +19,11 @@ from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_STEM
 from fieldapp.recon.outputs import LeafRow, PlantRow, PointLabels, write_outputs
 
+EXPORTED_VERTEX = np.dtype(
+    [("xyz", "<f4", 3), ("rgb", "u1", 3), ("plant_id", "<u4"), ("organ", "u1"),
+     ("leaf_id", "u1"), ("mixed", "u1")]
+)  # fmt: skip
+"""A vertex of the exported ``cloud.ply`` (its ``scalar_`` fields by their plain names)."""
 PLANTS = {1: (0.5, 1.0, 21.5, 12.25), 2: (1.25, 1.0, 18.0, 10.5), 3: (2.0, 1.1, 25.75, 14.0)}
 """plant -> x_m, y_m, height_cm, width_cm."""
 
@@ -116,11 +121,7 @@ def test_organs_leaves_and_mixed_pixels_of_every_point(tmp_path):
     assert b"property uchar scalar_leaf_id" in header
     assert b"property uchar scalar_mixed" in header
     assert b"organ 0 none 1 stem 2 leaf 3 whorl" in header
-    vertex = np.dtype(
-        [("xyz", "<f4", 3), ("rgb", "u1", 3), ("plant_id", "<u4"), ("organ", "u1"),
-         ("leaf_id", "u1"), ("mixed", "u1")]
-    )  # fmt: skip
-    vertices = np.frombuffer(body, vertex)
+    vertices = np.frombuffer(body, EXPORTED_VERTEX)
     assert np.bincount(vertices["organ"]).tolist() == [300, 300, 900]
     assert vertices["mixed"].sum() == 150
 
@@ -150,11 +151,7 @@ def test_ply_with_scalar_fields_reads_back(exported):
     header, _, body = data.partition(b"end_header\n")
     assert b"property uint scalar_plant_id" in header  # CloudCompare: scalar field plant_id
     assert b"property uchar scalar_organ" in header
-    vertex = np.dtype(
-        [("xyz", "<f4", 3), ("rgb", "u1", 3), ("plant_id", "<u4"), ("organ", "u1"),
-         ("leaf_id", "u1"), ("mixed", "u1")]
-    )  # fmt: skip
-    vertices = np.frombuffer(body, vertex)
+    vertices = np.frombuffer(body, EXPORTED_VERTEX)
     assert np.bincount(vertices["plant_id"]).tolist() == [300, 400, 400, 400]
     import open3d as o3d
 
