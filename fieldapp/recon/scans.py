@@ -640,7 +640,7 @@ def _green_and_soil(
         if separation.by_geometry:
             # without colour every pixel is one without colour of its own: those between two
             # surfaces hold a plant together but do not set its width, as in the colour's
-            # black (RECONSTRUCTION.md, "Depth-only captures")
+            # black (RECONSTRUCTION.md, "Mixed pixels without colour")
             mixed = mixed_pixels(DepthEdges.of(frame.images.depth_m, frame.measured), green)
     else:
         shape = frame.measured.shape
