@@ -21,13 +21,14 @@ from fieldapp.errors import FieldappError
 from fieldapp.io.durable import write_bytes_durably
 from fieldapp.io.ply import ply_bytes
 from fieldapp.recon.organs import ORGAN_LEAF, ORGAN_NONE, ORGAN_STEM, ORGAN_WHORL
-from fieldapp.recon.outputs import read_labelled_ply, read_ply
+from fieldapp.recon.outputs import read_results_cloud
 
 ORGANS = {ORGAN_NONE: "none", ORGAN_STEM: "stem", ORGAN_LEAF: "leaf", ORGAN_WHORL: "whorl"}
 """Organ codes of the ``organ`` field: those of the organ step (0 where organs were not
 measured, or the point is no plant's)."""
-ORGAN_CODES_TEXT = "0 none 1 stem 2 leaf 3 whorl"
-"""The codes as the files describe them (a LAS extra dimension's description: 32 bytes)."""
+ORGAN_CODES_TEXT = " ".join(f"{code} {name}" for code, name in sorted(ORGANS.items()))
+"""The codes as the files describe them, "0 none 1 stem 2 leaf 3 whorl" (a LAS extra
+dimension's description: 32 bytes at most)."""
 LAS_LOW_VEGETATION = 3
 LAS_UNCLASSIFIED = 1
 
@@ -46,45 +47,24 @@ class LabelledCloud:
     mixed: NDArray[np.uint8]
 
 
-def _keys(points: NDArray[np.float64]) -> NDArray[np.void]:
-    """One comparable key per point: its float32 coordinates as stored in the PLY."""
-    packed = np.ascontiguousarray(points.astype("<f4"))
-    return packed.view(np.dtype((np.void, 12))).ravel()
-
-
 def labelled_cloud(results: Path) -> LabelledCloud:
-    """``cloud.ply`` of a results folder with each point's labels (module docstring)."""
+    """``cloud.ply`` of a results folder with each point's labels (module docstring;
+    :func:`~fieldapp.recon.outputs.read_results_cloud`)."""
     path = results / "cloud.ply"
-    if not path.is_file():
-        raise FieldappError(f"{path}: file is missing (is this a results folder?)")
     try:
-        cloud, labels = read_labelled_ply(path)
+        cloud, labels = read_results_cloud(results)
+    except FileNotFoundError:
+        raise FieldappError(f"{path}: file is missing (is this a results folder?)") from None
     except ValueError as error:
         raise FieldappError(f"{path}: not a fieldapp cloud ({error})") from None
-    n = len(cloud)
-    mixed = cloud.mixed_mask().astype(np.uint8)
-    if labels is not None:
-        return LabelledCloud(
-            cloud.points,
-            cloud.colors,
-            labels.plant_id.astype(np.uint32),
-            labels.organ,
-            labels.leaf_id,
-            mixed,
-        )
-    plant_id = np.zeros(n, np.uint32)
-    keys = _keys(cloud.points)
-    order = np.argsort(keys)
-    for plant_path in sorted((results / "plants").glob("*.ply")):
-        if not plant_path.stem.isdigit():
-            continue
-        plant_keys = _keys(read_ply(plant_path).points)
-        at = np.searchsorted(keys[order], plant_keys)
-        at = np.clip(at, 0, len(keys) - 1)
-        found = keys[order][at] == plant_keys
-        plant_id[order[at[found]]] = int(plant_path.stem)
-    zeros = np.zeros(n, np.uint8)
-    return LabelledCloud(cloud.points, cloud.colors, plant_id, zeros, zeros.copy(), mixed)
+    return LabelledCloud(
+        cloud.points,
+        cloud.colors,
+        labels.plant_id.astype(np.uint32),
+        labels.organ,
+        labels.leaf_id,
+        cloud.mixed_mask().astype(np.uint8),
+    )
 
 
 def write_laz(path: Path, cloud: LabelledCloud) -> None:

@@ -161,6 +161,52 @@ def read_labelled_ply(path: Path) -> tuple[Cloud, PointLabels | None]:
     return Cloud(ply.points_of(vertices, str(path)), colors, mixed), labels
 
 
+def read_results_cloud(folder: Path) -> tuple[Cloud, PointLabels]:
+    """``cloud.ply`` of a results folder with its per-point labels; a cloud written without
+    them (organs not measured, an imported cloud) gets each point's plant from the
+    ``plants/<plant>.ply`` that holds it (:func:`plant_of_points`), organ and leaf 0. Raises
+    FileNotFoundError, or :class:`~fieldapp.io.ply.PlyError` (a ValueError), naming the file."""
+    path = folder / "cloud.ply"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: file is missing")
+    cloud, labels = read_labelled_ply(path)
+    if labels is not None:
+        return cloud, labels
+    plant_clouds = {
+        int(plant_path.stem): read_ply(plant_path)
+        for plant_path in sorted((folder / "plants").glob("*.ply"))
+        if plant_path.stem.isdigit()
+    }
+    none = np.zeros(len(cloud), np.uint8)
+    return cloud, PointLabels(plant_of_points(cloud, plant_clouds), none, none.copy())
+
+
+def plant_of_points(cloud: Cloud, plant_clouds: dict[int, Cloud]) -> NDArray[np.int32]:
+    """(N,) for each point of ``cloud`` the plant whose cloud holds the very same point (the
+    files keep the same float32 coordinates), 0 for a point of no plant. For a cloud written
+    without per-point labels (organs not measured)."""
+    found = np.zeros(len(cloud), np.int32)
+    if len(cloud) == 0 or not plant_clouds:
+        return found
+    keys = _point_keys(cloud.points)
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    for plant, plant_cloud in plant_clouds.items():
+        if len(plant_cloud) == 0:
+            continue
+        wanted = _point_keys(plant_cloud.points)
+        where = np.clip(np.searchsorted(sorted_keys, wanted), 0, len(keys) - 1)
+        hit = sorted_keys[where] == wanted
+        found[order[where[hit]]] = plant
+    return found
+
+
+def _point_keys(points_m: NDArray[np.float64]) -> NDArray[np.void]:
+    """(N,) one sortable key per point: its float32 coordinates' bytes."""
+    exact = np.ascontiguousarray(points_m, np.float32)
+    return exact.view(np.dtype((np.void, 12))).ravel()
+
+
 def csv_text(rows: list[PlantRow], grid: bool | None = None) -> str:
     """``plants.csv``; with ``row`` and ``column`` when ``grid`` (default: when a row has one)."""
     with_grid = any(r.row is not None for r in rows) if grid is None else grid

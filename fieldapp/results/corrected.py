@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from fieldapp.errors import FieldappError
 from fieldapp.io.durable import write_bytes_durably
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.outputs import LeafRow, PlantRow, PointLabels, read_labelled_ply
+from fieldapp.recon.outputs import LeafRow, PlantRow, PointLabels, read_results_cloud
 from fieldapp.recon.settings import ReconstructionSettings
 from fieldapp.results import correction_ops
 from fieldapp.results.correction_plot import PlotState, load_state, write_state
@@ -153,27 +153,13 @@ def snapshot_is_current(folder: Path, corrections: Corrections) -> bool:
 
 
 def _labelled_cloud(folder: Path) -> tuple[Cloud, PointLabels]:
-    """``cloud.ply`` with its per-point labels; a cloud written without them (organs not
-    measured, an imported cloud) is labelled from ``plants/<plant>.ply`` by position."""
-    path = folder / "cloud.ply"
-    if not path.is_file():
-        raise CorrectionError(f"{path}: missing: the results folder has no cloud to correct")
-    cloud, labels = read_labelled_ply(path)
-    if labels is not None:
-        return cloud, labels
-    n = len(cloud)
-    labels = PointLabels(np.zeros(n, np.int32), np.zeros(n, np.uint8), np.zeros(n, np.uint8))
-    if n == 0:
-        return cloud, labels
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(cloud.points)
-    for plant_path in sorted((folder / "plants").glob("*.ply")):
-        if plant_path.stem.isdigit():
-            points = read_labelled_ply(plant_path)[0].points
-            distance, index = tree.query(points, distance_upper_bound=1e-6)
-            labels.plant_id[index[np.isfinite(distance)]] = int(plant_path.stem)
-    return cloud, labels
+    """``cloud.ply`` with its per-point labels (:func:`read_results_cloud`)."""
+    try:
+        return read_results_cloud(folder)
+    except FileNotFoundError:
+        path = folder / "cloud.ply"
+        message = f"{path}: missing: the results folder has no cloud to correct"
+        raise CorrectionError(message) from None
 
 
 def centroid_xy_m(points_m: NDArray[np.float64]) -> tuple[float, float]:

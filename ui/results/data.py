@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from fieldapp.errors import FormatError, Problem
 from fieldapp.recon.cloud import Cloud
-from fieldapp.recon.outputs import read_labelled_ply
+from fieldapp.recon.outputs import plant_of_points, read_labelled_ply
 from fieldapp.results.files import PlantRecord, read_plants_csv, read_report
 from fieldapp.results.organ_tables import read_table
 
@@ -85,32 +85,6 @@ def load_results_dir(folder: Path) -> PlotResults:
         leaves=leaves,
         point_plants=point_plants,
     )
-
-
-def plant_of_points(cloud: Cloud, plant_clouds: dict[int, Cloud]) -> NDArray[np.int32]:
-    """(N,) for each point of ``cloud`` the plant whose cloud holds the very same point (the
-    files keep the same float32 coordinates), 0 for a point of no plant. For a cloud written
-    without per-point labels (organs not measured)."""
-    found = np.zeros(len(cloud), np.int32)
-    if len(cloud) == 0 or not plant_clouds:
-        return found
-    keys = _point_keys(cloud.points)
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    for plant, plant_cloud in plant_clouds.items():
-        if len(plant_cloud) == 0:
-            continue
-        wanted = _point_keys(plant_cloud.points)
-        where = np.clip(np.searchsorted(sorted_keys, wanted), 0, len(keys) - 1)
-        hit = sorted_keys[where] == wanted
-        found[order[where[hit]]] = plant
-    return found
-
-
-def _point_keys(points_m: NDArray[np.float64]) -> NDArray[np.void]:
-    """(N,) one sortable key per point: its float32 coordinates' bytes."""
-    exact = np.ascontiguousarray(points_m, np.float32)
-    return exact.view(np.dtype((np.void, 12))).ravel()
 
 
 def _read_cloud(path: Path) -> Cloud:
