@@ -315,9 +315,7 @@ def add_clods(
     if scene.soil is None:
         raise ValueError("clods need soil")
     rng = np.random.default_rng([seed, 23])
-    radii = CLOD_RADIUS_M
-    if largest_across_m is not None:
-        radii = (CLOD_RADIUS_M[0], largest_across_m / 2.0)
+    radii = (CLOD_RADIUS_M[0], largest_across_m / 2.0 if largest_across_m else CLOD_RADIUS_M[1])
     half = scene.soil.spec.half_extent_m - CLOD_REACH_M
     count = round(per_m2 * (2 * half) ** 2)
     xy = rng.uniform(-half, half, (count, 2))

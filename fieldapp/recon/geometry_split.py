@@ -179,21 +179,23 @@ def clod_tops(
     up to 13.5 cm too wide by the clods their low leaves touch; with this 1.66 and 1.74 cm
     (RECONSTRUCTION.md, "Clods under low leaves"). The price: a leaf wider than the disc lying
     within :data:`CLOD_TOP_M` of the soil with nothing above it is taken for a clod."""
-    low = is_plant & (height_m < CLOD_TOP_M)
+    clods = np.zeros(len(points_m), dtype=bool)
+    plant = np.flatnonzero(is_plant)
+    height = height_m[plant]
+    low = height < CLOD_TOP_M
     if not low.any():
-        return np.zeros(len(points_m), dtype=bool)
-    origin = points_m[is_plant, :2].min(axis=0)
-    cells = np.floor((points_m[:, :2] - origin) / CLOD_CELL_M).astype(np.int64)
-    shape = tuple(cells[is_plant].max(axis=0) + 1)
+        return clods
+    xy = points_m[plant, :2]
+    cells = np.floor((xy - xy.min(axis=0)) / CLOD_CELL_M).astype(np.int64)
+    shape = tuple(cells.max(axis=0) + 1)
     occupied = np.zeros(shape, dtype=bool)
     occupied[tuple(cells[low].T)] = True
     over = np.zeros(shape, dtype=bool)
-    over[tuple(cells[is_plant & (height_m >= CLOD_TOP_M + CLOD_CLEAR_M)].T)] = True
+    over[tuple(cells[height >= CLOD_TOP_M + CLOD_CLEAR_M].T)] = True
     square = np.ones((3, 3), dtype=bool)
     free = ndimage.binary_closing(occupied & ~over, structure=square) & ~over
     r = CLOD_RADIUS_CELLS
     across, along = np.mgrid[-r : r + 1, -r : r + 1]
     tops = ndimage.binary_opening(free, structure=across**2 + along**2 <= r * r)
-    clods = np.zeros(len(points_m), dtype=bool)
-    clods[low] = tops[tuple(cells[low].T)]
+    clods[plant[low]] = tops[tuple(cells[low].T)]
     return clods
