@@ -323,6 +323,33 @@ def _leaf(
     return vertices, triangles, albedo
 
 
+DRY_TIP_RGB = np.array([0.48, 0.34, 0.22], dtype=np.float32)
+"""A dry leaf tip's tan (excess green about 0 in the image's sRGB, as the soil's: 0.004 against
+the loam's 0.0 and the leaves' 0.2-0.5)."""
+DRY_TIP_RANGE_M = (0.0, 0.15)
+
+
+def with_dry_tips(mesh: PlantMesh, dry_m: float) -> PlantMesh:
+    """``mesh`` with the last ``dry_m`` (along the midrib) of every leaf straw brown
+    (:data:`DRY_TIP_RGB`): tips that dried (drought, nitrogen, a late frost), or, seen from 2 m,
+    the last pixels of a tip whose colour mixes with the soil's. The shape, and so the truth,
+    is unchanged. Leaves are read section by section (``section_vertices``, base to tip)."""
+    low, high = DRY_TIP_RANGE_M
+    if not low <= dry_m <= high:
+        raise ValueError(f"dry tips must be within {low:g}..{high:g} m, got {dry_m!r}")
+    if mesh.organ_of_vertex is None or dry_m == 0.0:
+        return mesh
+    albedo = mesh.albedo_rgb.copy()
+    for leaf in range(mesh.leaves):
+        at = np.flatnonzero(mesh.organ_of_vertex == leaf)
+        sections = mesh.vertices_m[at].reshape(-1, mesh.section_vertices, 3).mean(axis=1)
+        steps = np.linalg.norm(np.diff(sections, axis=0), axis=1)
+        from_tip = np.concatenate([np.cumsum(steps[::-1])[::-1], [0.0]])
+        dry = np.repeat(from_tip < dry_m, mesh.section_vertices)
+        albedo[at[dry]] = DRY_TIP_RGB
+    return replace(mesh, albedo_rgb=albedo)
+
+
 def _strip(rings: int, per_ring: int, closed: bool) -> NDArray[np.int64]:
     """Triangles joining ``rings`` consecutive rings of ``per_ring`` vertices each."""
     columns = per_ring if closed else per_ring - 1

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from devices.sim.boards import PlacedBoard
 from devices.sim.canopy import CanopyContacts, PlantSurface, canopy_contacts
 from devices.sim.organ_truth import organ_truth
-from devices.sim.plants import PlantMesh, make_plant, settle_on_ground
+from devices.sim.plants import PlantMesh, make_plant, settle_on_ground, with_dry_tips
 from devices.sim.soil import Soil, SoilSpec
 
 SPHERE_DIAMETERS_MM = (200, 300, 350, 400, 500, 600)
@@ -197,13 +197,15 @@ def add_plot(
     leaf_width: float = 1.0,
     grounded_leaves: float = 0.0,
     late_plants: float = 0.0,
+    dry_tips_m: float = 0.0,
 ) -> None:
     """Sow the plot of ``seed`` (positions and plants do not depend on ``day``) at ``stage``
     (:data:`devices.sim.plants.STAGES`) with plants of ``plant_model``
     (:data:`devices.sim.plants.PLANT_MODELS`), leaning up to ``max_lean_deg`` (``None``: as the
     model's plants do), their leaf blades ``leaf_width`` times the model's width, each lower
     leaf coming down to the soil with the chance ``grounded_leaves``. Each plant emerged late
-    with the chance ``late_plants`` (:func:`late_draws`) and is a seedling among the others."""
+    with the chance ``late_plants`` (:func:`late_draws`) and is a seedling among the others.
+    Every leaf's last ``dry_tips_m`` is straw brown (:func:`devices.sim.plants.with_dry_tips`)."""
     if scene.soil is None:
         raise ValueError("a plot needs soil")
     rng = np.random.default_rng([seed, 11])
@@ -223,7 +225,8 @@ def add_plot(
             grounded_leaves,
         )
         ground = scene.soil.height_m(mesh.vertices_m[:, 0], mesh.vertices_m[:, 1])
-        scene.add_plant(f"p{index + 1:02d}", settle_on_ground(mesh, ground))
+        mesh = with_dry_tips(settle_on_ground(mesh, ground), dry_tips_m)
+        scene.add_plant(f"p{index + 1:02d}", mesh)
 
 
 def late_draws(seed: int, count: int, chance: float) -> NDArray[np.bool_]:
@@ -273,11 +276,12 @@ def plot_scene(
     grounded_leaves: float = 0.0,
     late_plants: float = 0.0,
     clod_size_m: float | None = None,
+    dry_tips_m: float = 0.0,
 ) -> Scene:
     """The paper's plot: 16 maize plants at 0.8 m on uneven soil (seedlings by default; or
     ``layout``; plants of ``plant_model``, leaning up to ``max_lean_deg``, leaf blades
     ``leaf_width`` times the model's width; ``clods_per_m2``, ``clod_size_m``: :func:`add_clods`;
-    ``grounded_leaves``, ``late_plants``: :func:`add_plot`)."""
+    ``grounded_leaves``, ``late_plants``, ``dry_tips_m``: :func:`add_plot`)."""
     scene = empty_scene(seed, soil)
     add_plot(
         scene,
@@ -290,6 +294,7 @@ def plot_scene(
         leaf_width,
         grounded_leaves,
         late_plants,
+        dry_tips_m,
     )
     if clods_per_m2 > 0.0:
         add_clods(scene, seed, clods_per_m2, clod_size_m)

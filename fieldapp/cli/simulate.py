@@ -60,6 +60,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "late_plants": ("plot",),
     "clods": ("plot",),
     "clod_size": ("plot",),
+    "dry_tips": ("plot",),
     "plants": ("spheres",),
     "intrinsics_images": ("checkerboard",),
 }
@@ -161,6 +162,14 @@ def register(subparsers: Any) -> None:
         metavar="CM",
         help="with --clods: the largest clods this many centimetres across (8..16; default 8): "
         "a coarse seedbed's clods, whose tops low leaves rest on",
+    )
+    parser.add_argument(
+        "--dry-tips",
+        default=None,
+        metavar="CM",
+        help="the last this many centimetres of every leaf straw brown (1..15; default: none): "
+        "tips dried by drought or frost, or whose colour the soil's mixes with at 2 m; the "
+        "plants' shapes, and their truth, unchanged",
     )
     parser.add_argument(
         "--camera",
@@ -433,6 +442,7 @@ def run(args: argparse.Namespace) -> int:
     color_noise = parse_number("--color-noise", args.color_noise, 0.0, 10.0, "levels")
     clods = parse_number("--clods", args.clods, 0.0, 60.0, "per square metre")
     clod_size = parse_number("--clod-size", args.clod_size, 8.0, 16.0, "centimetres")
+    dry_tips = parse_number("--dry-tips", args.dry_tips, 1.0, 15.0, "centimetres")
     if clod_size is not None and not clods:
         raise FieldappError("--clod-size: give --clods too (how many clods a square metre)")
     errors = StopErrors.arrival(*arrival) if arrival else StopErrors()
@@ -466,6 +476,7 @@ def run(args: argparse.Namespace) -> int:
                 color_noise=color_noise,
                 clods_per_m2=clods,
                 clod_size_m=None if clod_size is None else clod_size / 100.0,
+                dry_tips_m=None if dry_tips is None else dry_tips / 100.0,
                 grounded_leaves=grounded,
                 late_plants=late,
             )
@@ -499,6 +510,8 @@ def run(args: argparse.Namespace) -> int:
                 about["clods_per_m2"] = clods
             if clod_size is not None:  # absent: clods up to 8 cm across (sessions unchanged)
                 about["clod_size_cm"] = clod_size
+            if dry_tips is not None:  # absent: green to the tips (sessions unchanged)
+                about["dry_tips_cm"] = dry_tips
             if grounded is not None:  # absent: no leaf down to the soil (sessions unchanged)
                 about["grounded_leaves"] = grounded
             if late is not None:  # absent: every plant came up with the others (unchanged)
@@ -560,6 +573,7 @@ def build_world(
     color_noise: float | None = None,
     clods_per_m2: float | None = None,
     clod_size_m: float | None = None,
+    dry_tips_m: float | None = None,
     grounded_leaves: float | None = None,
     late_plants: float | None = None,
 ) -> SimWorld:
@@ -590,6 +604,7 @@ def build_world(
             grounded_leaves or 0.0,
             late_plants or 0.0,
             clod_size_m,
+            dry_tips_m or 0.0,
         )
     elif scene_name == "spheres":
         scene = spheres_scene(seed, day, plants, layout, soil)
