@@ -9,7 +9,7 @@ from __future__ import annotations
 import ctypes
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 
@@ -141,6 +141,11 @@ class FilteredStation:
     soil_m: NDArray[np.float64]
     kept: dict[str, int]
     steady: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+    continued: Cloud = field(default_factory=Cloud.empty)
+    """The points of the leaves' surfaces continued past their green
+    (``scans.continued_surfaces``) that stand ``pass_through_continued_min_m`` clear of the
+    local ground, voxel means: kept apart from ``plants``, they join the plants they continue
+    once these are found."""
 
     def registration_points(self, include_soil: bool) -> NDArray[np.float64]:
         """(N, 3) the points the registration aligns: the plants, and the soil when
@@ -157,6 +162,7 @@ def filter_station(
     soil_voxel_m: float,
     by_geometry: bool = False,
     steady: tuple[Cloud, Cloud] | None = None,
+    continued: Cloud | None = None,
 ) -> FilteredStation:
     """Pass-through on a levelled station's green points (z is the height above the ground),
     then voxel means; the soil points near the ground are kept as a sparse sample.
@@ -170,9 +176,14 @@ def filter_station(
     filtered the same way for the registration; by geometry, point for point the same as
     ``green_field`` and ``soil_field``: what tells the plants from the soil, and the soil
     sample the registration takes.
+
+    ``continued``: the points of the leaves' surfaces that colour did not call green
+    (``scans.continued_surfaces``), kept apart where they stand
+    ``pass_through_continued_min_m`` clear of the local ground.
     """
     steady_points = None
     steady_soil = None
+    continued_kept = Cloud.empty()
     if by_geometry:
         # told apart on the steady points where given (the same points, point for point): in
         # the sun the soil's noise stands clear of its ground and joined the plants
@@ -211,6 +222,13 @@ def filter_station(
                 _soil_sample(steady[1], soil_band_m, soil_voxel_m),
             )
         plants = green_field.select(passed)
+        if continued is not None and len(continued):
+            clear = height_above(ground, continued.points)
+            continued = continued.select(
+                (clear >= settings.pass_through_continued_min_m)
+                & (continued.points[:, 2] <= settings.pass_through_max_m)
+            )
+            continued_kept = voxel_mean(continued, settings.voxel_size_m)
     kept["pass_through"] = len(plants)
     plants = voxel_mean(plants, settings.voxel_size_m)
     kept["voxel_mean"] = len(plants)
@@ -220,7 +238,9 @@ def filter_station(
         # the leaves (a shaded plot's stations 1.4 -> 2.7 mm off)
         steady_points = (plants.points, steady_soil)
     soil = _soil_sample(soil_field, soil_band_m, soil_voxel_m)
-    return FilteredStation(plants, soil, kept, steady_points)
+    if len(continued_kept):
+        kept["continued"] = len(continued_kept)
+    return FilteredStation(plants, soil, kept, steady_points, continued_kept)
 
 
 def not_green(colors: NDArray[np.uint8]) -> NDArray[np.bool_]:

@@ -96,6 +96,22 @@ UNCOLOURED_REACH_PX = 12
 (:func:`grown_into_uncoloured`): the colour camera, 5.2 cm beside the depth camera, loses a
 band 365 px x 0.052 m x (1 / near - 1 / far) wide beside a near edge: 8 px for a leaf 30 cm in
 front of another 1 m away, 12 px at 0.8 m."""
+CONTINUED_REACH_PX = 16
+"""How far (pixels) a leaf's surface is followed from its coloured pixels into pixels whose
+colour is not green (:func:`continued_surfaces`): a leaf's tip seen at 1.5-2.5 m, whose last
+few centimetres (6-12 px at 2 m) take the soil's colour or yellow."""
+CONTINUED_MIN_HEIGHT_M = 0.04
+"""A pixel is followed only this far above the frame's ground plane (a plane through its soil
+sample, :func:`frame_ground_heights`): a leaf lying on the soil continues into the soil, whose
+depth runs on without an edge; the levelled station's pass-through then wants
+``FilterSettings.pass_through_continued_min_m`` above the local ground."""
+CONTINUED_SHARE = 0.03
+"""A pixel continues the one beside it within this share of its distance
+(:func:`continued_surfaces`)."""
+MIN_GROUND_PIXELS = 50
+GROUND_SAMPLE = 2000
+"""A frame with fewer soil sample pixels than the first has no ground plane, and no surface is
+followed; the plane is fitted to at most the second, evenly spread."""
 BLOCK_PX = 5
 """Side of the window whose median depth a point takes for the registration
 (:func:`block_median_depths`): a soil sample pixel's the block of 4 x 4 pixels it stands for on
@@ -133,6 +149,9 @@ class StationScan:
     colour_offset: ColourOffset | None = None
     """How far the station's colour was found registered off its depth, and moved back
     (:mod:`fieldapp.recon.colour_offset`); ``None``: not told (no colour, too few depth edges)."""
+    continued: Cloud | None = None
+    """The points of the leaves' surfaces continued past their green (:func:`continued_surfaces`),
+    in the same frame; ``None``: none looked for (a turntable's scan)."""
 
 
 def captures_by_station(session: Session) -> dict[int, list[Capture]]:
@@ -323,6 +342,7 @@ def read_station(
         separation,
         (joined(2), joined(3)),
         offset,
+        joined(4),
     )
     return scan, warnings
 
@@ -550,6 +570,92 @@ _EIGHT = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 """The eight neighbours of a pixel, as (row, column) steps."""
 
 
+def frame_ground_heights(
+    rays: NDArray[np.float64], depth_m: NDArray[np.float32], soil: NDArray[np.intp]
+) -> Callable[[NDArray[np.intp]], NDArray[np.float64]] | None:
+    """The height of pixels above the frame's ground: a plane fitted (least squares, twice
+    refitted to the points within 5 cm or 2.5 times the median residual of it) through the
+    ``soil`` sample pixels (S,) of the frame (depth ``depth_m`` (H, W), camera ``rays`` (H, W,
+    3); at most :data:`GROUND_SAMPLE` of them, evenly), oriented with the camera above it.
+    Returns the function of flat pixel indices (P,) to their heights (P,) in metres, or None
+    with fewer than :data:`MIN_GROUND_PIXELS`."""
+    ray = rays.reshape(-1, 3)
+    depth = depth_m.reshape(-1)
+    soil = soil[:: max(len(soil) // GROUND_SAMPLE, 1)]
+    points = np.take(ray, soil, axis=0) * depth[soil, None].astype(np.float64)
+    points = points[np.isfinite(points).all(axis=1)]
+    if len(points) < MIN_GROUND_PIXELS:
+        return None
+    for _ in range(3):
+        centre = points.mean(axis=0)
+        spread = points - centre
+        normal = np.linalg.eigh(spread.T @ spread)[1][:, 0]
+        normal = normal if normal @ centre < 0 else -normal  # the camera, at 0, above it
+        residual = np.abs(spread @ normal)
+        near = residual <= max(0.05, 2.5 * float(np.median(residual)))
+        if near.sum() < MIN_GROUND_PIXELS:
+            break
+        points = points[near]
+    offset = float(normal @ centre)
+
+    def heights(pixels: NDArray[np.intp]) -> NDArray[np.float64]:
+        at = np.take(ray, pixels, axis=0) * depth[pixels, None].astype(np.float64)
+        return at @ normal - offset  # type: ignore[no-any-return]
+
+    return heights
+
+
+def continued_surfaces(
+    green: NDArray[np.bool_],
+    edges: DepthEdges,
+    heights: Callable[[NDArray[np.intp]], NDArray[np.float64]],
+) -> NDArray[np.intp]:
+    """The flat indices (ascending) of the measured pixels not in ``green`` (H, W) that
+    continue a green pixel's surface, followed pixel by pixel up to
+    :data:`CONTINUED_REACH_PX`: not behind a nearer surface (``edges``), within
+    :data:`CONTINUED_SHARE` of the distance of the nearest or farthest pixel already reached
+    beside them, and :data:`CONTINUED_MIN_HEIGHT_M` above the frame's ground (``heights``,
+    :func:`frame_ground_heights`).
+
+    What colour did not call green at a plant's extremity: the last centimetres of a leaf's
+    tip, a pixel or two wide at 2 m, whose colour mixes the leaf's with the soil behind it,
+    and tips that yellow or dry. An independent renderer's touching plots lost 1.5-5 cm of
+    their plants' widths so, there where the same sessions read without colour kept them."""
+    far = np.pad(edges.far_m, 1, constant_values=NOT_MEASURED_M).reshape(-1)
+    shape = green.shape
+    padded = (shape[0] + 2, shape[1] + 2)
+    reached = np.pad(green, 1).reshape(-1)
+    open_ = np.pad(edges.measured & ~edges.behind & ~green, 1).reshape(-1)
+    steps = np.array([dr * padded[1] + dc for dr, dc in _EIGHT])
+    beside = cv2.dilate(reached.reshape(padded).view(np.uint8), _NEIGHBOURS).view(bool)
+    frontier = np.flatnonzero(open_ & beside.reshape(-1) & ~reached)
+    added: list[NDArray[np.intp]] = []
+    for _ in range(CONTINUED_REACH_PX):
+        if len(frontier) == 0:
+            break
+        own = far[frontier]
+        around = frontier[:, None] + steps
+        there, depths = reached[around], far[around]
+        nearest = np.where(there, depths, NOT_MEASURED_M).min(axis=1)
+        farthest = np.where(there, depths, 0.0).max(axis=1)
+        tolerance = CONTINUED_SHARE * own
+        continues = (np.abs(own - nearest) <= tolerance) | (np.abs(own - farthest) <= tolerance)
+        candidates = frontier[continues]
+        row, column = np.divmod(candidates, padded[1])
+        flat = (row - 1) * shape[1] + column - 1
+        high = heights(flat) > CONTINUED_MIN_HEIGHT_M
+        open_[candidates[~high]] = False  # on the ground: never followed
+        step, flat = candidates[high], flat[high]
+        if len(step) == 0:
+            break
+        reached[step] = True
+        added.append(flat)
+        near = (step[:, None] + steps).reshape(-1)
+        near = np.unique(near[open_[near] & ~reached[near]])
+        frontier = near
+    return np.sort(np.concatenate(added)) if added else np.zeros(0, dtype=np.intp)
+
+
 def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame | str:
     """A capture's measured pixels, or the warning saying why it was skipped."""
     try:
@@ -621,7 +727,7 @@ def _green_and_soil(
     grid: NDArray[np.intp],
     rays: NDArray[np.float64],
     crop: CropSettings,
-) -> tuple[Cloud, Cloud, Cloud, Cloud]:
+) -> tuple[Cloud, Cloud, Cloud, Cloud, Cloud]:
     """One frame's green points (``green_keys``: (EXG_KEYS + 1,) which colour keys are green,
     and which weakly green, ``NO_KEY`` neither; grown into the weak green next to the green,
     :func:`grown_into_weak_green`, and over the leaves' rims, :func:`grown_over_edges`) and
@@ -630,10 +736,15 @@ def _green_and_soil(
     their blocks' median depths (:func:`block_median_depths`, for the registration); by geometry
     every measured point is "green" and the soil the whole grid, their medians plain (not held
     to a plant's surface: which points are plants is not known yet) and the same pixels in
-    the raw and the median clouds."""
+    the raw and the median clouds. Last, with colour, the points of the surfaces continued
+    from the green into pixels not green (:func:`continued_surfaces`; empty by geometry):
+    they take no part in the registration, the outlier filters or the search for plants,
+    and join the plant they continue after it is found (``filters.filter_station``,
+    ``stages.fuse``), so what colour called green is read as without them."""
     if frame.measured.shape != rays.shape[:2]:
         raise ValueError(f"depth {frame.measured.shape} does not match the camera {rays.shape[:2]}")
     mixed = None
+    continued, continued_mixed = np.zeros(0, dtype=np.intp), np.zeros(0, dtype=bool)
     if separation.by_geometry or frame.keys is None:
         measured = frame.measured.reshape(-1)
         green, soil = np.flatnonzero(measured), grid[measured[grid]]
@@ -654,6 +765,10 @@ def _green_and_soil(
         mask = grown_over_edges(grown, edges, rim_px).reshape(-1)
         green = np.flatnonzero(mask)
         soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
+        heights = frame_ground_heights(rays, frame.images.depth_m, soil)
+        if heights is not None:
+            continued = continued_surfaces(mask.reshape(shape), edges, heights)
+            continued_mixed = mixed_pixels(edges, continued)
         if uncoloured is not None:
             # the green pixels with no colour of their own that lie between two surfaces:
             # kept (they hold a plant together), but they do not set its width
@@ -689,7 +804,7 @@ def _green_and_soil(
                 (soil, soil_m, soil_rgb, None),
             )
         )
-        return green_cloud, soil_cloud, green_steady, soil_steady
+        return green_cloud, soil_cloud, green_steady, soil_steady, Cloud.empty()
     soil_median = block_median_depths(depth, soil)
     noise = noise_per_m2(soil_m, soil_median)
     green_median = block_median_depths(depth, green, SAME_SURFACE_SIGMAS * noise)
@@ -698,11 +813,21 @@ def _green_and_soil(
     green_cloud, green_steady = backproject_pixels_twice(
         green, green_m, green_median, green_rgb, rays, crop.radius_m, crop.min_depth_m, mixed
     )
+    continued_rgb = np.take(frame.images.color.reshape(-1, 3), continued, axis=0)
     return (
         green_cloud,
         cloud(soil, soil_m, soil_rgb),
         green_steady,
         cloud(soil, soil_median, soil_rgb),
+        backproject_pixels(
+            continued,
+            depth.reshape(-1)[continued],
+            continued_rgb,
+            rays,
+            crop.radius_m,
+            crop.min_depth_m,
+            continued_mixed,
+        ),
     )
 
 

@@ -55,6 +55,12 @@ class FilterSettings(_Section):
     local ground: on an independent renderer's plots the rim rules grew 251 000 soil pixels
     against 3 200 of leaf, and the soil on clods and ridges 1-5 cm up joined the plants (a
     seedling 32 % soil and straw, 19 cm too wide)."""
+    pass_through_continued_min_m: float = Field(default=0.05, ge=0.0)
+    """How far a point of a leaf's surface followed past its green (``scans.continued_surfaces``:
+    a tip whose colour mixes with the soil's, or yellows) must stand clear of the local ground:
+    a leaf lying on the soil continues into it without a depth edge, and the soil's clods and
+    ridges stand 1-5 cm up (the dull points' 2.5 cm let 300-600 soil points through on a
+    seedling plot)."""
     exg_threshold: float | Literal["otsu"] = "otsu"
     sor_neighbors: int = Field(default=35, ge=2)
     sor_std_ratio: float = Field(default=1.5, gt=0.0)

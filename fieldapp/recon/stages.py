@@ -259,6 +259,7 @@ def filter_plants(
             scan.steady[0].transformed(T_field_station),
             scan.steady[1].transformed(T_field_station),
         ),
+        None if scan.continued is None else scan.continued.transformed(T_field_station),
     )
 
 
@@ -491,7 +492,31 @@ def fuse(
     station's view of a leaf is together (statistical, then radius)."""
     fused, soil_m = _joined(filtered, registrations, filters.voxel_size_m)
     cloud, doubtful, outlier_counts = split_outliers(fused, filters, threads)
+    continued = _continued(filtered, registrations, filters.voxel_size_m)
+    if len(continued):
+        # apart from the plants until they are found: they join the one they continue as the
+        # doubtful points do (plants._with_loose), and move no other point
+        doubtful = Cloud.concatenate([doubtful, continued])
     return Fused(cloud, soil_m, {"fused": len(fused)} | outlier_counts, doubtful)
+
+
+def _continued(
+    filtered: dict[int, FilteredStation],
+    registrations: dict[int, StationRegistration],
+    voxel_m: float,
+) -> Cloud:
+    """Every station's points of the leaves' surfaces continued past their green
+    (``FilteredStation.continued``) in the plot's frame, averaged in ``voxel_m`` voxels."""
+    moved = [
+        Cloud(
+            transform_points(registrations[station].T_correction, f.continued.points),
+            f.continued.colors,
+            f.continued.mixed,
+        )
+        for station, f in filtered.items()
+        if len(f.continued)
+    ]
+    return voxel_mean(Cloud.concatenate(moved), voxel_m) if moved else Cloud.empty()
 
 
 def _joined(
