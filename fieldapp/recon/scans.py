@@ -109,9 +109,10 @@ CONTINUED_SHARE = 0.03
 """A pixel continues the one beside it within this share of its distance
 (:func:`continued_surfaces`)."""
 MIN_GROUND_PIXELS = 50
-GROUND_SAMPLE = 2000
+GROUND_SAMPLE = 500
 """A frame with fewer soil sample pixels than the first has no ground plane, and no surface is
-followed; the plane is fitted to at most the second, evenly spread."""
+followed; the plane is fitted to one to two times the second, evenly spread (a plane needs
+few: 0.24 ms a frame, against 0.55 with 2 000)."""
 BLOCK_PX = 5
 """Side of the window whose median depth a point takes for the registration
 (:func:`block_median_depths`): a soil sample pixel's the block of 4 x 4 pixels it stands for on
@@ -529,23 +530,40 @@ def grown_into_uncoloured(
     read as not green, it was lost (a touching plot's tallest plant 2.5 cm low). The leaf's
     surface goes on from its green part into the black: grown along it. The black soil beside
     a leaf lies far behind the leaf's edge and is not grown into; soil that continues a stem's
-    foot lies on the local ground, where the pass-through drops it.
+    foot lies on the local ground, where the pass-through drops it. Grown step by step
+    (:func:`_walked`): every frame libfreenect2 registers has black rows, and an erosion and a
+    dilation of the whole frame at every step took 0.6-0.7 s of CPU on a 72-frame session."""
+    return _walked(green, uncoloured, edges.far_m, UNCOLOURED_REACH_PX, CONTINUOUS_SHARE)
 
-    Each step judges only the pixels without colour beside one grown at the step before (a few
+
+def _walked(
+    green: NDArray[np.bool_],
+    open_: NDArray[np.bool_],
+    far_m: NDArray[np.float32],
+    reach_px: int,
+    share: float,
+    accept: Callable[[NDArray[np.intp]], NDArray[np.bool_]] | None = None,
+) -> NDArray[np.bool_]:
+    """(H, W) ``green`` grown, pixel by pixel up to ``reach_px``, into the ``open_`` pixels
+    that continue the surface of one already grown beside them: within ``share`` of their
+    distance (``far_m``) of the nearest or the farthest grown neighbour; and, with ``accept``
+    (flat pixel indices (P,) to (P,) whether each may be grown), only those it accepts (one it
+    refuses is not judged again).
+
+    Each step judges only the open pixels beside one grown at the step before (a few
     thousand at most of a frame's 217 088), against the nearest and the farthest of their
     grown neighbours: the same pixels as an erosion and a dilation of the whole frame at every
-    step, which took 8-10 ms a frame (0.6-0.7 s of CPU on a 72-frame session; every frame
-    libfreenect2 registers has black rows), 1.4-5 ms now."""
-    # on a one-pixel frame of pixels neither grown nor without colour, a neighbour is one
-    # constant step away in the flat image wherever a pixel is
-    far = np.pad(edges.far_m, 1, constant_values=NOT_MEASURED_M).reshape(-1)
+    step, which took 8-10 ms a frame, 1.4-5 ms with black pixels to grow into."""
+    # on a one-pixel frame of pixels neither grown nor open, a neighbour is one constant step
+    # away in the flat image wherever a pixel is
+    far = np.pad(far_m, 1, constant_values=NOT_MEASURED_M).reshape(-1)
     grown = np.pad(green, 1).reshape(-1)
-    without = np.pad(uncoloured, 1).reshape(-1)
+    open_ = np.pad(open_, 1).reshape(-1)
     padded = (green.shape[0] + 2, green.shape[1] + 2)
     steps = np.array([dr * padded[1] + dc for dr, dc in _EIGHT])
     beside = cv2.dilate(grown.reshape(padded).view(np.uint8), _NEIGHBOURS).view(bool)
-    frontier = np.flatnonzero(without & beside.reshape(-1) & ~grown)
-    for _ in range(UNCOLOURED_REACH_PX):
+    frontier = np.flatnonzero(open_ & beside.reshape(-1) & ~grown)
+    for _ in range(reach_px):
         if len(frontier) == 0:
             break
         own = far[frontier]
@@ -553,15 +571,20 @@ def grown_into_uncoloured(
         grown_there, depths = grown[around], far[around]
         nearest = np.where(grown_there, depths, NOT_MEASURED_M).min(axis=1)
         farthest = np.where(grown_there, depths, 0.0).max(axis=1)
-        tolerance = CONTINUOUS_SHARE * own
+        tolerance = share * own
         continues = (np.abs(own - nearest) <= tolerance) | (np.abs(own - farthest) <= tolerance)
         added = frontier[continues]
+        if accept is not None and len(added):
+            row, column = np.divmod(added, padded[1])
+            accepted = accept((row - 1) * green.shape[1] + column - 1)
+            open_[added[~accepted]] = False  # refused for good
+            added = added[accepted]
         if len(added) == 0:
             break
         grown[added] = True
         # only a pixel beside one just grown has a new grown neighbour to be judged against
         near = (added[:, None] + steps).reshape(-1)
-        near = np.sort(near[without[near] & ~grown[near]])
+        near = np.sort(near[open_[near] & ~grown[near]])
         frontier = near[np.r_[True, near[1:] != near[:-1]]] if len(near) else near
     return grown.reshape(padded)[1:-1, 1:-1].copy()
 
@@ -576,9 +599,9 @@ def frame_ground_heights(
     """The height of pixels above the frame's ground: a plane fitted (least squares, twice
     refitted to the points within 5 cm or 2.5 times the median residual of it) through the
     ``soil`` sample pixels (S,) of the frame (depth ``depth_m`` (H, W), camera ``rays`` (H, W,
-    3); at most :data:`GROUND_SAMPLE` of them, evenly), oriented with the camera above it.
-    Returns the function of flat pixel indices (P,) to their heights (P,) in metres, or None
-    with fewer than :data:`MIN_GROUND_PIXELS`."""
+    3); every n-th, n the whole number of times :data:`GROUND_SAMPLE` goes into them),
+    oriented with the camera above it. Returns the function of flat pixel indices (P,) to
+    their heights (P,) in metres, or None with fewer than :data:`MIN_GROUND_PIXELS`."""
     ray = rays.reshape(-1, 3)
     depth = depth_m.reshape(-1)
     soil = soil[:: max(len(soil) // GROUND_SAMPLE, 1)]
@@ -621,39 +644,16 @@ def continued_surfaces(
     tip, a pixel or two wide at 2 m, whose colour mixes the leaf's with the soil behind it,
     and tips that yellow or dry. An independent renderer's touching plots lost 1.5-5 cm of
     their plants' widths so, there where the same sessions read without colour kept them."""
-    far = np.pad(edges.far_m, 1, constant_values=NOT_MEASURED_M).reshape(-1)
-    shape = green.shape
-    padded = (shape[0] + 2, shape[1] + 2)
-    reached = np.pad(green, 1).reshape(-1)
-    open_ = np.pad(edges.measured & ~edges.behind & ~green, 1).reshape(-1)
-    steps = np.array([dr * padded[1] + dc for dr, dc in _EIGHT])
-    beside = cv2.dilate(reached.reshape(padded).view(np.uint8), _NEIGHBOURS).view(bool)
-    frontier = np.flatnonzero(open_ & beside.reshape(-1) & ~reached)
-    added: list[NDArray[np.intp]] = []
-    for _ in range(CONTINUED_REACH_PX):
-        if len(frontier) == 0:
-            break
-        own = far[frontier]
-        around = frontier[:, None] + steps
-        there, depths = reached[around], far[around]
-        nearest = np.where(there, depths, NOT_MEASURED_M).min(axis=1)
-        farthest = np.where(there, depths, 0.0).max(axis=1)
-        tolerance = CONTINUED_SHARE * own
-        continues = (np.abs(own - nearest) <= tolerance) | (np.abs(own - farthest) <= tolerance)
-        candidates = frontier[continues]
-        row, column = np.divmod(candidates, padded[1])
-        flat = (row - 1) * shape[1] + column - 1
-        high = heights(flat) > CONTINUED_MIN_HEIGHT_M
-        open_[candidates[~high]] = False  # on the ground: never followed
-        step, flat = candidates[high], flat[high]
-        if len(step) == 0:
-            break
-        reached[step] = True
-        added.append(flat)
-        near = (step[:, None] + steps).reshape(-1)
-        near = np.unique(near[open_[near] & ~reached[near]])
-        frontier = near
-    return np.sort(np.concatenate(added)) if added else np.zeros(0, dtype=np.intp)
+    open_ = edges.measured & ~edges.behind & ~green
+    reached = _walked(
+        green,
+        open_,
+        edges.far_m,
+        CONTINUED_REACH_PX,
+        CONTINUED_SHARE,
+        lambda pixels: heights(pixels) > CONTINUED_MIN_HEIGHT_M,
+    )
+    return np.flatnonzero(reached & ~green)
 
 
 def _read_frame(session: Session, station: int, capture: Capture) -> ReadFrame | str:
