@@ -174,12 +174,25 @@ def grey_group(colors: NDArray[np.uint8]) -> bool:
     """Whether a group of points has no hue (``colors`` (N, 3)): the median saturation of
     those with colour (:func:`has_colour`) under :data:`GREY_SATURATION`; a group with no
     colour at all is not judged by it (``False``)."""
-    lit = colors[has_colour(colors)].astype(np.float64)
+    lit = colors[has_colour(colors)]
     if not len(lit):
         return False
+    return float(np.median(saturation(lit))) < GREY_SATURATION
+
+
+def hued(colors: NDArray[np.uint8]) -> NDArray[np.bool_]:
+    """(N,) which of ``colors`` (N, 3) have colour (:func:`has_colour`) and a hue: saturation
+    :data:`GREY_SATURATION` or more. A leaf has one, green or dry (tan, yellow, brown), and so
+    has the soil; white and grey (the reference spheres, their stands, stakes, labels) and
+    black do not."""
+    return has_colour(colors) & (saturation(colors) >= GREY_SATURATION)
+
+
+def saturation(colors: NDArray[np.uint8]) -> NDArray[np.float64]:
+    """(N,) (max - min) / max of each colour's R, G, B (N, 3); 0 for black."""
+    lit = colors.astype(np.float64)
     top = lit.max(axis=1)
-    saturation = (top - lit.min(axis=1)) / np.maximum(top, 1.0)
-    return float(np.median(saturation)) < GREY_SATURATION
+    return (top - lit.min(axis=1)) / np.maximum(top, 1.0)  # type: ignore[no-any-return]
 
 
 def exg_keys(colors: NDArray[np.uint8]) -> NDArray[np.int32]:

@@ -50,6 +50,7 @@ from fieldapp.recon.exg import (
     exg_of_keys,
     exg_tally,
     exg_values,
+    hued,
     keep_soil,
     mixed_pixel_threshold,
     noise_floors,
@@ -632,13 +633,17 @@ def continued_surfaces(
     green: NDArray[np.bool_],
     edges: DepthEdges,
     heights: Callable[[NDArray[np.intp]], NDArray[np.float64]],
+    colors: NDArray[np.uint8],
 ) -> NDArray[np.intp]:
     """The flat indices (ascending) of the measured pixels not in ``green`` (H, W) that
     continue a green pixel's surface, followed pixel by pixel up to
     :data:`CONTINUED_REACH_PX`: not behind a nearer surface (``edges``), within
     :data:`CONTINUED_SHARE` of the distance of the nearest or farthest pixel already reached
-    beside them, and :data:`CONTINUED_MIN_HEIGHT_M` above the frame's ground (``heights``,
-    :func:`frame_ground_heights`).
+    beside them, :data:`CONTINUED_MIN_HEIGHT_M` above the frame's ground (``heights``,
+    :func:`frame_ground_heights`), and of a colour with a hue (``colors`` (H * W, 3), the
+    frame's: :func:`~fieldapp.recon.exg.hued`; a white or grey sphere or stake a leaf touches
+    is not a leaf, nor is a pixel the colour camera did not see, which
+    :func:`grown_into_uncoloured` judges).
 
     What colour did not call green at a plant's extremity: the last centimetres of a leaf's
     tip, a pixel or two wide at 2 m, whose colour mixes the leaf's with the soil behind it,
@@ -651,7 +656,9 @@ def continued_surfaces(
         edges.far_m,
         CONTINUED_REACH_PX,
         CONTINUED_SHARE,
-        lambda pixels: heights(pixels) > CONTINUED_MIN_HEIGHT_M,
+        lambda pixels: (
+            (heights(pixels) > CONTINUED_MIN_HEIGHT_M) & hued(np.take(colors, pixels, axis=0))
+        ),
     )
     return np.flatnonzero(reached & ~green)
 
@@ -767,7 +774,8 @@ def _green_and_soil(
         soil = grid[(frame.keys[grid] != NO_KEY) & ~mask[grid]]
         heights = frame_ground_heights(rays, frame.images.depth_m, soil)
         if heights is not None:
-            continued = continued_surfaces(mask.reshape(shape), edges, heights)
+            colors = frame.images.color.reshape(-1, 3)
+            continued = continued_surfaces(mask.reshape(shape), edges, heights, colors)
             continued_mixed = mixed_pixels(edges, continued)
         if uncoloured is not None:
             # the green pixels with no colour of their own that lie between two surfaces:

@@ -54,6 +54,19 @@ def _looking_down(
     return depth
 
 
+TAN, SOIL, GREY = (183, 158, 131), (149, 121, 93), (200, 200, 196)
+
+
+def _colours(leaf: NDArray[np.bool_], grey: NDArray[np.bool_] | None = None) -> NDArray[np.uint8]:
+    """The frame's colours (H * W, 3): the soil's brown, the leaf (tip) tan, ``grey`` grey."""
+    colours = np.empty((*leaf.shape, 3), np.uint8)
+    colours[:] = SOIL
+    colours[leaf] = TAN
+    if grey is not None:
+        colours[grey] = GREY
+    return colours.reshape(-1, 3)
+
+
 def _strip(columns: slice) -> NDArray[np.bool_]:
     mask = np.zeros((K.height, K.width), bool)
     mask[200:212, columns] = True
@@ -67,7 +80,7 @@ def test_a_tip_whose_colour_is_not_green_is_followed_to_its_end_and_no_further()
     edges = DepthEdges.of(depth, np.ones(depth.shape, bool))
     heights = frame_ground_heights(_rays(), depth, _soil_pixels(depth.shape, leaf))
     assert heights is not None
-    continued = continued_surfaces(green, edges, heights)
+    continued = continued_surfaces(green, edges, heights, _colours(leaf))
     tip = np.flatnonzero((leaf & ~green).reshape(-1))
     np.testing.assert_array_equal(continued, tip)  # every pixel of the tip, the soil's none
 
@@ -79,7 +92,7 @@ def test_a_tip_is_followed_no_farther_than_the_reach() -> None:
     edges = DepthEdges.of(depth, np.ones(depth.shape, bool))
     heights = frame_ground_heights(_rays(), depth, _soil_pixels(depth.shape, leaf))
     assert heights is not None
-    continued = continued_surfaces(green, edges, heights)
+    continued = continued_surfaces(green, edges, heights, _colours(leaf))
     columns = np.unique(np.divmod(continued, K.width)[1])
     np.testing.assert_array_equal(columns, np.arange(200, 200 + CONTINUED_REACH_PX))
 
@@ -95,12 +108,29 @@ def test_a_leaf_coming_down_to_the_soil_is_followed_down_to_its_ground_band_only
     edges = DepthEdges.of(depth, np.ones(depth.shape, bool))
     heights = frame_ground_heights(_rays(), depth, _soil_pixels(depth.shape, leaf))
     assert heights is not None
-    continued = continued_surfaces(green, edges, heights)
+    continued = continued_surfaces(green, edges, heights, _colours(leaf))
     row, column = np.divmod(continued, K.width)
     assert len(continued) > 0 and set(np.unique(row)) <= set(range(200, 212))
     reached_m = above_m[column]
     assert reached_m.min() > CONTINUED_MIN_HEIGHT_M - 0.01
     assert column.max() < 262  # stopped before the leaf lies on the soil
+
+
+def test_a_grey_sphere_a_tip_touches_and_a_pixel_without_colour_are_not_followed() -> None:
+    # the tip runs on into a white sphere's side at its own depth, and past a black pixel
+    leaf = _strip(slice(150, 240))
+    sphere = _strip(slice(240, 262))
+    green = _strip(slice(150, 230))
+    depth = _looking_down(1.6, leaf | sphere)
+    edges = DepthEdges.of(depth, np.ones(depth.shape, bool))
+    heights = frame_ground_heights(_rays(), depth, _soil_pixels(depth.shape, leaf | sphere))
+    assert heights is not None
+    continued = continued_surfaces(green, edges, heights, _colours(leaf, sphere))
+    np.testing.assert_array_equal(continued, np.flatnonzero((leaf & ~green).reshape(-1)))
+    colours = _colours(leaf)
+    colours.reshape(K.height, K.width, 3)[200:212, 235] = 0  # black across the tip
+    continued = continued_surfaces(green, edges, heights, colours)
+    assert np.divmod(continued, K.width)[1].max() == 234
 
 
 def test_the_frame_ground_is_a_plane_through_the_soil_below_a_tilted_camera() -> None:
