@@ -508,11 +508,7 @@ def _continued(
     """Every station's points of the leaves' surfaces continued past their green
     (``FilteredStation.continued``) in the plot's frame, averaged in ``voxel_m`` voxels."""
     moved = [
-        Cloud(
-            transform_points(registrations[station].T_correction, f.continued.points),
-            f.continued.colors,
-            f.continued.mixed,
-        )
+        f.continued.transformed(registrations[station].T_correction)
         for station, f in filtered.items()
         if len(f.continued)
     ]
