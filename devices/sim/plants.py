@@ -330,7 +330,7 @@ DRY_TIP_RANGE_M = (0.0, 0.15)
 
 
 def with_dry_tips(mesh: PlantMesh, dry_m: float) -> PlantMesh:
-    """``mesh`` with the last ``dry_m`` (along the midrib) of every leaf straw brown
+    """``mesh`` with the last ``dry_m`` (along the midrib) of every leaf tan, the soil's colour
     (:data:`DRY_TIP_RGB`): tips that dried (drought, nitrogen, a late frost), or, seen from 2 m,
     the last pixels of a tip whose colour mixes with the soil's. The shape, and so the truth,
     is unchanged. Leaves are read section by section (``section_vertices``, base to tip)."""

@@ -205,7 +205,8 @@ def add_plot(
     model's plants do), their leaf blades ``leaf_width`` times the model's width, each lower
     leaf coming down to the soil with the chance ``grounded_leaves``. Each plant emerged late
     with the chance ``late_plants`` (:func:`late_draws`) and is a seedling among the others.
-    Every leaf's last ``dry_tips_m`` is straw brown (:func:`devices.sim.plants.with_dry_tips`)."""
+    Every leaf's last ``dry_tips_m`` is tan, the soil's colour
+    (:func:`devices.sim.plants.with_dry_tips`)."""
     if scene.soil is None:
         raise ValueError("a plot needs soil")
     rng = np.random.default_rng([seed, 11])

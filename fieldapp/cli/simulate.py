@@ -167,7 +167,8 @@ def register(subparsers: Any) -> None:
         "--dry-tips",
         default=None,
         metavar="CM",
-        help="the last this many centimetres of every leaf straw brown (1..15; default: none): "
+        help="the last this many centimetres of every leaf tan, the soil's colour (1..15; "
+        "default: none): "
         "tips dried by drought or frost, or whose colour the soil's mixes with at 2 m; the "
         "plants' shapes, and their truth, unchanged",
     )

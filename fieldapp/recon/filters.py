@@ -210,23 +210,28 @@ def filter_station(
         # image is registered a pixel or two off (RECONSTRUCTION.md, "Colour a pixel or two
         # off the depth")
         ground = station_ground(soil_field.points, soil_band_m)  # once for both copies
-        dull = not_green(green_field.colors)  # the same colours in both copies
-        passed = _passes_through(green_field.points, dull, ground, settings)
+        # a point not green by its own colour (not_green) stands further clear: the same
+        # colours in both copies
+        least = np.where(
+            not_green(green_field.colors),
+            settings.pass_through_dull_min_m,
+            settings.pass_through_min_m,
+        )
+        passed = _passes_through(green_field.points, least, ground, settings)
         if steady is not None:
             # point for point the same pixels at their blocks' median depths: a point passes
             # where both stand clear (in the sun the soil's noise lifts a pixel of green soil,
             # not its block)
-            passed &= _passes_through(steady[0].points, dull, ground, settings)
+            passed &= _passes_through(steady[0].points, least, ground, settings)
             steady_points = (
                 voxel_mean(steady[0].select(passed), settings.voxel_size_m).points,
                 _soil_sample(steady[1], soil_band_m, soil_voxel_m),
             )
         plants = green_field.select(passed)
         if continued is not None and len(continued):
-            clear = height_above(ground, continued.points)
+            least_m = settings.pass_through_continued_min_m
             continued = continued.select(
-                (clear >= settings.pass_through_continued_min_m)
-                & (continued.points[:, 2] <= settings.pass_through_max_m)
+                _passes_through(continued.points, least_m, ground, settings)
             )
             continued_kept = voxel_mean(continued, settings.voxel_size_m)
     kept["pass_through"] = len(plants)
@@ -255,16 +260,14 @@ def not_green(colors: NDArray[np.uint8]) -> NDArray[np.bool_]:
 
 def _passes_through(
     points_m: NDArray[np.float64],
-    dull: NDArray[np.bool_],
+    least_m: NDArray[np.float64] | float,
     ground: LocalGround,
     settings: FilterSettings,
 ) -> NDArray[np.bool_]:
-    """(N,) which green points ``points_m`` (N, 3) stand ``pass_through_min_m`` clear of the
-    local ``ground`` (those ``dull``, not green by their own colour (:func:`not_green`),
-    ``pass_through_dull_min_m``) and at most ``pass_through_max_m`` above the plane."""
+    """(N,) which points ``points_m`` (N, 3) stand ``least_m`` (each its own, (N,), or one for
+    all) clear of the local ``ground`` and at most ``pass_through_max_m`` above the plane."""
     clear = height_above(ground, points_m)
-    least = np.where(dull, settings.pass_through_dull_min_m, settings.pass_through_min_m)
-    passes: NDArray[np.bool_] = (clear >= least) & (  # off the soil
+    passes: NDArray[np.bool_] = (clear >= least_m) & (  # off the soil
         points_m[:, 2] <= settings.pass_through_max_m  # above the plane
     )
     return passes

@@ -791,9 +791,14 @@ def _green_and_soil(
     )
 
     def cloud(
-        pixels: NDArray[np.intp], depth_m: NDArray[np.float32], rgb: NDArray[np.uint8]
+        pixels: NDArray[np.intp],
+        depth_m: NDArray[np.float32],
+        rgb: NDArray[np.uint8],
+        flags: NDArray[np.bool_] | None = None,
     ) -> Cloud:
-        return backproject_pixels(pixels, depth_m, rgb, rays, crop.radius_m, crop.min_depth_m)
+        return backproject_pixels(
+            pixels, depth_m, rgb, rays, crop.radius_m, crop.min_depth_m, flags
+        )
 
     if separation.by_geometry:
         # every point's height above its local ground tells plant from soil; read at its
@@ -827,15 +832,7 @@ def _green_and_soil(
         cloud(soil, soil_m, soil_rgb),
         green_steady,
         cloud(soil, soil_median, soil_rgb),
-        backproject_pixels(
-            continued,
-            depth.reshape(-1)[continued],
-            continued_rgb,
-            rays,
-            crop.radius_m,
-            crop.min_depth_m,
-            continued_mixed,
-        ),
+        cloud(continued, depth.reshape(-1)[continued], continued_rgb, continued_mixed),
     )
 
 
