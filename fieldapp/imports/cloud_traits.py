@@ -23,7 +23,7 @@ from fieldapp.errors import FieldappError
 from fieldapp.imports.clouds import LoadedCloud
 from fieldapp.recon.cloud import Cloud
 from fieldapp.recon.exg import excess_green, otsu_threshold
-from fieldapp.recon.filters import split_outliers, voxel_mean
+from fieldapp.recon.filters import split_outliers, voxel_mean, voxel_mean_points
 from fieldapp.recon.ground import GroundNotFound, T_level, fit_ground_plane, subsample
 from fieldapp.recon.outputs import PlantRow, write_outputs
 from fieldapp.recon.plants import Plant, search_plants
@@ -123,13 +123,13 @@ def cloud_traits(
     keep = levelled.points[:, 2] <= settings.filters.pass_through_max_m
     mask, separation = plant_mask(levelled, loaded.has_color, min_height_m)
     kept = {"points": len(cloud), "plant_points": int((mask & keep).sum())}
-    soil = levelled.select(np.abs(levelled.points[:, 2]) <= settings.ground.soil_band_m)
+    soil_m = levelled.points[np.abs(levelled.points[:, 2]) <= settings.ground.soil_band_m]
     plants_cloud = voxel_mean(levelled.select(mask & keep), settings.filters.voxel_size_m)
     kept["voxel_mean"] = len(plants_cloud)
     plants_cloud, doubtful, counts = split_outliers(
         plants_cloud, settings.filters, settings.threads
     )
-    soil_m = voxel_mean(soil, settings.ground.soil_voxel_m).points
+    soil_m = voxel_mean_points(soil_m, settings.ground.soil_voxel_m)
     if len(soil_m) == 0:
         soil_m = np.zeros((1, 3))
     search = search_plants(

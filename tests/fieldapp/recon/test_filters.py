@@ -21,7 +21,10 @@ from fieldapp.recon.filters import (
     radius_outliers,
     remove_outliers,
     statistical_outliers,
+    voxel_groups,
+    voxel_keys,
     voxel_mean,
+    voxel_mean_points,
 )
 from fieldapp.recon.geometry_split import LocalGround
 from fieldapp.recon.settings import FilterSettings
@@ -216,6 +219,36 @@ def test_voxel_mean_averages_points_and_colours_per_voxel() -> None:
     order = np.argsort(out.points[:, 0])
     np.testing.assert_allclose(out.points[order], [[0.002, 0.002, 0.002], [0.011, 0.0, 0.0]])
     assert out.colors[order].tolist() == [[50, 150, 0], [7, 7, 7]]
+
+
+@pytest.mark.parametrize("order", ["scan", "shuffled", "reversed"])
+def test_voxel_groups_number_the_voxels_as_np_unique_does(order: str) -> None:
+    # a stable sort in place of np.unique's: the same numbering, so the same voxel means in
+    # the same order, whatever order the points come in (a camera's scan order, a plot's
+    # stations one after another, or none)
+    rng = np.random.default_rng(7)
+    points = np.cumsum(rng.normal(0.0, 0.004, (5000, 3)), axis=0)  # runs, as a scan has
+    points = np.concatenate([points, points[:700] + 0.0005])  # voxels shared, far apart
+    if order == "shuffled":
+        points = points[rng.permutation(len(points))]
+    elif order == "reversed":
+        points = points[::-1]
+    group, counts = voxel_groups(points, 0.01)
+    _, inverse, expected = np.unique(
+        voxel_keys(points, 0.01), return_inverse=True, return_counts=True
+    )
+    assert group.tolist() == inverse.ravel().tolist()
+    assert counts.tolist() == expected.tolist()
+    assert counts.sum() == len(points) and (counts > 1).any()
+
+
+def test_voxel_mean_points_are_voxel_mean_s_points() -> None:
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-1.0, 1.0, (20_000, 3))
+    colors = rng.integers(0, 255, (20_000, 3), dtype=np.uint8)
+    full = voxel_mean(Cloud(points, colors), 0.05)
+    assert np.array_equal(voxel_mean_points(points, 0.05), full.points)
+    assert voxel_mean_points(np.empty((0, 3)), 0.05).shape == (0, 3)
 
 
 def test_filter_chain_keeps_the_plant_and_drops_soil_and_strays() -> None:
