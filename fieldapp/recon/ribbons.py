@@ -225,10 +225,13 @@ def follow(
     points_m: NDArray[np.float64],
     tree: cKDTree,
     claimable: NDArray[np.bool_],
+    held: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
     """The points (indices into ``points_m`` (N, 3), those ``claimable`` (N,)) that the
     ribbon's continuation runs through, step by step from its end, and (K,) how far past the
-    end each was reached. ``tree``: the k-d tree of ``points_m``."""
+    end each was reached. ``tree``: the k-d tree of ``points_m``. ``held`` (N,): the points of
+    a neighbour's leaf where that leaf is held; they steer the ribbon but do not fill a step
+    (:func:`_step`)."""
     claimed: list[tuple[NDArray[np.intp], float]] = []
     pending: list[tuple[NDArray[np.intp], float]] = []
     start = float(ribbon.arc_m[-1])
@@ -240,19 +243,23 @@ def follow(
         centre, direction, width = ribbon.predict(ahead)
         if past > MAX_REACH_M or width < MIN_WIDTH_M:
             break
-        step = _step(ribbon, centre, direction, width, points_m, tree)
+        step = _step(ribbon, centre, direction, width, points_m, tree, held)
         if step is None:
             gap, ahead = gap + STEP_M, ahead + STEP_M
             continue
-        taken, span, moved = step
+        taken, span, moved, free_span = step
         # a tapering tip fills less and less of the width: measured against the last filled
         # step it is still the leaf (touching 4 x 4 seed 87's p23 lost its outer 2 709 points,
         # -13.1 cm, where its 9 cm wide leaf narrowed to 5)
-        filled = span >= FILL * min(width, last)
+        # a step filled only by a neighbour's held leaf is that leaf's, not this one's: a
+        # leaf lying on its neighbour's leaf ends, and its ribbon, run on along the other
+        # leaf, took the few points past where that leaf is held (a touching plot's p11,
+        # 4 points of p10's 18 cm past its own leaf's tip, +11 cm)
+        filled = free_span >= FILL * min(width, last)
         gap, ahead = 0.0, STEP_M
         pending.append((taken[claimable[taken]], past))
         if filled:
-            claimed, pending, patchy, last = claimed + pending, [], 0.0, span
+            claimed, pending, patchy, last = claimed + pending, [], 0.0, free_span
         else:
             patchy += STEP_M
         # but a narrow step does not steer: re-centred on a narrow strip beside it (a
@@ -271,10 +278,13 @@ def _step(
     width: float,
     points_m: NDArray[np.float64],
     tree: cKDTree,
-) -> tuple[NDArray[np.intp], float, NDArray[np.float64]] | None:
+    held: NDArray[np.bool_] | None = None,
+) -> tuple[NDArray[np.intp], float, NDArray[np.float64], float] | None:
     """The points inside the ribbon's step at ``centre`` (3,) heading ``direction`` (3,), the
-    span across the ribbon between their 5th and 95th percentiles, and the centre moved onto
-    them; ``None`` when the step holds fewer than :data:`MIN_STEP_POINTS`."""
+    span across the ribbon between their 5th and 95th percentiles, the centre moved onto
+    them, and the same span of those not ``held`` (N,) (0 with fewer than
+    :data:`MIN_STEP_POINTS` of them); ``None`` when the step holds fewer than
+    :data:`MIN_STEP_POINTS`."""
     normal = ribbon.normal - (ribbon.normal @ direction) * direction
     normal /= max(float(np.linalg.norm(normal)), 1e-12)
     across_dir = np.cross(normal, direction)
@@ -294,7 +304,14 @@ def _step(
     lift = float(np.median(off[on_plane])) if on_plane.any() else 0.0
     moved = centre + shift * across_dir + lift * normal
     taken = inside | _edges(across, off, slab, inside, half)
-    return near[taken], float(high - low), moved
+    free_span = float(high - low)
+    if held is not None:
+        free = inside & ~held[near]
+        free_span = 0.0
+        if free.sum() >= MIN_STEP_POINTS:
+            free_low, free_high = np.percentile(across[free], [5.0, 95.0])
+            free_span = float(free_high - free_low)
+    return near[taken], float(high - low), moved, free_span
 
 
 def _edges(
@@ -442,8 +459,9 @@ def follow_leaves(
     claimer = np.full(len(points_m), -1, dtype=np.intp)
     nearest = np.full(len(points_m), np.inf)
     for stem, ribbon in ribbons:
-        claimable = on_stems & (labels != stem) & (~held | ambiguous)
-        taken, past = follow(ribbon, points_m, tree, claimable)
+        others = on_stems & (labels != stem)
+        claimable = others & (~held | ambiguous)
+        taken, past = follow(ribbon, points_m, tree, claimable, others & ~claimable)
         better = past < nearest[taken]
         claimer[taken[better]] = stem
         nearest[taken[better]] = past[better]

@@ -74,3 +74,26 @@ def test_the_points_a_ribbon_missed_among_those_it_took_go_with_them() -> None:
     assert (labels[: len(taken_leaf)][inner] == 1).all()
     assert (labels[len(taken_leaf) :] == 0).all()
     assert set(moved.tolist()) <= set(range(len(taken_leaf)))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_ribbon_run_on_along_a_neighbour_s_held_leaf_does_not_take_its_tip(seed: int) -> None:
+    """The leaf ends where the ribbon was traced to, lying on its neighbour's leaf: the ribbon
+    runs on along that leaf (held: traced, so none of it changes hands) and 17 cm on meets four
+    of the neighbour's points past where its leaf is held. A step filled only by the held leaf
+    is not this leaf's: the four stay (a touching plot's p11 took them, 11 cm past its own
+    points). Without the held points marked, the steps they fill take them."""
+    rng = np.random.default_rng(seed)
+    held_leaf = sheet((0.005, 0.2), (-0.02, 0.02), 0.5, rng)
+    tip = np.column_stack(
+        [rng.uniform(0.165, 0.175, 4), rng.uniform(-0.01, 0.01, 4), np.full(4, 0.5)]
+    )
+    points = np.vstack([held_leaf, tip])
+    held = np.zeros(len(points), dtype=bool)
+    held[: len(held_leaf)] = True
+    claimable = ~held
+    tree = cKDTree(points)
+    taken, _ = follow(straight_ribbon(0.04), points, tree, claimable, held)
+    assert len(taken) == 0
+    taken, _ = follow(straight_ribbon(0.04), points, tree, claimable)
+    assert set(taken.tolist()) == set(range(len(held_leaf), len(points)))
