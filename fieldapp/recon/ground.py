@@ -43,7 +43,9 @@ class Plane:
         return points @ self.normal + self.offset_m
 
 
-def _least_squares_plane(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+def least_squares_plane(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+    """The plane through ``points`` (N, 3) closest in the least squares: its unit normal and
+    offset, a point's height ``points @ normal + offset`` (the normal's sign as it falls)."""
     centroid = points.mean(axis=0)
     _, _, vt = np.linalg.svd(points - centroid, full_matrices=False)
     normal = vt[2]
@@ -86,11 +88,11 @@ def fit_ground_plane(
     below = heights < -BELOW_FACTOR * distance_m
     score = inliers.sum(axis=0) - below.sum(axis=0)
     best = int(np.argmax(score))
-    normal, offset = _least_squares_plane(scoring[inliers[:, best]])
+    normal, offset = least_squares_plane(scoring[inliers[:, best]])
     if normal @ up < 0:
         normal, offset = -normal, -offset
     final = np.abs(points @ normal + offset) <= distance_m
-    normal, offset = _least_squares_plane(points[final])
+    normal, offset = least_squares_plane(points[final])
     if normal @ up < 0:
         normal, offset = -normal, -offset
     return Plane(normal, offset, float(final.mean()))

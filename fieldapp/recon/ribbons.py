@@ -304,14 +304,14 @@ def _step(
     lift = float(np.median(off[on_plane])) if on_plane.any() else 0.0
     moved = centre + shift * across_dir + lift * normal
     taken = inside | _edges(across, off, slab, inside, half)
-    free_span = float(high - low)
-    if held is not None:
-        free = inside & ~held[near]
+    span = free_span = float(high - low)
+    free = inside if held is None else inside & ~held[near]
+    if free.sum() < inside.sum():  # some of it a neighbour's held leaf: the rest's span
         free_span = 0.0
         if free.sum() >= MIN_STEP_POINTS:
             free_low, free_high = np.percentile(across[free], [5.0, 95.0])
             free_span = float(free_high - free_low)
-    return near[taken], float(high - low), moved, free_span
+    return near[taken], span, moved, free_span
 
 
 def _edges(

@@ -58,6 +58,7 @@ from fieldapp.recon.exg import (
     thresholds_by_key,
     uncoloured_keys,
 )
+from fieldapp.recon.ground import least_squares_plane
 from fieldapp.recon.settings import CropSettings
 from fieldapp.recon.station import (
     MAX_ANGLE_OFF_DEG,
@@ -611,20 +612,18 @@ def frame_ground_heights(
     if len(points) < MIN_GROUND_PIXELS:
         return None
     for _ in range(3):
-        centre = points.mean(axis=0)
-        spread = points - centre
-        normal = np.linalg.eigh(spread.T @ spread)[1][:, 0]
-        normal = normal if normal @ centre < 0 else -normal  # the camera, at 0, above it
-        residual = np.abs(spread @ normal)
+        normal, offset = least_squares_plane(points)
+        residual = np.abs(points @ normal + offset)
         near = residual <= max(0.05, 2.5 * float(np.median(residual)))
         if near.sum() < MIN_GROUND_PIXELS:
             break
         points = points[near]
-    offset = float(normal @ centre)
+    if offset < 0.0:  # the camera, at 0, above it
+        normal, offset = -normal, -offset
 
     def heights(pixels: NDArray[np.intp]) -> NDArray[np.float64]:
         at = np.take(ray, pixels, axis=0) * depth[pixels, None].astype(np.float64)
-        return at @ normal - offset  # type: ignore[no-any-return]
+        return at @ normal + offset
 
     return heights
 
@@ -786,8 +785,8 @@ def _green_and_soil(
 
     depth = frame.images.depth_m
     green_m, soil_m = depth.reshape(-1)[green], depth.reshape(-1)[soil]
-    green_rgb, soil_rgb = (
-        np.take(frame.images.color.reshape(-1, 3), p, axis=0) for p in (green, soil)
+    green_rgb, soil_rgb, continued_rgb = (
+        np.take(frame.images.color.reshape(-1, 3), p, axis=0) for p in (green, soil, continued)
     )
 
     def cloud(
@@ -826,7 +825,6 @@ def _green_and_soil(
     green_cloud, green_steady = backproject_pixels_twice(
         green, green_m, green_median, green_rgb, rays, crop.radius_m, crop.min_depth_m, mixed
     )
-    continued_rgb = np.take(frame.images.color.reshape(-1, 3), continued, axis=0)
     return (
         green_cloud,
         cloud(soil, soil_m, soil_rgb),
