@@ -200,7 +200,9 @@ class Renderer:
         normals = result["primitive_normals"].numpy()
         facing = np.einsum("ij,ij->i", normals, directions) / -self._ray_norms
         normals *= np.where(facing < 0, np.float32(-1), np.float32(1))[:, None]  # two-sided
-        points = (origin + np.where(hit, t, np.float32(0))[:, None] * directions).astype(np.float32)
+        points = (origin + np.where(hit, t, np.float32(0))[:, None] * directions).astype(
+            np.float32, copy=False
+        )
         rgb, ir = self._albedo(hit, gid, result, points)
         range_m = np.where(hit, t * self._ray_norms, np.float32(np.inf))
         body = np.where(hit, gid, 0)
@@ -229,8 +231,9 @@ class Renderer:
         ir[varied] = np.einsum("nk,nk->n", weights, self._ir[corners])
         for body_index, texture in self._textured:
             on_body = index[gid[index] == body_index]
-            if len(on_body):
-                rgb[on_body], ir[on_body] = texture(points[on_body])
+            if len(on_body):  # the soil: most of a frame (take and row views: 3x faster)
+                texture_rgb, ir[on_body] = texture(points.take(on_body, axis=0))
+                _rows(rgb)[on_body] = _rows(np.ascontiguousarray(texture_rgb, np.float32))
         return rgb, ir
 
     def _shade(self, hits: Hits, light: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -268,6 +271,12 @@ class Renderer:
         near = np.maximum(hits.range_m, np.float32(0.2))
         amplitude: NDArray[np.float32] = hits.ir * hits.cos_incidence / near**2
         return amplitude * np.float32(self.sensor.ir_gain)
+
+
+def _rows(array: NDArray[np.float32]) -> NDArray[np.void]:
+    """A C-contiguous (N, K) array seen as (N, 1) rows of one opaque item each: numpy
+    scatters whole rows into it by index several times faster than float by float."""
+    return array.view(np.dtype((np.void, array.shape[1] * array.itemsize)))
 
 
 def _uniform(body: Body) -> bool:

@@ -61,11 +61,13 @@ class ShadowMap:
         if not self._mapped:
             return np.ones(len(body), bool)
         result = ~self.is_soil[body]
-        on_soil = np.flatnonzero(~result)
-        index = self._cell(points_m[on_soil, :2])
         n = self._grid.shape[0]
-        inside = (index >= 0).all(axis=1) & (index < n).all(axis=1)
-        result[on_soil[inside]] = self._grid[index[inside, 1], index[inside, 0]]
+        # cell coordinates as floats: within [0, n) exactly where their floor is a cell
+        u = (points_m[:, 0] + self._half_m) / CELL_M
+        v = (points_m[:, 1] + self._half_m) / CELL_M
+        look = np.flatnonzero(~result & (u >= 0) & (u < n) & (v >= 0) & (v < n))
+        cell = v[look].astype(np.intp) * n + u[look].astype(np.intp)
+        result[look] = self._grid.ravel()[cell]
         return result
 
 

@@ -92,10 +92,13 @@ class Soil:
         v = np.clip(
             ((points_m[:, 1] + self.spec.half_extent_m) * scale).astype(np.int64), 0, size - 1
         )
-        shade = self._texture[v, u]
-        rgb = SOIL_RGB[None, :] * shade[:, None]
+        shade = self._texture.ravel()[v * size + u]
+        rgb = np.empty((len(shade), 3), np.float32)
+        np.multiply(SOIL_RGB[0], shade, out=rgb[:, 0])
         rgb[:, 0] *= 1.0 + 0.08 * (shade - 1.0)  # darker patches are also redder (moister)
-        return rgb.astype(np.float32), (SOIL_IR * shade).astype(np.float32)
+        np.multiply(SOIL_RGB[1], shade, out=rgb[:, 1])
+        np.multiply(SOIL_RGB[2], shade, out=rgb[:, 2])
+        return rgb, np.float32(SOIL_IR) * shade
 
 
 def _waves(
