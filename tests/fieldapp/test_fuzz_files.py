@@ -6,7 +6,7 @@ runs ``fieldapp verify`` and the reconstruction in-process. Every case must end 
 in the project's typed errors with one-line messages: zero tracebacks. A hang fails the test
 through the suite's per-test timeout, so each family of cases is bounded.
 
-``FIELDAPP_FUZZ_SEED`` (default 0) and ``FIELDAPP_FUZZ_CASES`` (per family, default 60) run
+``FIELDAPP_FUZZ_SEED`` (default 0) and ``FIELDAPP_FUZZ_CASES`` (per family, default 40) run
 other or more cases by hand.
 """
 
@@ -37,7 +37,7 @@ from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.settings import ReconstructionSettings
 
 BASE_SEED = int(os.environ.get("FIELDAPP_FUZZ_SEED", "0"))
-CASES = int(os.environ.get("FIELDAPP_FUZZ_CASES", "60"))
+CASES = int(os.environ.get("FIELDAPP_FUZZ_CASES", "40"))
 
 ODD_VALUES: list[Any] = [
     None,
@@ -334,7 +334,7 @@ def _run_case(folder: Path, capsys: pytest.CaptureFixture[str]) -> list[str]:
 
 @pytest.mark.parametrize("family", ["session", "calibration", "image", "filesystem"])
 def test_damaged_sessions_never_crash_or_hang(small_session, tmp_path, capsys, family):
-    logging.disable(logging.WARNING)  # the reconstruction's warnings, 60 times over
+    logging.disable(logging.WARNING)  # the reconstruction's warnings, 40 times over
     try:
         findings: list[str] = []
         kinds: set[str] = set()

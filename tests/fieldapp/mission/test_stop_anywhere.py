@@ -40,7 +40,7 @@ from fieldapp.verify import verify_session
 
 from .conftest import HANG_S, small_plan
 
-TRIALS_PER_SEED = 50
+TRIALS_PER_SEED = 35
 SEEDS = (0, 1, 2, 3)
 TAPPED = {
     "base": ("goto", "follow_goal", "status", "reset"),
