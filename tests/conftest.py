@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import fcntl
+import gc
 import logging
 import os
 import shutil
@@ -33,6 +34,17 @@ def shared_data() -> Path:
             pytest.fail(f"{message}; CI=true requires it")
         pytest.skip(message)
     return folder
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Every test module is imported now, and with them numpy, Open3D, Qt and pyqtgraph: some
+    200 000 objects that live as long as the process. Frozen out of the garbage collector
+    (``gc.freeze``), they are no longer scanned by each collection: the UI tests' teardowns
+    collect six times each (Qt's deferred deletes flushed, pyqtgraph's menus freed from their
+    cycles), 122 ms a collection before and 18 ms after on two UI test files (8.1 -> 1.2 s of
+    their 25 s). What the tests create is collected as before."""
+    gc.collect()
+    gc.freeze()
 
 
 _OURS = ("fieldapp", "devices", "ui")
