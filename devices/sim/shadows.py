@@ -45,12 +45,19 @@ class ShadowMap:
         self._grid = grown
 
     def _mark(self, xy_m: NDArray[np.float64]) -> None:
-        index = self._cell(xy_m)
-        inside = (index >= 0).all(axis=1) & (index < self._grid.shape[0]).all(axis=1)
-        self._grid[index[inside, 1], index[inside, 0]] = True
+        self._grid.reshape(-1)[self._cells(xy_m)[1]] = True  # a view: the grid is contiguous
 
-    def _cell(self, xy_m: NDArray[np.floating]) -> NDArray[np.int64]:
-        return np.floor((np.asarray(xy_m) + self._half_m) / CELL_M).astype(np.int64)
+    def _cells(
+        self, xy_m: NDArray[np.floating], among: NDArray[np.bool_] | bool = True
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Which of ``xy_m`` (N, 2 or more), of those ``among`` (N,), lie over the grid
+        (indices), and their cells (flat indices into it). The cell coordinates stay floats
+        until then: within [0, n) exactly where their floor is a cell."""
+        n = self._grid.shape[0]
+        u = (xy_m[:, 0] + self._half_m) / CELL_M
+        v = (xy_m[:, 1] + self._half_m) / CELL_M
+        over = np.flatnonzero(among & (u >= 0) & (u < n) & (v >= 0) & (v < n))
+        return over, v[over].astype(np.intp) * n + u[over].astype(np.intp)
 
     def may_be_shadowed(
         self, points_m: NDArray[np.floating], body: NDArray[np.int64]
@@ -61,13 +68,8 @@ class ShadowMap:
         if not self._mapped:
             return np.ones(len(body), bool)
         result = ~self.is_soil[body]
-        n = self._grid.shape[0]
-        # cell coordinates as floats: within [0, n) exactly where their floor is a cell
-        u = (points_m[:, 0] + self._half_m) / CELL_M
-        v = (points_m[:, 1] + self._half_m) / CELL_M
-        look = np.flatnonzero(~result & (u >= 0) & (u < n) & (v >= 0) & (v < n))
-        cell = v[look].astype(np.intp) * n + u[look].astype(np.intp)
-        result[look] = self._grid.ravel()[cell]
+        on_soil, cell = self._cells(points_m, ~result)
+        result[on_soil] = self._grid.reshape(-1)[cell]
         return result
 
 

@@ -306,9 +306,10 @@ def _step(
     taken = inside | _edges(across, off, slab, inside, half)
     span = free_span = float(high - low)
     free = inside if held is None else inside & ~held[near]
-    if free.sum() < inside.sum():  # some of it a neighbour's held leaf: the rest's span
+    if free is not inside and (free_count := int(free.sum())) < int(inside.sum()):
+        # some of it a neighbour's held leaf: the rest's span
         free_span = 0.0
-        if free.sum() >= MIN_STEP_POINTS:
+        if free_count >= MIN_STEP_POINTS:
             free_low, free_high = np.percentile(across[free], [5.0, 95.0])
             free_span = float(free_high - free_low)
     return near[taken], span, moved, free_span
