@@ -427,10 +427,22 @@ class DepthEdges:
         return cls(far, behind, measured)
 
 
+MIXED_SHARE = 0.02
+"""How far (share of its distance) a mixed pixel lies from each of the two surfaces beside it
+(:func:`mixed_pixels`). A pixel whose neighbours on both sides step away by more than 2 % of
+its distance would be, as a surface, seen within 8 degrees of grazing (a Kinect v2 pixel spans
+1/365 rad, and 0.02 x 365 = tan 82 degrees from face-on), which a time-of-flight camera does not
+measure: it is a pixel in the air on the rays past an edge. Below :data:`CONTINUOUS_SHARE`
+because a veil of such pixels steps from a leaf's edge to the surface behind it in as many steps
+as it is deep, each a share of the gap: at 3 % the inner pixels of the deeper veils were missed
+(on an independent renderer's seedlings the points newly flagged at 2 % lay a median 2.5 cm off
+every leaf, 77 % of them more than 1.5 cm off, against 0.8 cm and 15 % for the points left
+unflagged; RECONSTRUCTION.md, "A veil's inner pixels"). Lower still, the pixels taken from
+1.5 % to 1 % lay within 1.5 cm of a leaf in 41-63 %: leaves seen 10-15 degrees from grazing."""
 MIXED_REACH_PX = 1
 """How far (pixels) on each side :func:`mixed_pixels` looks for the two surfaces a mixed pixel
 lies between: the pixels beside it. A veil two or more deep is still found where each of its
-steps is over :data:`CONTINUOUS_SHARE`, while a surface two or more pixels wide between a
+steps is over :data:`MIXED_SHARE`, while a surface two or more pixels wide between a
 nearer and a farther one (a lower leaf's tip seen between an upper leaf and the soil, in
 touching canopies) continues itself on one side and is not taken (two pixels on each side
 took such tips on an independent renderer's touching plots: widths 0.5-3 cm narrower where its
@@ -442,7 +454,7 @@ def mixed_pixels(edges: DepthEdges, pixels: NDArray[np.intp]) -> NDArray[np.bool
     """(P,) which of ``pixels`` (P,) (row-major indices into the frame) lie between two
     surfaces: along a row, a column or a diagonal, a measured pixel within
     :data:`MIXED_REACH_PX` on one side nearer than it and one on the other side farther, each
-    by more than :data:`CONTINUOUS_SHARE` of its distance.
+    by more than :data:`MIXED_SHARE` of its distance.
 
     A time-of-flight pixel across a depth edge returns a depth between the two surfaces it sees:
     a point in the air between a leaf's edge and the soil or leaf behind it, off every surface
@@ -458,7 +470,7 @@ def mixed_pixels(edges: DepthEdges, pixels: NDArray[np.intp]) -> NDArray[np.bool
     row, column = np.divmod(pixels, width)
     at = (row + reach) * padded.shape[1] + column + reach
     own = flat[at]
-    step = CONTINUOUS_SHARE * own
+    step = MIXED_SHARE * own
     between = np.zeros(len(pixels), dtype=bool)
     with np.errstate(invalid="ignore"):  # NaN, not measured, is neither nearer nor farther
         for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):

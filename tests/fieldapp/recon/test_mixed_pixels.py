@@ -19,7 +19,7 @@ from fieldapp.recon.cloud import Cloud, joined_mixed, width_points
 from fieldapp.recon.filters import voxel_mean
 from fieldapp.recon.outputs import PointLabels, ply_bytes, read_labelled_ply, read_ply
 from fieldapp.recon.plants import Plant, find_plants, widest_meets
-from fieldapp.recon.scans import DepthEdges, mixed_pixels
+from fieldapp.recon.scans import CONTINUOUS_SHARE, DepthEdges, mixed_pixels
 from fieldapp.recon.settings import PlantSettings, ReconstructionSettings
 from fieldapp.recon.station import station_cloud
 from fieldapp.recon.traits import measure_plant
@@ -56,6 +56,21 @@ def test_a_stem_against_the_soil_and_a_leaf_seen_face_on_are_not_mixed() -> None
     depth[5:35, 35:55] = np.linspace(0.9, 1.1, 20, dtype=np.float32)  # a leaf, sloping
     assert not _row(depth, 20, range(15, 26)).any()
     assert not _row(depth, 20, range(36, 54)).any()
+
+
+def test_a_veil_of_gentle_steps_is_mixed_and_a_surface_near_grazing_is_not() -> None:
+    """A veil five pixels deep between a leaf's edge and a lower leaf 15 cm behind it steps 2.5
+    cm a pixel, under :data:`CONTINUOUS_SHARE` of its distance: each of its pixels is still
+    between two surfaces. A surface seen 10 degrees from grazing (1.5 % a pixel) is not."""
+    depth = np.full((40, 60), SOIL_M, np.float32)
+    depth[10:30, 10:30] = LOWER_M
+    depth[10:30, 30:35] = np.arange(1, 6, dtype=np.float32) * 0.025 + LOWER_M
+    depth[10:30, 35:50] = LOWER_M + 0.15
+    assert (np.diff(depth[20, 29:36]) / depth[20, 30:36] < CONTINUOUS_SHARE).all()
+    assert _row(depth, 20, range(27, 38)).tolist() == [False] * 3 + [True] * 5 + [False] * 3
+    grazing = np.full((40, 60), SOIL_M, np.float32)
+    grazing[5:35, 5:55] = (UPPER_M * 1.015 ** np.arange(50)).astype(np.float32)
+    assert not _row(grazing, 20, range(6, 54)).any()
 
 
 @pytest.mark.parametrize("width_px", [2, 3, 6])
