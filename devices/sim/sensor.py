@@ -1,6 +1,7 @@
 """The Kinect v2 sensor model (``shared/KINECT-V2.md``): range, axial noise by distance and
-incidence angle (Fankhauser et al. 2015), flying pixels on depth edges, dropouts at grazing
-angles and on surfaces too dark in IR, and the sun's own infrared (``sun_ir``): shot noise
+incidence angle (Fankhauser et al. 2015), flying pixels on depth edges (single, or a veil several
+pixels deep: ``veil_px``), dropouts at grazing angles and on surfaces too dark in IR, and the
+sun's own infrared (``sun_ir``): shot noise
 that grows with the ambient light over the camera's returned light, and no depth where the
 return drowns in it."""
 
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -26,6 +28,10 @@ class SensorModel:
     """Share of depth-edge pixels that return a mixture of the two surfaces."""
     edge_jump: float = 0.04
     """Relative depth jump between neighbours that makes an edge."""
+    veil_px: int = 0
+    """How many pixels deep a veil of mixed pixels runs from a near surface's edge over the
+    farther one beside it, stepping evenly from the one to the other (:func:`veiled`; 0: only
+    the single flying pixels of ``flying_fraction``)."""
     grazing_start_deg: float = 75.0
     grazing_end_deg: float = 88.0
     """Dropout probability rises from 0 to 1 between these incidence angles."""
@@ -95,7 +101,7 @@ def sensor_depth(
     A time-of-flight pixel's phase noise goes as sqrt(returned + ambient) / returned, so the
     ambient multiplies the shade's noise by sqrt(1 + ambient / returned)."""
     valid = np.isfinite(depth)
-    safe = np.where(valid, depth, np.float32(1.0))
+    safe = np.where(valid, veiled(depth, sensor.veil_px, sensor.edge_jump), np.float32(1.0))
     theta = np.arccos(np.clip(cos_incidence, 0.0, 1.0))
     sigma = axial_noise_m(safe, theta).astype(np.float32)
     weak = np.sqrt(np.clip(400.0 / np.maximum(ir, 1.0), 1.0, 9.0))  # dim returns are noisier
@@ -112,6 +118,35 @@ def sensor_depth(
     dropped = (rng.random(depth.shape, np.float32) < p_drop) | (ir < sensor.min_ir) | drowned
     noisy[~valid | dropped] = np.nan
     return noisy
+
+
+def veiled(depth: NDArray[np.float32], veil_px: int, edge_jump: float) -> NDArray[np.float32]:
+    """``depth`` (H, W; inf where nothing is hit) with a veil of mixed pixels beside every depth
+    edge: a pixel ``k`` pixels (1..``veil_px``, the nearest such surface within a square's reach)
+    from a surface nearer than it by more than ``edge_jump`` of its distance returns the depth
+    ``k / (veil_px + 1)`` of the way from that surface to its own. A time-of-flight camera's
+    optics and its depth pipeline's smoothing spread an edge's mixture over several pixels of the
+    farther surface, a veil of points in the air along the rays past a leaf's edge (an
+    independent renderer's veils ran up to four pixels deep)."""
+    if veil_px <= 0:
+        return depth
+    hit = np.isfinite(depth)
+    own = np.where(hit, depth, np.float32(np.inf)).astype(np.float32)
+    out = own.copy()
+    done = ~hit
+    square = np.ones((3, 3), np.uint8)
+    # the near side of every edge: a pixel with a neighbour farther by more than the jump (only
+    # these spread a veil, not a surface sloping away a little at each pixel)
+    farthest = cv2.dilate(np.where(hit, own, np.float32(0.0)), square)
+    nearest = np.where(farthest > own * np.float32(1.0 + edge_jump), own, np.float32(np.inf))
+    nearest = nearest.astype(np.float32)
+    for k in range(1, veil_px + 1):
+        nearest = cv2.erode(nearest, square, borderType=cv2.BORDER_REPLICATE)
+        edge = ~done & (nearest < own * np.float32(1.0 - edge_jump))
+        share = np.float32(k / (veil_px + 1))
+        out[edge] = nearest[edge] + share * (own[edge] - nearest[edge])
+        done |= edge
+    return np.where(np.isfinite(depth), out, depth).astype(np.float32)
 
 
 def flying_pixels(

@@ -37,6 +37,7 @@ MAX_ARRIVAL_DEG = 5.0
 MAX_LOCALISATION_M = 0.25
 MAX_LOCALISATION_DEG = 10.0
 MAX_DEPTH_OFFSET_M = 0.05
+MAX_VEIL_PX = 6
 _ON_THE_RIG = ("plot", "spheres", "soil", "checkerboard")
 SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "grid": _ON_THE_RIG,
@@ -48,6 +49,7 @@ SCENE_OPTIONS: dict[str, tuple[str, ...]] = {
     "lens_distortion": _ON_THE_RIG,
     "sunlight": _ON_THE_RIG,
     "color_noise": (*_ON_THE_RIG, "turntable"),
+    "veil": _ON_THE_RIG,
     "camera": _ON_THE_RIG,
     "station_spacing": ("plot", "spheres", "soil"),
     "base_tilt": ("plot", "spheres", "soil"),
@@ -147,6 +149,14 @@ def register(subparsers: Any) -> None:
         help="each colour channel's own noise, standard deviation in 8-bit levels (0..10): dark "
         "pixels (shade, moist soil, clods) change hue, as a colour camera's do (default: none, "
         "brightness noise only)",
+    )
+    parser.add_argument(
+        "--veil",
+        default=None,
+        metavar="PX",
+        help="flying pixels as a veil PX pixels deep (1..6) beside every depth edge, stepping "
+        "evenly from the near surface to the far one, as a time-of-flight camera's optics and "
+        "smoothing spread an edge (default: none, single flying pixels only)",
     )
     parser.add_argument(
         "--clods",
@@ -441,6 +451,7 @@ def run(args: argparse.Namespace) -> int:
     )
     sunlight = parse_number("--sunlight", args.sunlight, 0.0, 1.0, "of a clear midday sun")
     color_noise = parse_number("--color-noise", args.color_noise, 0.0, 10.0, "levels")
+    veil = None if args.veil is None else parse_int("veil", args.veil, 1, MAX_VEIL_PX)
     clods = parse_number("--clods", args.clods, 0.0, 60.0, "per square metre")
     clod_size = parse_number("--clod-size", args.clod_size, 8.0, 16.0, "centimetres")
     dry_tips = parse_number("--dry-tips", args.dry_tips, 1.0, 15.0, "centimetres")
@@ -475,6 +486,7 @@ def run(args: argparse.Namespace) -> int:
                 leaf_width,
                 args.lens_distortion,
                 color_noise=color_noise,
+                veil_px=veil,
                 clods_per_m2=clods,
                 clod_size_m=None if clod_size is None else clod_size / 100.0,
                 dry_tips_m=None if dry_tips is None else dry_tips / 100.0,
@@ -507,6 +519,8 @@ def run(args: argparse.Namespace) -> int:
                 about["sunlight"] = sunlight
             if color_noise is not None:  # absent: brightness noise only (sessions unchanged)
                 about["color_noise_levels"] = color_noise
+            if veil is not None:  # absent: single flying pixels (sessions unchanged)
+                about["veil_px"] = veil
             if clods is not None:  # absent: no clods (sessions unchanged)
                 about["clods_per_m2"] = clods
             if clod_size is not None:  # absent: clods up to 8 cm across (sessions unchanged)
@@ -572,6 +586,7 @@ def build_world(
     lens_distortion: bool = False,
     *,
     color_noise: float | None = None,
+    veil_px: int | None = None,
     clods_per_m2: float | None = None,
     clod_size_m: float | None = None,
     dry_tips_m: float | None = None,
@@ -617,6 +632,7 @@ def build_world(
         depth_offset_m=depth_offset_m or 0.0,
         sun_ir=(sunlight or 0.0) * FULL_SUN_IR,
         color_noise=color_noise or 0.0,
+        veil_px=veil_px or 0,
     )
     from devices.camera.frames import KINECT_V2_DISTORTION, KINECT_V2_PAPER
 
