@@ -15,7 +15,8 @@ spread of width RMSE over the perturbations (``--shift``: also over rigid shifts
 which move only where the voxel grid cuts the plants):
 
     .venv/bin/python benchmarks/bench_touching.py prepare --dir /tmp/touching \
-        --touching 0-8 --seedling 0-2 [--plant-model irregular] [--lean 20]
+        --touching 0-8 --seedling 0-2 [--plant-model irregular] [--lean 20] \
+        [--sensor "--color-holes --veil 3"]
     .venv/bin/python benchmarks/bench_touching.py run --dir /tmp/touching [--perturb 3] \
         [--shift 5] [--set stems.follow_leaves=false] [--only t3,t8] [--plants]
 
@@ -78,6 +79,7 @@ def prepare(
     seedling: list[int],
     plant_model: str = "distichous",
     lean: str | None = None,
+    sensor: list[str] | None = None,
 ) -> None:
     from fieldapp.io.session import load_session
     from fieldapp.recon import stages
@@ -92,6 +94,7 @@ def prepare(
         if not (session / "truth.json").exists():
             cmd = [sys.executable, "-m", "fieldapp", "simulate", "--out", str(session)]
             cmd += ["--plant-model", plant_model] + (["--lean", lean] if lean else [])
+            cmd += sensor or []
             subprocess.run([*cmd, "--seed", str(seed), "--stage", stage], check=True)
         target = folder / f"{name}.pkl"
         if target.exists():
@@ -250,6 +253,11 @@ def main() -> int:
     p.add_argument("--seedling", type=_seeds, default=_seeds("0-2"))
     p.add_argument("--plant-model", default="distichous")
     p.add_argument("--lean", default=None, help="simulate --lean DEG (stems leaning more)")
+    p.add_argument(
+        "--sensor",
+        default="",
+        help='more simulate options for the sensor, e.g. "--color-holes --veil 3" (one --dir each)',
+    )
     r = sub.add_parser("run")
     r.add_argument("--dir", type=Path, required=True)
     r.add_argument("--only", type=lambda t: t.split(","), default=[])
@@ -261,7 +269,9 @@ def main() -> int:
     r.add_argument("--plants", action="store_true")
     args = parser.parse_args()
     if args.command == "prepare":
-        prepare(args.dir, args.touching, args.seedling, args.plant_model, args.lean)
+        prepare(
+            args.dir, args.touching, args.seedling, args.plant_model, args.lean, args.sensor.split()
+        )
     else:
         run(args.dir, args.only, args.perturb, args.set, args.plants, args.shift)
     return 0
