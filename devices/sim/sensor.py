@@ -1,9 +1,8 @@
 """The Kinect v2 sensor model (``shared/KINECT-V2.md``): range, axial noise by distance and
 incidence angle (Fankhauser et al. 2015), flying pixels on depth edges (single, or a veil several
 pixels deep: ``veil_px``), dropouts at grazing angles and on surfaces too dark in IR, and the
-sun's own infrared (``sun_ir``): shot noise
-that grows with the ambient light over the camera's returned light, and no depth where the
-return drowns in it."""
+sun's own infrared (``sun_ir``): shot noise that grows with the ambient light over the camera's
+returned light, and no depth where the return drowns in it."""
 
 from __future__ import annotations
 
