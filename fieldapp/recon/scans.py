@@ -788,12 +788,16 @@ def _green_and_soil(
             colors = frame.images.color.reshape(-1, 3)
             continued = continued_surfaces(mask.reshape(shape), edges, heights, colors)
             continued_mixed = mixed_pixels(edges, continued)
+        # the pixels taken as plant without being green by their own colour (grown over a
+        # leaf's rim, into weak green or into black; black with a trace of green counts as
+        # black) that lie between two surfaces: kept (they hold a plant together), but they do
+        # not set its width (RECONSTRUCTION.md, "Veils several pixels deep")
+        borrowed = ~strong.reshape(-1)[green]
         if uncoloured is not None:
-            # the green pixels with no colour of their own that lie between two surfaces:
-            # kept (they hold a plant together), but they do not set its width
-            dark = np.flatnonzero(uncoloured.reshape(-1)[green])
-            mixed = np.zeros(len(green), dtype=bool)
-            mixed[dark] = mixed_pixels(edges, green[dark])
+            borrowed |= uncoloured.reshape(-1)[green]
+        looked_at = np.flatnonzero(borrowed)
+        mixed = np.zeros(len(green), dtype=bool)
+        mixed[looked_at] = mixed_pixels(edges, green[looked_at])
 
     depth = frame.images.depth_m
     green_m, soil_m = depth.reshape(-1)[green], depth.reshape(-1)[soil]

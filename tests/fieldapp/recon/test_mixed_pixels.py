@@ -14,18 +14,29 @@ from numpy.typing import NDArray
 
 from devices.camera.frames import KINECT_V2_PAPER as K
 from devices.geometry import make_transform
+from devices.sim.render import SensorModel
+from devices.sim.sensor import veiled
+from fieldapp.io.session import Capture, CaptureImages
 from fieldapp.recon.backproject import backproject_pixels_twice, ray_table
 from fieldapp.recon.cloud import Cloud, joined_mixed, width_points
 from fieldapp.recon.filters import voxel_mean
 from fieldapp.recon.outputs import PointLabels, ply_bytes, read_labelled_ply, read_ply
 from fieldapp.recon.plants import Plant, find_plants, widest_meets
-from fieldapp.recon.scans import CONTINUOUS_SHARE, DepthEdges, mixed_pixels
-from fieldapp.recon.settings import PlantSettings, ReconstructionSettings
+from fieldapp.recon.scans import (
+    CONTINUOUS_SHARE,
+    DepthEdges,
+    _green_and_soil,
+    _green_keys,
+    _separation,
+    frame_of,
+    mixed_pixels,
+)
+from fieldapp.recon.settings import CropSettings, PlantSettings, ReconstructionSettings
 from fieldapp.recon.station import station_cloud
 from fieldapp.recon.traits import measure_plant
 from fieldapp.results.correction_plot import PlotState, measure_again
 
-from .synthetic import LEAF_RGB, seedling
+from .synthetic import LEAF_RGB, SOIL_RGB, seedling
 
 SOIL_M, LOWER_M, UPPER_M = 1.6, 1.0, 0.7
 
@@ -71,6 +82,30 @@ def test_a_veil_of_gentle_steps_is_mixed_and_a_surface_near_grazing_is_not() -> 
     grazing = np.full((40, 60), SOIL_M, np.float32)
     grazing[5:35, 5:55] = (UPPER_M * 1.015 ** np.arange(50)).astype(np.float32)
     assert not _row(grazing, 20, range(6, 54)).any()
+
+
+def test_a_veil_grown_over_a_leaf_s_rim_is_flagged_though_it_has_the_soil_s_colour() -> None:
+    """A veil three pixels deep between a leaf and the soil 10 cm behind it, with the soil's
+    colour (the colour camera sees the soil there): its first pixel continues the leaf within
+    :data:`CONTINUOUS_SHARE` and is grown over the leaf's rim as plant; it lies between two
+    surfaces, so it is flagged and does not widen the leaf (``scans._green_and_soil``)."""
+    depth = np.full((K.height, K.width), LOWER_M + 0.1, np.float32)
+    leaf = np.zeros(depth.shape, bool)
+    leaf[150:260, 150:350] = True
+    depth[leaf] = LOWER_M
+    depth = veiled(depth, 3, SensorModel().edge_jump)
+    color = np.empty((*depth.shape, 3), np.uint8)
+    color[:] = SOIL_RGB
+    color[leaf] = LEAF_RGB
+    frame = frame_of(CaptureImages(Capture(station=1, view=0, depth="d", color="c"), depth, color))
+    separation, threshold, weak, rim_px, tally, _ = _separation([frame], "otsu")
+    grid = np.arange(0, depth.size, 8, dtype=np.intp)
+    keys = _green_keys(threshold, weak, tally)
+    green = _green_and_soil(frame, separation, keys, rim_px, grid, ray_table(K), CropSettings())[0]
+    veil = (green.points[:, 2] > LOWER_M + 0.005) & (green.points[:, 2] < LOWER_M + 0.095)
+    assert veil.sum() > 100  # grown over the rim: the ring's first pixels, all round the leaf
+    assert green.mixed is not None
+    assert green.mixed[veil].all() and not green.mixed[~veil].any()
 
 
 @pytest.mark.parametrize("width_px", [2, 3, 6])
