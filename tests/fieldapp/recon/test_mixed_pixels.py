@@ -6,6 +6,7 @@ together but does not set its width (``scans.mixed_pixels``, ``Cloud.mixed``,
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -16,11 +17,13 @@ from devices.camera.frames import KINECT_V2_PAPER as K
 from devices.geometry import make_transform
 from devices.sim.render import SensorModel
 from devices.sim.sensor import veiled
-from fieldapp.io.session import Capture, CaptureImages
+from fieldapp.cli import main
+from fieldapp.io.session import Capture, CaptureImages, load_session
 from fieldapp.recon.backproject import backproject_pixels_twice, ray_table
 from fieldapp.recon.cloud import Cloud, joined_mixed, width_points
 from fieldapp.recon.filters import voxel_mean
 from fieldapp.recon.outputs import PointLabels, ply_bytes, read_labelled_ply, read_ply
+from fieldapp.recon.pipeline import run_reconstruction
 from fieldapp.recon.plants import Plant, find_plants, widest_meets
 from fieldapp.recon.scans import (
     CONTINUOUS_SHARE,
@@ -37,6 +40,7 @@ from fieldapp.recon.traits import measure_plant
 from fieldapp.results.correction_plot import PlotState, measure_again
 
 from .synthetic import LEAF_RGB, SOIL_RGB, seedling
+from .test_end_to_end import matched_errors
 
 SOIL_M, LOWER_M, UPPER_M = 1.6, 1.0, 0.7
 
@@ -271,3 +275,24 @@ def test_a_veil_reaching_a_neighbour_does_not_make_the_plants_meet() -> None:
 
     assert widest_meets(plants(True), [[1, 2]], 0.025) == {}
     assert widest_meets(plants(False), [[1, 2]], 0.025) == {1: 2, 2: 1}
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_veiled_seedlings_are_found_and_their_veils_keep_out_of_most_widths(
+    tmp_path: Path,
+) -> None:
+    """A seedling plot whose depth edges trail veils three pixels deep and whose colour has
+    libfreenect2's black (``simulate --veil 3 --color-holes``): every plant found, heights as
+    without a veil, widths within 2.8 cm (2.51 measured; 5.19 before the veils' pixels were
+    flagged at 2 % and the borrowed pixels looked at; 0.79 without a veil: the rest of the veil
+    is open, RECONSTRUCTION.md, "Veils several pixels deep")."""
+    folder = tmp_path / "veiled"
+    options = ["--seed", "1", "--color-holes", "--veil", "3"]
+    assert main(["simulate", "--out", str(folder), *options]) == 0
+    truth = json.loads((folder / "truth.json").read_text())
+    result = run_reconstruction(load_session(folder), ReconstructionSettings())
+    errors = matched_errors(result, truth)
+    assert len(result.plants) == len(truth["plants"]) == len(errors["dw_cm"])
+    assert np.sqrt(np.mean(errors["dh_cm"] ** 2)) <= 0.8
+    assert np.sqrt(np.mean(errors["dw_cm"] ** 2)) <= 2.8
